@@ -1,0 +1,88 @@
+"""Building the model graph: members with kinds and θ, flow edges (layer 0), tree edges (layer i ≥ 1).
+
+The graph is a ``networkx.MultiDiGraph``; the edge key is the layer ``i`` of the paper's
+``((u, v), i)``, and the edge attribute ``kind`` says what it is (``pub``, ``sub``, ``send``,
+``tree``). Member attributes: ``kind``, ``active``, ``label`` and any extra plain data
+(``pid``, ``type``, ``qos`` …); ``theta`` holds the attribute vector when one is known.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any
+
+import networkx as nx
+
+from stream_viz.errors import ModelError
+from stream_viz.model.ids import kind_of, name_of
+
+ACTIVE_KINDS = frozenset({"node"})
+PASSIVE_KINDS = frozenset({"topic", "service", "action", "process", "host", "root"})
+# Allowed (source kind class, target kind class) per layer-0 edge kind, data-flow direction.
+FLOW_KINDS = {"pub": ("active", "passive"), "sub": ("passive", "active"), "send": ("active", "active")}
+PROCESS_TREE = 1
+
+
+def new_graph() -> nx.MultiDiGraph:
+    """Return an empty model graph."""
+    return nx.MultiDiGraph()
+
+
+def add_member(G: nx.MultiDiGraph, member: str, **attrs: Any) -> None:
+    """Add ``member`` (or update its attributes); its kind is taken from the id.
+
+    Parameters
+    ----------
+    G : MultiDiGraph
+        The model graph.
+    member : str
+        A member id such as ``node:/camera``.
+    **attrs
+        Extra plain attributes (``pid``, ``type``, ``theta`` …).
+    """
+    kind = kind_of(member)
+    G.add_node(member, kind=kind, active=kind in ACTIVE_KINDS, label=name_of(member), **attrs)
+
+
+def is_active(G: nx.MultiDiGraph, member: str) -> bool:
+    """Return True if ``member`` is an active member (a component, i.e. a ROS node)."""
+    return bool(G.nodes[member]["active"])
+
+
+def add_flow_edge(G: nx.MultiDiGraph, src: str, dst: str, kind: str, **attrs: Any) -> None:
+    """Add a layer-0 edge ``((src, dst), 0)`` of ``kind`` ``pub``, ``sub`` or ``send``.
+
+    Both members must exist; the kinds must match the paper's
+    ``E_pub = M_A × M_P``, ``E_sub = M_P × M_A``, ``E_send = M_A × M_A``.
+    """
+    if kind not in FLOW_KINDS:
+        raise ModelError(f"unknown flow edge kind {kind!r}")
+    want_src, want_dst = FLOW_KINDS[kind]
+    for member, want in ((src, want_src), (dst, want_dst)):
+        if member not in G:
+            raise ModelError(f"edge {src} -> {dst}: member {member!r} is not in the graph")
+        if is_active(G, member) != (want == "active"):
+            raise ModelError(f"{kind} edge {src} -> {dst}: {member} must be {want}")
+    G.add_edge(src, dst, key=0, kind=kind, **attrs)
+
+
+def add_tree_edge(G: nx.MultiDiGraph, parent: str, child: str, layer: int = PROCESS_TREE) -> None:
+    """Add a tree edge ``((parent, child), layer)``; layers ≥ 1 are rooted trees (parent → child)."""
+    if layer < 1:
+        raise ModelError(f"tree edges live on layers >= 1, not {layer}")
+    for member in (parent, child):
+        if member not in G:
+            raise ModelError(f"tree edge {parent} -> {child}: member {member!r} is not in the graph")
+    G.add_edge(parent, child, key=layer, kind="tree")
+
+
+def flow_edges(G: nx.MultiDiGraph) -> Iterator[tuple[str, str, str]]:
+    """Yield ``(src, dst, kind)`` for every layer-0 edge."""
+    for u, v, key, kind in G.edges(keys=True, data="kind"):
+        if key == 0:
+            yield u, v, kind
+
+
+def members_of_kind(G: nx.MultiDiGraph, kind: str) -> list[str]:
+    """Return the members of ``kind``, sorted."""
+    return sorted(m for m, k in G.nodes(data="kind") if k == kind)

@@ -1,0 +1,143 @@
+"""The model on tiny literal graphs, with exact expectations."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from stream_viz.errors import ModelError
+from stream_viz.model import (
+    ROOT,
+    add_flow_edge,
+    add_member,
+    add_tree_edge,
+    diff,
+    kind_of,
+    layer_subgraph,
+    make_id,
+    name_of,
+    new_graph,
+    predecessors,
+    psi,
+    successors,
+)
+from stream_viz.model.ids import node_fqn, pid_of
+from stream_viz.model.serialize import from_data, to_data
+from stream_viz.model.theta import make_theta, theta_dict
+
+
+def robot():
+    """camera -pub-> /image -sub-> detector -pub-> /objects -sub-> planner; planner -send-> map_server."""
+    G = new_graph()
+    for m in ["node:/camera", "node:/detector", "node:/planner", "node:/map_server",
+              "topic:/image", "topic:/objects", "service:/get_map",
+              "process:10", "process:11", "process:1", ROOT]:
+        add_member(G, m)
+    add_flow_edge(G, "node:/camera", "topic:/image", "pub")
+    add_flow_edge(G, "topic:/image", "node:/detector", "sub")
+    add_flow_edge(G, "node:/detector", "topic:/objects", "pub")
+    add_flow_edge(G, "topic:/objects", "node:/planner", "sub")
+    add_flow_edge(G, "node:/planner", "node:/map_server", "send", services=["service:/get_map"])
+    add_tree_edge(G, ROOT, "process:1")
+    add_tree_edge(G, "process:1", "process:10")
+    add_tree_edge(G, "process:1", "process:11")
+    add_tree_edge(G, "process:10", "node:/camera")
+    add_tree_edge(G, "process:10", "node:/detector")
+    add_tree_edge(G, "process:11", "node:/planner")
+    add_tree_edge(G, "process:11", "node:/map_server")
+    return G
+
+
+def test_ids_round_trip():
+    assert make_id("node", "/ns/cam") == "node:/ns/cam"
+    assert make_id("topic", "scan") == "topic:/scan"
+    assert make_id("process", 42) == "process:42"
+    assert make_id("root", "x") == "root"
+    assert kind_of("service:/a/b") == "service" and name_of("service:/a/b") == "/a/b"
+    assert kind_of(ROOT) == "root" and pid_of("process:42") == 42
+    assert node_fqn("/", "cam") == "/cam" and node_fqn("/ns", "cam") == "/ns/cam"
+    with pytest.raises(ModelError, match="malformed member id 'cam'"):
+        kind_of("cam")
+    with pytest.raises(ModelError, match="unknown member kind"):
+        make_id("robot", "x")
+
+
+def test_active_and_passive_are_disjoint():
+    G = robot()
+    active = {m for m, a in G.nodes(data="active") if a}
+    assert active == {"node:/camera", "node:/detector", "node:/planner", "node:/map_server"}
+
+
+def test_flow_edge_kinds_are_checked():
+    G = robot()
+    with pytest.raises(ModelError, match="topic:/image must be active"):
+        add_flow_edge(G, "topic:/image", "node:/camera", "pub")
+    with pytest.raises(ModelError, match="is not in the graph"):
+        add_flow_edge(G, "node:/ghost", "topic:/image", "pub")
+
+
+def test_predecessors_and_successors():
+    G = robot()
+    assert predecessors(G, "node:/detector") == ["topic:/image"]
+    assert predecessors(G, "node:/detector", "active") == []
+    assert successors(G, "node:/planner") == ["node:/map_server"]
+    assert successors(G, "node:/planner", "passive") == []
+    assert predecessors(G, "node:/map_server", "active") == ["node:/planner"]
+    # Tree layer: a process's children are its nodes and child processes.
+    assert successors(G, "process:1", layer=1) == ["process:10", "process:11"]
+    assert predecessors(G, "node:/camera", layer=1) == ["process:10"]
+
+
+def test_layer_subgraphs():
+    G = robot()
+    G0 = layer_subgraph(G, 0)
+    assert set(G0.nodes) == {"node:/camera", "node:/detector", "node:/planner", "node:/map_server",
+                             "topic:/image", "topic:/objects"}
+    assert G0.number_of_edges() == 5
+    T1 = layer_subgraph(G, 1)
+    assert "topic:/image" not in T1 and T1.number_of_edges() == 7
+
+
+def test_psi_matches_hand_sums():
+    G = robot()
+    theta = {
+        "process:1": np.array([1.0, 100.0]),
+        "process:10": np.array([20.0, 50.0]),
+        "process:11": np.array([5.0, 30.0]),
+    }
+    out = psi(G, theta, layer=1)
+    # ψ(p10) = its children are nodes without θ -> 0
+    np.testing.assert_array_equal(out["process:10"], [0.0, 0.0])
+    # ψ(p1) = (ψ(p10)+θ(p10)) + (ψ(p11)+θ(p11)) = [25, 80]
+    np.testing.assert_array_equal(out["process:1"], [25.0, 80.0])
+    # ψ(root) = ψ(p1)+θ(p1) = [26, 180]
+    np.testing.assert_array_equal(out[ROOT], [26.0, 180.0])
+
+
+def test_diff_reports_appeared_and_vanished():
+    a = robot()
+    b = robot()
+    b.remove_node("node:/camera")
+    add_member(b, "node:/lidar")
+    d = diff(a, b)
+    assert d.added_members == {"node:/lidar"}
+    assert d.removed_members == {"node:/camera"}
+    assert d.removed_edges == {("node:/camera", "topic:/image", 0), ("process:10", "node:/camera", 1)}
+    assert not diff(a, robot())
+
+
+def test_theta_schema_and_serialisation_round_trip():
+    th = make_theta("topic", {"rate_hz": 10.0, "latency_ms": 2.5})
+    assert theta_dict("topic", th)["rate_hz"] == 10.0
+    assert np.isnan(theta_dict("topic", th)["jitter_ms"])
+    with pytest.raises(ModelError, match="unknown attributes"):
+        make_theta("topic", {"colour": 1})
+    G = robot()
+    G.nodes["node:/camera"]["pid"] = 10
+    G.nodes["topic:/image"]["theta"] = th
+    data = to_data(G)
+    assert {"id": "node:/camera", "kind": "node", "pid": 10} in data["members"]
+    assert {"src": "node:/camera", "dst": "topic:/image", "kind": "pub", "layer": 0} in data["edges"]
+    H = from_data(data)
+    assert set(H.edges(keys=True)) == set(G.edges(keys=True))
+    assert H.nodes["topic:/image"]["theta"][0] == 10.0
