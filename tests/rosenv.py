@@ -1,0 +1,92 @@
+"""Real ROS 2 processes for tests: an own ROS_DOMAIN_ID per run, children always ended."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+_LOCKS: list[int] = []
+
+
+def claim_domain() -> int:
+    """Take a ROS_DOMAIN_ID no other test run on this machine holds (flock, released on exit)."""
+    for domain in range(11, 100):
+        fd = os.open(f"/tmp/stream_viz_test_domain_{domain}.lock", os.O_CREAT | os.O_RDWR, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        _LOCKS.append(fd)
+        return domain
+    raise RuntimeError("no free ROS_DOMAIN_ID in 11..99")
+
+
+def ros_env(domain: int) -> dict[str, str]:
+    env = dict(os.environ)
+    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    return env
+
+
+class Children:
+    """Starts Python children in their own process group and ends them all."""
+
+    def __init__(self, env: dict[str, str], workdir: Path) -> None:
+        self.env, self.workdir, self.procs = env, workdir, []
+
+    def python(self, code: str, *args: str, name: str = "child") -> subprocess.Popen:
+        """Run ``code`` (dedented) in a new Python process; stdout/stderr go to a log file."""
+        script = self.workdir / f"{name}_{len(self.procs)}.py"
+        script.write_text(textwrap.dedent(code))
+        return self.run([sys.executable, str(script), *args], name=name)
+
+    def run(self, cmd: list[str], name: str = "child", env: dict[str, str] | None = None) -> subprocess.Popen:
+        log = open(self.workdir / f"{name}_{len(self.procs)}.log", "w")
+        p = subprocess.Popen(cmd, env=env or self.env, stdout=log, stderr=subprocess.STDOUT,
+                             start_new_session=True)
+        self.procs.append(p)
+        return p
+
+    def end(self, p: subprocess.Popen, sig: int = signal.SIGINT, timeout: float = 5.0) -> None:
+        if p.poll() is None:
+            try:
+                os.killpg(p.pid, sig)
+                p.wait(timeout)
+            except (ProcessLookupError, subprocess.TimeoutExpired):
+                pass
+        if p.poll() is None:
+            try:
+                os.killpg(p.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            p.wait(5)
+
+    def end_all(self) -> None:
+        for p in self.procs:
+            self.end(p)
+
+
+def wait_for(pred, timeout: float = 10.0, period: float = 0.1):
+    """Poll ``pred()`` until it returns something truthy; return it, or raise after ``timeout``."""
+    deadline = time.monotonic() + timeout
+    while True:
+        value = pred()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"condition not met within {timeout} s")
+        time.sleep(period)
+
+
+def shm_clean() -> None:
+    """Remove Fast DDS shared-memory files of dead participants (``fastdds shm clean``)."""
+    exe = Path(sys.executable).with_name("fastdds")
+    if exe.exists():
+        subprocess.run([str(exe), "shm", "clean"], capture_output=True, timeout=60, check=False)
