@@ -141,3 +141,22 @@ def test_theta_schema_and_serialisation_round_trip():
     H = from_data(data)
     assert set(H.edges(keys=True)) == set(G.edges(keys=True))
     assert H.nodes["topic:/image"]["theta"][0] == 10.0
+
+
+def test_remember_keeps_vanished_members_marked_gone():
+    from stream_viz.model.seen import remember
+
+    a = robot()
+    seen = remember(new_graph(), a, 1.0)
+    assert set(seen.nodes) == set(a.nodes) and not any(g for _, g in seen.nodes(data="gone"))
+    b = robot()
+    b.remove_node("node:/camera")
+    seen = remember(seen, b, 2.0)
+    assert seen.nodes["node:/camera"]["gone"] is True and seen.nodes["node:/camera"]["gone_at"] == 2.0
+    assert seen.edges["node:/camera", "topic:/image", 0]["gone"] is True
+    assert "gone" not in seen.nodes["node:/detector"]
+    seen = remember(seen, b, 3.0)
+    assert seen.nodes["node:/camera"]["gone_at"] == 2.0  # first time missed, kept
+    seen = remember(seen, robot(), 4.0)  # it came back
+    assert "gone" not in seen.nodes["node:/camera"]
+    assert "gone" not in seen.edges["node:/camera", "topic:/image", 0]

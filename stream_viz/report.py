@@ -1,0 +1,102 @@
+"""The report JSON of DESIGN.md §4 (``stream-viz.report/v1``), written atomically."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import networkx as nx
+
+from stream_viz.errors import OutputError
+from stream_viz.records import Alert
+
+SCHEMA = "stream-viz.report/v1"
+
+
+def build_report(
+    G: nx.MultiDiGraph,
+    alerts: Iterable[Alert],
+    rca: Mapping[str, Any],
+    started_at: float,
+    ended_at: float,
+    injected: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Return the report dict for the model ``G``, the alerts and the RCA's ``to_report()`` output.
+
+    Parameters
+    ----------
+    G : MultiDiGraph
+        The model (every member seen during the run; vanished ones carry ``gone=True``).
+    alerts : iterable of Alert
+        Every alert stored during the run, in time order.
+    rca : mapping
+        ``{"iterations": [...], "root_causes": [...]}`` as the RCA engine reports them.
+    started_at, ended_at : float
+        Unix seconds.
+    injected : mapping, optional
+        What the demo injected (``fault``, ``target``, ``t``).
+    """
+    members = []
+    for m, attrs in sorted(G.nodes(data=True)):
+        row: dict[str, Any] = {"id": m, "kind": attrs["kind"]}
+        if attrs["kind"] == "node":
+            row["pid"] = attrs.get("pid")
+        if attrs.get("gone"):
+            row["gone"] = True
+        members.append(row)
+    edges = [
+        {"src": u, "dst": v, "kind": kind}
+        for u, v, key, kind in sorted(G.edges(keys=True, data="kind"), key=lambda e: (e[2], e[0], e[1]))
+        if key == 0
+    ]
+    report: dict[str, Any] = {
+        "schema": SCHEMA,
+        "started_at": started_at,
+        "ended_at": ended_at,
+        "members": members,
+        "edges": edges,
+        "alerts": [
+            {"member": a.member, "plugin": a.plugin, "severity": a.severity, "t": a.t, "message": a.message}
+            for a in alerts
+        ],
+        "iterations": list(rca.get("iterations", [])),
+        "root_causes": list(rca.get("root_causes", [])),
+    }
+    if injected:
+        report["injected"] = dict(injected)
+    return report
+
+
+def check_writable(path: Path, what: str) -> Path:
+    """Fail early, before monitoring starts, when ``path`` cannot be written (names it and why)."""
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise OutputError(f"{what} {path}: folder {parent} does not exist")
+    if path.is_dir():
+        raise OutputError(f"{what} {path}: is a folder")
+    if not os.access(parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise OutputError(f"{what} {path}: not writable")
+    return path
+
+
+def write_report(path: Path, report: Mapping[str, Any]) -> None:
+    """Write ``report`` as JSON to ``path`` via a temporary file, so a reader never sees half a file."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        tmp.write_text(json.dumps(report, indent=1, default=_default))
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise OutputError(f"report {path}: {exc.strerror or exc}") from exc
+
+
+def _default(value: Any) -> Any:
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, set | frozenset | tuple):
+        return sorted(value) if isinstance(value, set | frozenset) else list(value)
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
