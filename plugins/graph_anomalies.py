@@ -1,0 +1,91 @@
+"""Structural trouble in the ROS graph: one name on two nodes, subscribers without a publisher,
+incompatible QoS between a publisher and a subscriber."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any, ClassVar
+
+from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.records import Alert
+
+
+def _policy(qos: Any, key: str) -> str:
+    """Return a QoS policy: ``reliable``, ``best_effort``, ``transient_local``, ``volatile`` or ''."""
+    if not isinstance(qos, dict):
+        return ""
+    raw = qos.get(key)
+    if isinstance(raw, int) and not isinstance(raw, bool):
+        # rclpy enums: reliability RELIABLE=1, BEST_EFFORT=2; durability TRANSIENT_LOCAL=1, VOLATILE=2.
+        return {("reliability", 1): "reliable", ("reliability", 2): "best_effort",
+                ("durability", 1): "transient_local", ("durability", 2): "volatile"}.get((key, raw), "")
+    text = str(raw or "").lower()
+    for word in ("best_effort", "reliable", "transient_local", "volatile"):
+        if word in text:
+            return word
+    return ""
+
+
+def incompatible(pub_qos: Any, sub_qos: Any) -> list[str]:
+    """Return why a publisher with ``pub_qos`` cannot serve a subscriber with ``sub_qos``."""
+    why = []
+    if _policy(sub_qos, "reliability") == "reliable" and _policy(pub_qos, "reliability") == "best_effort":
+        why.append("reliable subscriber, best-effort publisher")
+    if _policy(sub_qos, "durability") == "transient_local" and _policy(pub_qos, "durability") == "volatile":
+        why.append("transient-local subscriber, volatile publisher")
+    return why
+
+
+class GraphAnomalies(Plugin):
+    """Alerts on:
+
+    * two nodes with one name (node attribute ``instances`` > 1, as the collector counts them): error;
+    * a subscriber whose topic has had no publisher for ``grace_s``: warn on the subscriber;
+    * incompatible QoS between a publisher and a subscriber of a topic (edge attribute ``qos``,
+      a dict with ``reliability`` and ``durability``): error on the subscriber.
+
+    A topic is checked when it or the subscriber is watched; topics in ``ignore_topics`` never.
+    """
+
+    name = "graph_anomalies"
+    kinds = ("node", "topic")
+    settings: ClassVar[dict[str, Any]] = {
+        "grace_s": 5.0, "ignore_topics": [], "duplicates": True, "no_publisher": True, "qos": True,
+    }
+
+    def check(self, ctx: PluginContext) -> Iterator[Alert]:
+        s = ctx.settings
+        G = ctx.graph
+        if s["duplicates"]:
+            for node in ctx.watched("node"):
+                n = G.nodes[node].get("instances", 1)
+                if isinstance(n, int) and n > 1:
+                    yield ctx.alert(node, "error", f"{n} nodes share this name", symptom="duplicate_name",
+                                    instances=n)
+        orphan_since = ctx.state.setdefault("orphan_since", {})
+        ignore = {t if t.startswith("topic:") else f"topic:{t}" for t in s["ignore_topics"]}
+        current = set()
+        for topic, kind in G.nodes(data="kind"):
+            if kind != "topic" or topic in ignore:
+                continue
+            pubs = [(u, d.get("qos")) for u, _, k, d in G.in_edges(topic, keys=True, data=True) if k == 0]
+            subs = [(v, d.get("qos")) for _, v, k, d in G.out_edges(topic, keys=True, data=True) if k == 0]
+            subs = [(v, q) for v, q in subs if topic in ctx.watch or v in ctx.watch]
+            if not subs:
+                continue
+            if not pubs and s["no_publisher"]:
+                current.add(topic)
+                since = orphan_since.setdefault(topic, ctx.t)
+                if ctx.t - since >= s["grace_s"]:
+                    for v, _ in sorted(subs, key=lambda x: x[0]):
+                        yield ctx.alert(v, "warn", f"subscribes to {topic} which has had no publisher for "
+                                        f"{ctx.t - since:.0f} s", symptom="no_publisher", topic=topic)
+            if pubs and s["qos"]:
+                for v, sq in sorted(subs, key=lambda x: x[0]):
+                    bad = sorted({f"{u}: {w}" for u, pq in pubs for w in incompatible(pq, sq)})
+                    if bad:
+                        yield ctx.alert(v, "error", f"QoS incompatible on {topic}: " + "; ".join(bad),
+                                        symptom="qos_incompatible", topic=topic)
+        for topic in list(orphan_since):
+            if topic not in current:
+                del orphan_since[topic]

@@ -1,0 +1,69 @@
+"""Nodes that left the graph, processes that died or restarted, nodes marked not alive."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any, ClassVar
+
+import networkx as nx
+
+from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.model.ids import kind_of, pid_of
+from stream_viz.records import Alert
+
+
+def hosted_nodes(G: nx.MultiDiGraph, process: str) -> list[str]:
+    """Nodes of ``process``: its layer-1 children of kind node, or nodes whose ``pid`` is its pid."""
+    out = set()
+    if process in G:
+        out.update(c for _, c, k in G.out_edges(process, keys=True)
+                   if k == 1 and G.nodes[c].get("kind") == "node")
+    pid = pid_of(process)
+    out.update(m for m, d in G.nodes(data=True) if d.get("kind") == "node" and d.get("pid") == pid)
+    return sorted(out)
+
+
+class MemberGone(Plugin):
+    """Alerts when a process dies (``exit`` event: error on its node(s), and on the process when
+    it has no node), restarts (``restart`` event: warn), a node leaves the graph without its
+    process having been seen to exit (``left_severity``), or a node carries ``alive=False``
+    (error, every sample while it lasts).
+
+    Alerts whether or not the member is watched unless ``watched_only``: a death is evidence,
+    not an attribute to screen.
+    """
+
+    name = "member_gone"
+    kinds = ("node", "process")
+    settings: ClassVar[dict[str, Any]] = {"left_severity": "warn", "watched_only": False}
+
+    def check(self, ctx: PluginContext) -> Iterator[Alert]:
+        s = ctx.settings
+        exited = ctx.state.setdefault("exited", set())
+
+        def ok(m: str) -> bool:
+            return not s["watched_only"] or m in ctx.watch
+
+        for e in ctx.events:
+            if e.kind == "exit":
+                targets = [e.member]
+                if kind_of(e.member) == "process":
+                    nodes = set(hosted_nodes(ctx.graph, e.member)) | set(e.data.get("nodes", ()))
+                    targets = sorted(nodes) or [e.member]
+                how = e.text or "exited"
+                for m in targets:
+                    exited.add(m)
+                    if ok(m):
+                        yield ctx.alert(m, "error", f"process died: {how}", symptom="exit",
+                                        process=e.member, **{k: v for k, v in e.data.items() if k != "nodes"})
+            elif e.kind == "restart" and ok(e.member):
+                yield ctx.alert(e.member, "warn", f"restarted: {e.text or 'new process'}", symptom="restart",
+                                **e.data)
+        for m in sorted(ctx.diff.removed_members):
+            if kind_of(m) == "node" and m not in exited and ok(m):
+                yield ctx.alert(m, s["left_severity"], "left the graph", symptom="left")
+        for m in sorted(ctx.diff.added_members):
+            exited.discard(m)  # back again: a later departure is news
+        for m, alive in ctx.graph.nodes(data="alive"):
+            if alive is False and ok(m):
+                yield ctx.alert(m, "error", "not alive", symptom="not_alive")

@@ -1,0 +1,115 @@
+"""Process CPU and memory anomalies against the process's own baseline, and memory growth."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from typing import Any, ClassVar
+
+import numpy as np
+from stream_viz_plugins.member_gone import hosted_nodes
+
+from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.detect.baseline import cached_baseline, slope, streak
+from stream_viz.model.ids import make_id
+from stream_viz.records import Alert
+
+
+class ProcessResources(Plugin):
+    """Alerts on a process using much more CPU or memory than it used to, or leaking memory.
+
+    * CPU / memory: ``value - median ≥ max(k·σ, min_rise)`` (σ = 1.4826·MAD of the process's own
+      past after ``warmup_s``, frozen while alerting) for ``confirm`` samples; the absolute
+      floors (``cpu_min_rise`` percentage points, ``rss_min_rise_mb``) keep idle noise quiet.
+    * growth: the least-squares slope of RSS over the last ``trend_s`` is at least
+      ``growth_mb_per_s`` and RSS grew at least ``growth_min_mb`` in that window.
+
+    Alerts go to the nodes the process hosts (``alert_on = "nodes"``; the process itself when
+    it hosts none), to the process (``"process"``) or both (``"both"``). A process is checked
+    when it or one of its nodes is watched.
+    """
+
+    name = "process_resources"
+    kinds = ("process", "node")
+    settings: ClassVar[dict[str, Any]] = {
+        "warmup_s": 10.0,
+        "min_samples": 8,
+        "refresh_s": 10.0,
+        "window": 120,
+        "k": 5.0,
+        "cpu_min_rise": 25.0,
+        "rss_min_rise_mb": 100.0,
+        "growth_mb_per_s": 1.0,
+        "growth_min_mb": 20.0,
+        "trend_s": 30.0,
+        "confirm": 2,
+        "alert_on": "nodes",
+    }
+
+    def check(self, ctx: PluginContext) -> Iterator[Alert]:
+        s = ctx.settings
+        G = ctx.graph
+        procs = set(ctx.watched("process"))
+        for node in ctx.watched("node"):
+            parents = [u for u, _, k in G.in_edges(node, keys=True)
+                       if k == 1 and G.nodes[u].get("kind") == "process"]
+            pid = G.nodes[node].get("pid")
+            if not parents and isinstance(pid, int) and make_id("process", pid) in G:
+                parents = [make_id("process", pid)]
+            procs.update(parents)
+        alerting = ctx.state.setdefault("alerting", set())
+        for proc in sorted(procs):
+            found = []
+            for attr, floor, what in (("cpu_percent", s["cpu_min_rise"], "cpu"),
+                                      ("rss_mb", s["rss_min_rise_mb"], "memory")):
+                value = ctx.value(proc, attr)
+                if math.isnan(value):
+                    continue
+                key = (proc, attr)
+                base = cached_baseline(ctx, proc, attr, warmup_s=s["warmup_s"], min_samples=s["min_samples"],
+                                       refresh_s=s["refresh_s"], window=s["window"], frozen=key in alerting)
+                if base is None:
+                    continue
+                med, sigma, _ = base
+                high = value - med >= max(s["k"] * sigma, floor)
+                if streak(ctx.state, key, high) >= s["confirm"]:
+                    alerting.add(key)
+                    unit = "%" if what == "cpu" else " MB"
+                    found.append((what, f"{what} {value:.0f}{unit}, normally {med:.0f}{unit}",
+                                  {"value": value, "baseline": med}))
+                else:
+                    alerting.discard(key)
+            growth = self._growth(ctx, proc)
+            if growth is not None:
+                found.append(("memory_growth", f"memory growing {growth:.1f} MB/s", {"mb_per_s": growth}))
+            if not found:
+                continue
+            nodes = hosted_nodes(G, proc)
+            mode = s["alert_on"]
+            targets = [proc] if mode == "process" or not nodes else []
+            targets += nodes if mode != "process" else []
+            if mode == "both" and nodes:
+                targets.append(proc)
+            message = "; ".join(f[1] for f in found)
+            data = {"process": proc, "symptoms": [f[0] for f in found]} | {
+                f"{f[0]}_{k}": v for f in found for k, v in f[2].items()}
+            for m in targets:
+                yield ctx.alert(m, "warn", f"{proc}: {message}", **data)
+
+    @staticmethod
+    def _growth(ctx: PluginContext, proc: str) -> float | None:
+        s = ctx.settings
+        times, values = ctx.past(proc, "rss_mb")
+        if len(times) == 0 or ctx.t - times[0] < s["warmup_s"]:
+            return None
+        now = ctx.value(proc, "rss_mb")
+        recent = times >= ctx.t - s["trend_s"]
+        t = np.append(times[recent], ctx.t)
+        v = np.append(values[recent], now)
+        ok = np.isfinite(v)
+        if ok.sum() < 5:
+            return None
+        rate = slope(t, v)
+        if np.isfinite(rate) and rate >= s["growth_mb_per_s"] and np.ptp(v[ok]) >= s["growth_min_mb"]:
+            return rate
+        return None

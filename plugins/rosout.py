@@ -1,0 +1,36 @@
+"""/rosout ERROR and FATAL lines, as alerts on the node that logged them."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any, ClassVar
+
+from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.detect.episodes import RANK
+from stream_viz.records import Alert
+
+
+class Rosout(Plugin):
+    """One alert per logging member and sample: its worst level (≥ ``min_level``), the count and
+    the first line. Alerts whether or not the member is watched unless ``watched_only``.
+    """
+
+    name = "rosout"
+    kinds = ("node",)
+    settings: ClassVar[dict[str, Any]] = {"min_level": "error", "watched_only": False}
+
+    def check(self, ctx: PluginContext) -> Iterator[Alert]:
+        s = ctx.settings
+        floor = RANK.get(s["min_level"], RANK["error"])
+        seen: dict[str, list] = {}
+        for e in ctx.events:
+            if e.kind != "log" or RANK.get(e.level, -1) < floor:
+                continue
+            if s["watched_only"] and e.member not in ctx.watch:
+                continue
+            seen.setdefault(e.member, []).append(e)
+        for member, evs in sorted(seen.items()):
+            worst = max(evs, key=lambda e: RANK[e.level])
+            more = f" (+{len(evs) - 1} more)" if len(evs) > 1 else ""
+            yield ctx.alert(member, worst.level, f"logged {worst.level.upper()}: {evs[0].text}{more}",
+                            symptom="log", lines=len(evs))

@@ -1,0 +1,66 @@
+"""Topic latency or jitter rising above the topic's own baseline; messages dropped."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from typing import Any, ClassVar
+
+from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.detect.baseline import cached_baseline, streak
+from stream_viz.records import Alert
+
+
+class TopicLatency(Plugin):
+    """Alerts on latency / jitter rises and on message drops of watched topics.
+
+    A rise counts when ``value - median ≥ max(k·σ, min_rise_ms)`` (σ = 1.4826·MAD of the topic's
+    own past after ``warmup_s``) for ``confirm`` samples in a row; drops when
+    ``drops_per_s ≥ max(drops_min_per_s, drops_ratio × rate)`` for ``confirm`` samples.
+    """
+
+    name = "topic_latency"
+    kinds = ("topic",)
+    settings: ClassVar[dict[str, Any]] = {
+        "warmup_s": 10.0,
+        "min_samples": 5,
+        "refresh_s": 10.0,
+        "window": 120,
+        "k": 6.0,
+        "latency_min_rise_ms": 20.0,
+        "jitter_min_rise_ms": 20.0,
+        "confirm": 2,
+        "drops_min_per_s": 1.0,
+        "drops_ratio": 0.05,
+    }
+
+    def check(self, ctx: PluginContext) -> Iterator[Alert]:
+        s = ctx.settings
+        alerting = ctx.state.setdefault("alerting", set())
+        for topic in ctx.watched("topic"):
+            floors = (("latency_ms", s["latency_min_rise_ms"]), ("jitter_ms", s["jitter_min_rise_ms"]))
+            for attr, floor in floors:
+                value = ctx.value(topic, attr)
+                if math.isnan(value):
+                    continue
+                key = (topic, attr)
+                base = cached_baseline(ctx, topic, attr, warmup_s=s["warmup_s"], min_samples=s["min_samples"],
+                                       refresh_s=s["refresh_s"], window=s["window"], frozen=key in alerting)
+                if base is None:
+                    continue
+                med, sigma, _ = base
+                high = value - med >= max(s["k"] * sigma, floor)
+                if streak(ctx.state, key, high) >= s["confirm"]:
+                    alerting.add(key)
+                    what = attr.removesuffix("_ms")
+                    yield ctx.alert(topic, "warn", f"{what} {value:.1f} ms, normally {med:.1f} ms",
+                                    symptom=f"{what}_rise", value_ms=value, baseline_ms=med)
+                else:
+                    alerting.discard(key)
+            drops = ctx.value(topic, "drops_per_s")
+            if not math.isnan(drops):
+                rate = ctx.value(topic, "rate_hz")
+                limit = max(s["drops_min_per_s"], s["drops_ratio"] * (0.0 if math.isnan(rate) else rate))
+                if streak(ctx.state, (topic, "drops"), drops >= limit) >= s["confirm"]:
+                    yield ctx.alert(topic, "warn", f"{drops:.3g} messages/s dropped",
+                                    symptom="drops", drops_per_s=drops)

@@ -1,0 +1,78 @@
+"""Topic rate drop or silence, against the topic's own healthy rate and the configured rate."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from typing import Any, ClassVar
+
+from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.detect.baseline import cached_baseline, streak
+from stream_viz.records import Alert
+
+
+class TopicRate(Plugin):
+    """Alerts when a watched topic's rate drops or it goes silent.
+
+    * silence (error): no message for ``max(silence_periods / rate, silence_min_s)`` after
+      having had messages;
+    * drop (warn): ``rate < drop_ratio × baseline`` for ``confirm`` samples, the baseline being
+      the median of the topic's own rate after ``warmup_s`` (frozen while alerting);
+    * below expectation (warn): ``rate < (1 - expected_tolerance) × expected_rate_hz`` from the
+      config, for ``confirm`` samples.
+    """
+
+    name = "topic_rate"
+    kinds = ("topic",)
+    settings: ClassVar[dict[str, Any]] = {
+        "warmup_s": 10.0,
+        "min_samples": 5,
+        "refresh_s": 10.0,
+        "window": 120,
+        "drop_ratio": 0.5,
+        "min_baseline_hz": 0.5,
+        "confirm": 2,
+        "silence_periods": 3.0,
+        "silence_min_s": 1.0,
+        "expected_tolerance": 0.3,
+    }
+
+    def check(self, ctx: PluginContext) -> Iterator[Alert]:
+        s = ctx.settings
+        last_msg = ctx.state.setdefault("last_msg", {})
+        alerting = ctx.state.setdefault("alerting", set())
+        for topic in ctx.watched("topic"):
+            rate = ctx.value(topic, "rate_hz")
+            if math.isnan(rate):
+                continue  # not measured
+            base = cached_baseline(ctx, topic, "rate_hz", warmup_s=s["warmup_s"],
+                                   min_samples=s["min_samples"], refresh_s=s["refresh_s"],
+                                   window=s["window"], frozen=topic in alerting)
+            fired = False
+            if rate > 0:
+                last_msg[topic] = (ctx.t, rate)
+            elif topic in last_msg:
+                t_last, rate_last = last_msg[topic]
+                ref = base[0] if base and base[0] > 0 else rate_last
+                quiet = ctx.t - t_last
+                if quiet >= max(s["silence_periods"] / ref, s["silence_min_s"]):
+                    fired = True
+                    yield ctx.alert(topic, "error", f"silent for {quiet:.1f} s (was {ref:.3g} Hz)",
+                                    symptom="silence", silent_s=quiet, baseline_hz=ref)
+            if not fired and base is not None and base[0] >= s["min_baseline_hz"]:
+                low = rate < s["drop_ratio"] * base[0]
+                if streak(ctx.state, (topic, "drop"), low) >= s["confirm"]:
+                    fired = True
+                    yield ctx.alert(topic, "warn", f"rate {rate:.3g} Hz, down from {base[0]:.3g} Hz",
+                                    symptom="rate_drop", rate_hz=rate, baseline_hz=base[0])
+            expected = ctx.expected_rates.get(topic)
+            if expected:
+                low = rate < (1.0 - s["expected_tolerance"]) * expected
+                if streak(ctx.state, (topic, "expected"), low) >= s["confirm"] and not fired:
+                    fired = True
+                    yield ctx.alert(topic, "warn", f"rate {rate:.3g} Hz, expected {expected:.3g} Hz",
+                                    symptom="below_expected", rate_hz=rate, expected_hz=expected)
+            if fired:
+                alerting.add(topic)
+            else:
+                alerting.discard(topic)

@@ -1,0 +1,89 @@
+"""Robust baselines of a member's own past: median / MAD, linear trend, cached per plugin state.
+
+Pure functions over numpy arrays, plus `cached_baseline`, which keeps a baseline in a plugin's
+private state and refreshes it only every ``refresh_s`` and never while the member is alerting,
+so an ongoing fault does not become the new normal and 1,000 members stay cheap.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+MAD_TO_SIGMA = 1.4826
+
+
+def robust(values: np.ndarray) -> tuple[float, float, int]:
+    """Return ``(median, sigma, n)`` of the finite values; sigma = 1.4826·MAD. NaNs when empty."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if len(v) == 0:
+        return float("nan"), float("nan"), 0
+    med = float(np.median(v))
+    return med, float(MAD_TO_SIGMA * np.median(np.abs(v - med))), len(v)
+
+
+def slope(times: np.ndarray, values: np.ndarray) -> float:
+    """Return the least-squares slope of ``values`` over ``times`` (finite pairs); NaN if < 2."""
+    t = np.asarray(times, dtype=float)
+    v = np.asarray(values, dtype=float)
+    ok = np.isfinite(t) & np.isfinite(v)
+    t, v = t[ok], v[ok]
+    if len(t) < 2 or np.ptp(t) == 0:
+        return float("nan")
+    t = t - t.mean()
+    return float(np.dot(t, v - v.mean()) / np.dot(t, t))
+
+
+def cached_baseline(
+    ctx: Any,
+    member: str,
+    attr: str,
+    *,
+    warmup_s: float,
+    min_samples: int,
+    refresh_s: float,
+    window: int,
+    frozen: bool = False,
+) -> tuple[float, float, int] | None:
+    """Return ``(median, sigma, n)`` of ``member``'s own past ``attr``, or None while warming up.
+
+    Parameters
+    ----------
+    ctx : PluginContext
+        The call's context (its ``state`` holds the cache).
+    member, attr : str
+        The member and θ attribute.
+    warmup_s, min_samples : float, int
+        No baseline before the member has been seen this long with this many finite samples.
+    refresh_s : float
+        Recompute at most this often.
+    window : int
+        Use the last this many samples.
+    frozen : bool
+        Keep the cached value (the member is alerting: do not learn the fault).
+    """
+    cache = ctx.state.setdefault("_baselines", {})
+    key = (member, attr)
+    hit = cache.get(key)
+    if hit is not None and (frozen or ctx.t - hit[0] < refresh_s):
+        return hit[1]
+    times, values = ctx.past(member, attr)
+    if len(times) == 0 or ctx.t - times[0] < warmup_s:
+        return hit[1] if hit else None
+    med, sigma, n = robust(values[-window:])
+    if n < min_samples:
+        return hit[1] if hit else None
+    cache[key] = (ctx.t, (med, sigma, n))
+    return med, sigma, n
+
+
+def streak(state: dict[str, Any], key: Any, condition: bool) -> int:
+    """Count consecutive calls with ``condition`` true for ``key`` (0 once it is false)."""
+    counts = state.setdefault("_streaks", {})
+    if condition:
+        counts[key] = counts.get(key, 0) + 1
+        return counts[key]
+    counts.pop(key, None)
+    return 0

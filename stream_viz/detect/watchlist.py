@@ -1,0 +1,153 @@
+"""The initial watchlist ``W_0``: members named in the config, plus process monitoring.
+
+After ``W_0`` the watchlist changes only through the RCA's subgraph growth.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import networkx as nx
+import numpy as np
+
+from stream_viz.detect.baseline import robust, slope
+from stream_viz.model.history import History
+from stream_viz.model.ids import kind_of
+from stream_viz.model.theta import SCHEMAS
+
+AUTO_LIMIT = 300
+_CPU = SCHEMAS["process"].index("cpu_percent")
+_RSS = SCHEMAS["process"].index("rss_mb")
+
+
+def match_members(G: nx.MultiDiGraph, patterns: Iterable[str]) -> set[str]:
+    """Return the members matching any pattern.
+
+    A pattern with a kind (``node:/camera*``) matches member ids; one without
+    (``/camera*``) matches the names of members of any kind. ``*``, ``?`` and ``[..]`` as in
+    shell globs.
+    """
+    out: set[str] = set()
+    members = list(G.nodes)
+    for pat in patterns:
+        if ":" in pat or pat == "root":
+            out.update(fnmatch.filter(members, pat))
+        else:
+            out.update(m for m in members if fnmatch.fnmatchcase(m.partition(":")[2], pat))
+    return out
+
+
+def process_anomaly(
+    times: np.ndarray,
+    values: np.ndarray,
+    now: float,
+    *,
+    k: float = 5.0,
+    cpu_min_rise: float = 25.0,
+    rss_min_rise_mb: float = 100.0,
+    growth_mb_per_s: float = 1.0,
+    growth_min_mb: float = 20.0,
+    trend_s: float = 30.0,
+    warmup: int = 10,
+) -> list[str]:
+    """Return what is anomalous in a process's last sample vs its own earlier samples.
+
+    Parameters
+    ----------
+    times : (n,) array
+        Sample times, the last one being the present.
+    values : (n, dim) array
+        θ of the process (schema ``SCHEMAS["process"]``).
+    now : float
+        The present (samples after it are ignored).
+
+    Returns
+    -------
+    list of str
+        Subset of ``["cpu", "memory", "memory_growth"]``.
+    """
+    keep = times <= now
+    times, values = times[keep], values[keep]
+    if len(times) < warmup + 1:
+        return []
+    past, cur = values[:-1], values[-1]
+    out = []
+    med, sigma, _ = robust(past[:, _CPU])
+    if np.isfinite(cur[_CPU]) and np.isfinite(med) and cur[_CPU] - med >= max(k * sigma, cpu_min_rise):
+        out.append("cpu")
+    med, sigma, _ = robust(past[:, _RSS])
+    if np.isfinite(cur[_RSS]) and np.isfinite(med) and cur[_RSS] - med >= max(k * sigma, rss_min_rise_mb):
+        out.append("memory")
+    recent = times >= now - trend_s
+    if recent.sum() >= 5:
+        s = slope(times[recent], values[recent, _RSS])
+        span = values[recent, _RSS]
+        if np.isfinite(s) and s >= growth_mb_per_s and np.nanmax(span) - np.nanmin(span) >= growth_min_mb:
+            out.append("memory_growth")
+    return out
+
+
+def process_anomalies(G: nx.MultiDiGraph, history: History, now: float | None = None,
+                      **kw: Any) -> set[str]:
+    """Return processes whose metrics are anomalous vs their own past, and the nodes they host.
+
+    Parameters
+    ----------
+    G : MultiDiGraph
+        The model (process tree on layer 1: process → node).
+    history : History
+        θ history; the last sample of each process is the present.
+    now : float, optional
+        The present (default: each process's last sample).
+    **kw
+        Thresholds of `process_anomaly`.
+    """
+    out: set[str] = set()
+    for m, kind in G.nodes(data="kind"):
+        if kind != "process" or m not in history:
+            continue
+        times = history.times(m)
+        if process_anomaly(times, history.values(m), times[-1] if now is None else now, **kw):
+            out.add(m)
+            out.update(c for _, c, key in G.out_edges(m, keys=True)
+                       if key == 1 and G.nodes[c].get("kind") == "node")
+    return out
+
+
+def _get(settings: Any, key: str, default: Any) -> Any:
+    if isinstance(settings, Mapping):
+        return settings.get(key, default)
+    return getattr(settings, key, default)
+
+
+def initial_watchlist(G: nx.MultiDiGraph, settings: Any, history: History | None = None,
+                      *, auto_limit: int = AUTO_LIMIT) -> set[str]:
+    """Return ``W_0``.
+
+    Parameters
+    ----------
+    G : MultiDiGraph
+        The model.
+    settings : WatchlistConfig or mapping
+        ``mode`` (``auto``, ``all`` or ``config``) and ``members`` (ids or patterns).
+    history : History, optional
+        θ history for process monitoring.
+    auto_limit : int
+        ``auto`` watches everything up to this many members.
+
+    Notes
+    -----
+    ``all`` (and ``auto`` on a graph of at most ``auto_limit`` members) watches every member.
+    Otherwise: the configured members, every process (process monitoring is cheap and is what
+    finds anomalous members), and the processes/nodes `process_anomalies` flags.
+    """
+    mode = _get(settings, "mode", "auto")
+    if mode == "all" or (mode == "auto" and G.number_of_nodes() <= auto_limit):
+        return set(G.nodes)
+    watch = match_members(G, _get(settings, "members", ()))
+    watch.update(m for m in G.nodes if kind_of(m) == "process")
+    if history is not None:
+        watch |= process_anomalies(G, history)
+    return watch
