@@ -1,0 +1,205 @@
+"""The collector: fills the model live from a real ROS 2 system and the OS, one `Sample` per call.
+
+It only observes: an own rclpy Context and node (no /rosout publisher, no parameter services),
+graph API calls, raw subscriptions; it never publishes on or calls the system's topics/services.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import rclpy
+from rclpy.context import Context
+
+from stream_viz.collect.build import build_model
+from stream_viz.collect.fastdds import decode_gid
+from stream_viz.collect.pidmap import PidResolver
+from stream_viz.collect.processes import ProcessSampler
+from stream_viz.collect.readings import GraphReading, PidInfo, ProcessReading
+from stream_viz.collect.rosgraph import read_graph
+from stream_viz.collect.topics import TopicMonitor, diag_events, log_event
+from stream_viz.errors import CollectError
+from stream_viz.model.diff import diff
+from stream_viz.model.graph import new_graph
+from stream_viz.model.ids import make_id, node_fqn
+from stream_viz.records import Event, Sample
+
+__all__ = ["Collector", "build_model"]
+
+
+class Collector:
+    """Watches one ROS 2 domain.
+
+    Parameters
+    ----------
+    domain_id : int or None
+        The ROS_DOMAIN_ID to observe (None: the environment's, else 0).
+    include_hidden : bool
+        Keep hidden names (``_…``, action internals) in the model.
+    include_internal : bool
+        Keep parameter services, ``/rosout`` and ``/parameter_events`` in the model.
+    topic_metrics : bool
+        Subscribe to every topic for rate/jitter/latency/bandwidth/drops.
+    window_s : float
+        Sliding window of the topic metrics.
+    """
+
+    def __init__(self, domain_id: int | None = None, *, include_hidden: bool = False,
+                 include_internal: bool = False, topic_metrics: bool = True, window_s: float = 3.0) -> None:
+        if domain_id is None:
+            try:
+                domain_id = int(os.environ.get("ROS_DOMAIN_ID", "0") or 0)
+            except ValueError as e:
+                raise CollectError(f"ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']!r} is not an integer") from e
+        self.domain_id = domain_id
+        self.include_hidden, self.include_internal = include_hidden, include_internal
+        self.topic_metrics, self.window_s = topic_metrics, window_s
+        self.name = f"_stream_viz_observer_{os.getpid()}"
+        self.own = node_fqn("/", self.name)
+        self._ctx: Context | None = None
+        self.node = None
+        self.topics: TopicMonitor | None = None
+        self.resolver: PidResolver | None = None
+        self.sampler = ProcessSampler()
+        self._prev = new_graph()
+        self._prev_pids: dict[str, int | None] = {}
+        self._dead: dict[int, ProcessReading] = {}
+        self._closed = False
+
+    def start(self) -> None:
+        """Create our own rclpy Context and observer node, subscribe to /rosout and /diagnostics."""
+        if self.node is not None:
+            return
+        ctx = Context()
+        try:
+            rclpy.init(args=[], context=ctx, domain_id=self.domain_id)
+            self._ctx = ctx
+            self.node = rclpy.create_node(self.name, context=ctx, enable_rosout=False,
+                                          start_parameter_services=False)
+        except Exception as e:  # rclpy raises RCLError/RuntimeError kinds we cannot name portably
+            self.close()
+            raise CollectError(f"cannot start the ROS 2 observer on domain {self.domain_id}: {e}") from e
+        self.topics = TopicMonitor(self.node, self.window_s, metrics=self.topic_metrics)
+        self.topics.start()
+        self.resolver = PidResolver(self.domain_id, self._own_host())
+
+    def _own_host(self) -> int | None:
+        # Our own /rosout subscription carries our participant's prefix, hence this host's id.
+        for i in self.node.get_subscriptions_info_by_topic("/rosout"):
+            if node_fqn(i.node_namespace, i.node_name) == self.own:
+                info = decode_gid(bytes(i.endpoint_gid))
+                return info.host_id if info else None
+        return None
+
+    def sample(self) -> Sample:
+        """Read everything now and return the model with θ, the events since last time, the diff."""
+        if self.node is None:
+            raise CollectError("Collector.sample() called before start() (or after close())")
+        t = time.time()
+        reading = read_graph(self.node, own=self.own, include_hidden=self.include_hidden,
+                             include_internal=self.include_internal)
+        self.topics.update(reading.topics)
+        pids = self.resolver.resolve(reading.rosout_gids)
+        for fqn in reading.nodes:
+            pids.setdefault(fqn, PidInfo(None, "unknown"))
+        node_pids = {n: p.pid for n, p in pids.items() if n in reading.nodes}
+        ps = self.sampler.sample({p for p in node_pids.values() if p is not None})
+        events = self._process_events(t, ps.exited, node_pids)
+        events += self._restarts(t, node_pids)
+        # Keep the process of nodes DDS still lists after their process died (SIGKILL: ~20 s).
+        self._dead.update(ps.exited)
+        listed = set(node_pids.values())
+        self._dead = {p: r for p, r in self._dead.items() if p in listed and p not in ps.processes}
+        processes = dict(ps.processes)
+        for pid, r in self._dead.items():
+            r.alive = False
+            processes[pid] = r
+        for pid in set(node_pids.values()) - set(processes) - {None}:
+            # Dead before we ever read it: a node of a process that is not there any more.
+            processes[pid] = ProcessReading(pid, None, alive=False)
+        pub_counts = {tp: len(eps) for tp, eps in reading.publishers.items()}
+        stats = self.topics.stats(pub_counts)
+        events += self._message_events(t, reading)
+        G = build_model(reading, pids, processes, stats)
+        unreadable = {make_id("node", n): why for n, why in reading.skipped.items()}
+        for pid, why in ps.errors.items():
+            if pid not in processes:  # dead ones are in the model, marked alive=False
+                unreadable[make_id("process", pid)] = why
+        for pid, r in ps.processes.items():
+            if r.unreadable:
+                unreadable[make_id("process", pid)] = "access denied: " + ", ".join(r.unreadable)
+        for tp, st in stats.items():
+            if not st.measured and tp in reading.topics:
+                unreadable[make_id("topic", tp)] = st.reason
+        d = diff(self._prev, G)
+        self._prev, self._prev_pids = G, node_pids
+        live = {p.prefix for p in pids.values() if p.prefix}
+        self.resolver.forget(live)
+        return Sample(t, G, events, d, unreadable)
+
+    def _process_events(self, t: float, exited: dict[int, ProcessReading],
+                        node_pids: dict[str, int | None]) -> list[Event]:
+        out = []
+        for pid, r in sorted(exited.items()):
+            had = sorted({n for n, p in self._prev_pids.items() if p == pid})
+            listed = sorted(n for n in had if node_pids.get(n) == pid)
+            # Nodes still in the DDS graph after their process ended: it did not shut down cleanly.
+            level = "error" if listed else ("warn" if had else "info")
+            nodes = [make_id("node", n) for n in had]
+            data = {"pid": pid, "process": make_id("process", pid), "nodes": nodes, "name": r.name,
+                    "still_listed": [make_id("node", n) for n in listed]}
+            text = f"process {pid} ({r.name}) exited" + (f" with nodes {', '.join(had)}" if had else "")
+            for m in [*nodes, make_id("process", pid)]:
+                out.append(Event(t, "exit", m, level, text, data))
+        return out
+
+    def _restarts(self, t: float, node_pids: dict[str, int | None]) -> list[Event]:
+        out = []
+        for n, pid in sorted(node_pids.items()):
+            old = self._prev_pids.get(n)
+            if old is not None and pid is not None and old != pid:
+                out.append(Event(t, "restart", make_id("node", n), "warn",
+                                 f"node {n} now runs in process {pid} (was {old})",
+                                 {"old_pid": old, "pid": pid}))
+        return out
+
+    def _message_events(self, t: float, reading: GraphReading) -> list[Event]:
+        nodes = set(reading.nodes)
+        diag_pubs = sorted({e.node for e in reading.publishers.get("/diagnostics", [])})
+        out: list[Event] = []
+        for topic, msg, info in self.topics.take_messages():
+            try:
+                if topic == "/rosout":
+                    ev = log_event(msg, nodes)
+                    if ev is not None:
+                        out.append(ev)
+                else:
+                    out += diag_events(msg, info["source_timestamp"] / 1e9, diag_pubs, nodes)
+            except (AttributeError, TypeError, ValueError) as e:  # a malformed message: say so, go on
+                out.append(Event(t, "observe_error", make_id("topic", topic), "warn",
+                                 f"cannot read a {topic} message: {e}"))
+        return out
+
+    def close(self) -> None:
+        """Stop observing: end the drain thread, destroy the node, shut our own Context. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        if self.topics is not None:
+            self.topics.close()
+        if self.node is not None:
+            try:
+                self.node.destroy_node()
+            finally:
+                self.node = None
+        if self._ctx is not None:
+            self._ctx.try_shutdown()
+            self._ctx = None
+
+    def __enter__(self) -> Collector:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

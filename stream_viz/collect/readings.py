@@ -1,0 +1,79 @@
+"""Plain readings the collector takes (ROS graph, node → pid, processes, topics), before the model.
+
+They cross from the side-effecting readers (rclpy, psutil) to the pure `build_model`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """One publisher or subscription of a topic, as the DDS graph reports it."""
+
+    node: str  # fully qualified node name
+    topic: str
+    type: str
+    gid: bytes
+    qos: dict[str, Any]  # reliability, durability, history (str), depth (int)
+
+
+@dataclass
+class NodeReading:
+    """One ROS node and its per-node graph lists (names → types)."""
+
+    fqn: str
+    name: str
+    namespace: str
+    services: dict[str, list[str]] = field(default_factory=dict)
+    clients: dict[str, list[str]] = field(default_factory=dict)
+    action_servers: dict[str, list[str]] = field(default_factory=dict)
+    action_clients: dict[str, list[str]] = field(default_factory=dict)
+
+
+@dataclass
+class GraphReading:
+    """The ROS graph at one moment (internal names already filtered out unless asked for)."""
+
+    nodes: dict[str, NodeReading] = field(default_factory=dict)
+    topics: dict[str, list[str]] = field(default_factory=dict)  # topic -> types
+    publishers: dict[str, list[Endpoint]] = field(default_factory=dict)  # topic -> endpoints
+    subscribers: dict[str, list[Endpoint]] = field(default_factory=dict)
+    rosout_gids: dict[str, bytes] = field(default_factory=dict)  # node fqn -> gid of its /rosout pub
+    skipped: dict[str, str] = field(default_factory=dict)  # node fqn -> why it was skipped
+
+
+@dataclass(frozen=True)
+class PidInfo:
+    """Which process a node lives in: ``status`` confirmed | unverified | ambiguous | unknown | remote."""
+
+    pid: int | None
+    status: str
+    candidates: tuple[int, ...] = ()
+    prefix: str = ""
+
+
+@dataclass
+class ProcessReading:
+    """One OS process: identity, its parent and metrics (SCHEMAS["process"] names; missing = unknown)."""
+
+    pid: int
+    ppid: int | None
+    name: str = ""
+    cmdline: str = ""
+    create_time: float | None = None
+    username: str | None = None
+    metrics: dict[str, float] = field(default_factory=dict)
+    alive: bool = True
+    unreadable: list[str] = field(default_factory=list)  # fields we were denied
+
+
+@dataclass
+class TopicStats:
+    """Metrics of one topic over the sliding window; ``measured`` False says why not in ``reason``."""
+
+    measured: bool
+    reason: str = ""
+    metrics: dict[str, float] = field(default_factory=dict)

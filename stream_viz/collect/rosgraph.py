@@ -1,0 +1,119 @@
+"""Read the ROS 2 graph through an rclpy node with graph API calls only (no spinning, no calls).
+
+Hidden names (a token starting with ``_``, e.g. ``/fib/_action/feedback``) and the per-node
+infrastructure (parameter services, ``get_type_description``, ``/rosout``, ``/parameter_events``)
+are left out by default: they would swamp the model and tie every node to every other.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from rclpy.node import Node, NodeNameNonExistentError
+
+from stream_viz.collect.readings import Endpoint, GraphReading, NodeReading
+from stream_viz.model.ids import node_fqn
+
+UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
+PARAM_SERVICES = frozenset({
+    "describe_parameters", "get_parameters", "get_parameter_types", "list_parameters",
+    "set_parameters", "set_parameters_atomically", "get_type_description",
+})
+INFRA_TOPICS = frozenset({"/rosout", "/parameter_events"})
+ACTION_GOAL_SUFFIX = "/_action/send_goal"
+
+
+def is_hidden(name: str) -> bool:
+    """Return True for a hidden ROS name (any token starts with ``_``)."""
+    return any(tok.startswith("_") for tok in name.split("/") if tok)
+
+
+def is_param_service(name: str, node_fqn_: str) -> bool:
+    """Return True for one of the standard per-node parameter / type-description services."""
+    base, _, last = name.rpartition("/")
+    return base == node_fqn_ and last in PARAM_SERVICES
+
+
+def qos_dict(qos: Any) -> dict[str, Any]:
+    """Return a QoS profile as plain data (policy names lower-case, depth as int)."""
+    def pol(p: Any) -> str:
+        return getattr(p, "name", str(p)).lower()
+    return {"reliability": pol(qos.reliability), "durability": pol(qos.durability),
+            "history": pol(qos.history), "depth": int(qos.depth)}
+
+
+def _actions(services: list[tuple[str, list[str]]]) -> dict[str, list[str]]:
+    # rcl_action finds actions exactly so: the ``<action>/_action/send_goal`` service of a node.
+    out = {}
+    for name, types in services:
+        if name.endswith(ACTION_GOAL_SUFFIX):
+            out[name[: -len(ACTION_GOAL_SUFFIX)]] = [t.removesuffix("_SendGoal") for t in types]
+    return out
+
+
+def _keep(name: str, include_hidden: bool) -> bool:
+    return include_hidden or not is_hidden(name)
+
+
+def read_graph(node: Node, *, own: str, include_hidden: bool = False,
+               include_internal: bool = False) -> GraphReading:
+    """Return the ROS graph as node ``node`` sees it now.
+
+    Parameters
+    ----------
+    node : rclpy Node
+        The observer node (its graph cache is read; it is never spun).
+    own : str
+        Fully qualified name of the observer node itself, left out of everything.
+    include_hidden : bool
+        Keep hidden nodes, topics and services (``_`` names, action internals).
+    include_internal : bool
+        Keep parameter services, ``/rosout`` and ``/parameter_events``.
+    """
+    r = GraphReading()
+    for name, ns in node.get_node_names_and_namespaces():
+        fqn = node_fqn(ns, name)
+        if fqn == own or name == UNKNOWN_NODE or not _keep(fqn, include_hidden):
+            continue
+        r.nodes[fqn] = NodeReading(fqn, name, ns)
+    for fqn, nr in list(r.nodes.items()):
+        try:
+            servers = node.get_service_names_and_types_by_node(nr.name, nr.namespace)
+            clients = node.get_client_names_and_types_by_node(nr.name, nr.namespace)
+        except NodeNameNonExistentError:
+            # Vanished between the listing and this query: skip it for this sample.
+            r.skipped[fqn] = "node vanished during the graph read"
+            del r.nodes[fqn]
+            continue
+        nr.action_servers = {a: t for a, t in _actions(servers).items() if _keep(a, include_hidden)}
+        nr.action_clients = {a: t for a, t in _actions(clients).items() if _keep(a, include_hidden)}
+        for src, dst in ((servers, nr.services), (clients, nr.clients)):
+            for sname, types in src:
+                if not _keep(sname, include_hidden):
+                    continue
+                if not include_internal and is_param_service(sname, fqn):
+                    continue
+                dst[sname] = list(types)
+    for topic, types in node.get_topic_names_and_types():
+        if not _keep(topic, include_hidden) or (not include_internal and topic in INFRA_TOPICS):
+            continue
+        pubs = _endpoints(node.get_publishers_info_by_topic(topic), topic, r.nodes)
+        subs = _endpoints(node.get_subscriptions_info_by_topic(topic), topic, r.nodes)
+        if not pubs and not subs:  # only we (or not yet named endpoints) use it
+            continue
+        r.topics[topic], r.publishers[topic], r.subscribers[topic] = list(types), pubs, subs
+    for ep in _endpoints(node.get_publishers_info_by_topic("/rosout"), "/rosout", r.nodes):
+        r.rosout_gids.setdefault(ep.node, ep.gid)
+    return r
+
+
+def _endpoints(infos: list[Any], topic: str, nodes: dict[str, NodeReading]) -> list[Endpoint]:
+    out = []
+    for i in infos:
+        if i.node_name == UNKNOWN_NODE:  # name not discovered yet (~0.1 s): no phantom member
+            continue
+        fqn = node_fqn(i.node_namespace, i.node_name)
+        if fqn not in nodes:  # our own node, a hidden one, or one that came after the listing
+            continue
+        out.append(Endpoint(fqn, topic, i.topic_type, bytes(i.endpoint_gid), qos_dict(i.qos_profile)))
+    return out
