@@ -38,8 +38,11 @@ def qos_dict(qos: Any) -> dict[str, Any]:
     """Return a QoS profile as plain data (policy names lower-case, depth as int)."""
     def pol(p: Any) -> str:
         return getattr(p, "name", str(p)).lower()
+    history = pol(qos.history)
+    # DDS discovery does not carry history/depth: rmw reports "unknown" and 0, kept as unknown.
+    depth = int(qos.depth) if history != "unknown" else None
     return {"reliability": pol(qos.reliability), "durability": pol(qos.durability),
-            "history": pol(qos.history), "depth": int(qos.depth)}
+            "history": history, "depth": depth}
 
 
 def _actions(services: list[tuple[str, list[str]]]) -> dict[str, list[str]]:

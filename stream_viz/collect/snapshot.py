@@ -88,9 +88,11 @@ def snapshot_main(json: bool, settle_s: float) -> str:
     """Observe the current ROS_DOMAIN_ID for ``settle_s`` seconds and return the snapshot text/JSON."""
     from stream_viz.collect.collector import Collector
 
+    half = max(settle_s, 0.0) / 2
     with Collector() as c:
-        c.sample()  # primes the per-second rates and cpu %
-        time.sleep(max(settle_s, 0.0))
+        time.sleep(half)  # discovery
+        c.sample()  # subscribes to the topics, primes cpu % and the per-second rates
+        time.sleep(half)
         sample = c.sample()
     if json:
         return _json.dumps({"t": sample.t, **to_data(sample.graph), "unreadable": sample.unreadable,

@@ -1,0 +1,168 @@
+"""The collector against real rclpy nodes in subprocesses (several nodes per process, a crash)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import pytest
+from rosenv import wait_for
+
+from stream_viz.collect.collector import Collector
+from stream_viz.model.graph import flow_edges
+from stream_viz.model.queries import predecessors
+from stream_viz.model.theta import theta_dict
+
+pytestmark = pytest.mark.ros
+
+HAVE_ACTIONS = True
+try:
+    import test_msgs.action  # noqa: F401  (ros-jazzy-test-msgs: the only action type around)
+except ImportError:
+    HAVE_ACTIONS = False
+
+# One process, six nodes: a 20 Hz topic, a service + client, an action server + client,
+# /rosout warnings and a /diagnostics ERROR.
+MANY = """
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+HAVE_ACTIONS = {have_actions}
+rclpy.init()
+talker = Node('talker', namespace='/ns')
+listener = Node('listener')
+server = Node('server')
+diag = Node('diag_pub')
+nodes = [talker, listener, server, diag]
+pub = talker.create_publisher(String, '/chatter', 10)
+listener.create_subscription(String, '/chatter', lambda m: None, 10)
+server.create_service(Trigger, '/trig', lambda req, res: res)
+listener.create_client(Trigger, '/trig')
+talker.create_timer(0.05, lambda: pub.publish(String(data='hello')))
+talker.create_timer(0.5, lambda: talker.get_logger().warn('battery low'))
+dpub = diag.create_publisher(DiagnosticArray, '/diagnostics', 10)
+def send_diag():
+    st = DiagnosticStatus(level=DiagnosticStatus.ERROR, name='diag_pub: motor', message='overheat',
+                          hardware_id='motor1', values=[KeyValue(key='temp', value='99')])
+    dpub.publish(DiagnosticArray(status=[st]))
+diag.create_timer(0.5, send_diag)
+if HAVE_ACTIONS:
+    from rclpy.action import ActionClient, ActionServer
+    from test_msgs.action import Fibonacci
+    fs, fc = Node('fib_server'), Node('fib_client')
+    ActionServer(fs, Fibonacci, '/fib', lambda goal: Fibonacci.Result())
+    ActionClient(fc, Fibonacci, '/fib')
+    nodes += [fs, fc]
+ex = SingleThreadedExecutor()
+for n in nodes:
+    ex.add_node(n)
+print('ready', flush=True)
+ex.spin()
+"""
+
+VICTIM = """
+import rclpy
+from rclpy.node import Node
+from std_msgs.msg import String
+rclpy.init()
+n = Node('victim')
+p = n.create_publisher(String, '/victim_out', 10)
+n.create_timer(0.1, lambda: p.publish(String(data='v')))
+rclpy.spin(n)
+"""
+
+
+def _ids(G, kinds=("node", "topic", "service", "action")):
+    return {m for m, k in G.nodes(data="kind") if k in kinds}
+
+
+def test_collector_real_system(children, ros_domain):
+    many = children.python(MANY.replace("{have_actions}", str(HAVE_ACTIONS)), name="many")
+    victim = children.python(VICTIM, name="victim")
+    want_nodes = {"node:/ns/talker", "node:/listener", "node:/server", "node:/diag_pub", "node:/victim"}
+    if HAVE_ACTIONS:
+        want_nodes |= {"node:/fib_server", "node:/fib_client"}
+    want = want_nodes | {"topic:/chatter", "topic:/diagnostics", "topic:/victim_out", "service:/trig"}
+    if HAVE_ACTIONS:
+        want.add("action:/fib")
+    with Collector(ros_domain) as col:
+        def complete():
+            s = col.sample()
+            G = s.graph
+            ok = _ids(G) == want and all(G.nodes[n]["pid_status"] == "confirmed" for n in want_nodes)
+            ok = ok and ("node:/listener", "node:/server", "send") in set(flow_edges(G))
+            return s if ok else None
+        try:
+            s = wait_for(complete, timeout=20, period=0.3)
+        except TimeoutError:
+            got = col.sample().graph
+            pytest.fail(f"model never complete: have {sorted(_ids(got))}, want {sorted(want)}")
+        G = s.graph
+        # Exact members (our own observer, /rosout, parameter services and action internals hidden).
+        assert _ids(G) == want
+        edges = set(flow_edges(G))
+        want_edges = {
+            ("node:/ns/talker", "topic:/chatter", "pub"), ("topic:/chatter", "node:/listener", "sub"),
+            ("node:/listener", "node:/server", "send"), ("node:/diag_pub", "topic:/diagnostics", "pub"),
+            ("node:/victim", "topic:/victim_out", "pub"),
+        }
+        if HAVE_ACTIONS:
+            want_edges.add(("node:/fib_client", "node:/fib_server", "send"))
+        assert edges == want_edges
+        assert G.edges["node:/listener", "node:/server", 0]["services"] == ["/trig"]
+        if HAVE_ACTIONS:
+            assert G.edges["node:/fib_client", "node:/fib_server", 0]["actions"] == ["/fib"]
+        # Node -> pid, several nodes in one process.
+        for n in want_nodes - {"node:/victim"}:
+            assert G.nodes[n]["pid"] == many.pid, n
+        assert G.nodes["node:/victim"]["pid"] == victim.pid
+        # Process tree: node -> its process -> pytest (us) -> ... -> a top.
+        path = ["node:/ns/talker"]
+        while True:
+            up = predecessors(G, path[-1], layer=1)
+            if not up:
+                break
+            assert len(up) == 1
+            path.append(up[0])
+        assert path[1:3] == [f"process:{many.pid}", f"process:{os.getpid()}"]
+        assert path[-1] == "root" or G.nodes[path[-1]].get("name")
+        qos = G.nodes["topic:/chatter"]["qos"]
+        assert {(q["node"], q["role"], q["reliability"], q["durability"]) for q in qos} == {
+            ("/ns/talker", "pub", "reliable", "volatile"), ("/listener", "sub", "reliable", "volatile")}
+
+        # Rate of the 20 Hz topic once the window has filled, and the log/diag events.
+        time.sleep(2.5)
+        s = col.sample()
+        rate = theta_dict("topic", s.graph.nodes["topic:/chatter"]["theta"])["rate_hz"]
+        assert 12.0 <= rate <= 28.0, rate
+        proc = theta_dict("process", s.graph.nodes[f"process:{many.pid}"]["theta"])
+        assert proc["rss_mb"] > 10 and proc["threads"] >= 1
+        logs = [e for e in s.events if e.kind == "log"]
+        assert any(e.member == "node:/ns/talker" and e.level == "warn" and e.text == "battery low"
+                   for e in logs), logs
+        diags = [e for e in s.events if e.kind == "diag"]
+        assert any(e.member == "node:/diag_pub" and e.level == "error" and e.data["hardware_id"] == "motor1"
+                   and e.data["values"] == {"temp": "99"} for e in diags), diags
+
+        # A SIGKILLed node stays ~20 s in DDS: the collector must notice from the OS within 2 samples.
+        os.killpg(victim.pid, signal.SIGKILL)
+        time.sleep(0.3)
+        exits = []
+        for _ in range(2):
+            s = col.sample()
+            exits += [e for e in s.events if e.kind == "exit"]
+            if exits:
+                break
+            time.sleep(0.5)
+        assert {e.member for e in exits} == {"node:/victim", f"process:{victim.pid}"}
+        assert all(e.level == "error" for e in exits)
+        if "node:/victim" in s.graph:  # still listed by DDS: kept, marked dead
+            assert s.graph.nodes["node:/victim"]["alive"] is False
+            assert s.graph.nodes[f"process:{victim.pid}"]["alive"] is False
+        s = col.sample()
+        assert not [e for e in s.events if e.kind == "exit"]  # reported once
+        assert s.graph.nodes["node:/ns/talker"]["alive"] is True
