@@ -118,10 +118,14 @@ def _execute(plugin: Plugin, call: _Call) -> None:
         out = plugin.check(call.ctx)
         if out is None:
             out = ()
-        # A generator could be endless: take one more than allowed and note that there was more.
-        items = list(itertools.islice(iter(out), call.limit + 1))
-        call.more = len(items) > call.limit
-        call.result = items
+        if isinstance(out, list | tuple):
+            call.result = list(out)
+        else:
+            # A generator could be endless: count up to 10x the limit, then note there was more.
+            cap = 10 * call.limit
+            items = list(itertools.islice(iter(out), cap + 1))
+            call.more = len(items) > cap
+            call.result = items[:cap]
     except BaseException as exc:
         call.error = exc
     finally:
@@ -460,7 +464,7 @@ class PluginSet:
             if more or len(good) > self.max_alerts_per_call:
                 cut = max(0, len(good) - self.max_alerts_per_call)
                 good = good[: self.max_alerts_per_call]
-                extra = f"{cut}+ more" if more else f"{cut} more"
+                extra = f"{cut}+" if more else f"{cut}"
                 problems.append(PluginProblem(lp.name, lp.where, "flood",
                                               f"more than {self.max_alerts_per_call} alerts in one call; "
                                               f"kept the first, dropped {extra}", t=t, count=max(cut, 1)))

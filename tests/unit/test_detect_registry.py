@@ -1,0 +1,274 @@
+"""The plugin registry: discovery, validation, and isolation from deliberately broken plugins."""
+
+from __future__ import annotations
+
+import textwrap
+import threading
+
+import pytest
+
+from stream_viz.detect.registry import PluginSet, discover
+from stream_viz.errors import ConfigError
+from stream_viz.model.graph import add_member, new_graph
+from stream_viz.model.history import History
+from stream_viz.records import Alert
+
+BUILTINS = ["diagnostics", "graph_anomalies", "member_gone", "process_resources", "rosout",
+            "topic_latency", "topic_rate"]
+
+GOOD = '''
+from stream_viz.detect.api import Plugin
+
+class Good(Plugin):
+    name = "good"
+    kinds = ("node",)
+    settings = {"severity": "warn", "limit": 1.5}
+
+    def check(self, ctx):
+        for m in ctx.watched("node"):
+            yield ctx.alert(m, ctx.settings["severity"], f"limit {ctx.settings['limit']}")
+'''
+
+
+def _write(folder, name, code):
+    folder.mkdir(exist_ok=True)
+    (folder / f"{name}.py").write_text(textwrap.dedent(code))
+
+
+def _graph():
+    G = new_graph()
+    add_member(G, "node:/a")
+    add_member(G, "node:/b")
+    return G
+
+
+def _run(ps, t=1.0, G=None):
+    G = G if G is not None else _graph()
+    return ps.run(t, G, G.nodes, History())
+
+
+def test_builtins_come_from_entry_points_and_the_local_folder_is_not_a_duplicate(monkeypatch, tmp_path):
+    found, problems, _ = discover(cwd_plugins=False)
+    assert [n for _, n, _ in found] == BUILTINS
+    assert problems == []
+    assert all(w.endswith(f"plugins/{n}.py") for _, n, w in found)
+
+
+def test_folder_plugin_runs_with_settings(tmp_path):
+    _write(tmp_path / "p", "good", GOOD)
+    ps = PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False,
+                        settings={"good": {"severity": "error", "limit": 2}})
+    alerts, problems = _run(ps)
+    assert problems == []
+    assert alerts == [Alert("node:/a", "good", 1.0, "error", "limit 2.0"),
+                      Alert("node:/b", "good", 1.0, "error", "limit 2.0")]
+    ps.close()
+
+
+def test_bad_settings_are_config_errors(tmp_path):
+    _write(tmp_path / "p", "good", GOOD)
+    with pytest.raises(ConfigError, match=r"cfg\.toml: \[plugins\.good\]: unknown setting 'limt'"):
+        PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False,
+                       settings={"good": {"limt": 2.0}}, config_path="cfg.toml")
+    with pytest.raises(ConfigError, match="setting 'limit' must be float, not str"):
+        PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False,
+                       settings={"good": {"limit": "x"}})
+    with pytest.raises(ConfigError, match="no plugin named 'nope'"):
+        PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False, settings={"nope": {}})
+    # A plugin switched off still has its settings checked.
+    with pytest.raises(ConfigError, match="setting 'severity' must be str"):
+        PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False, disable=["good"],
+                       settings={"good": {"severity": 3}})
+
+
+def test_enable_disable(tmp_path):
+    ps = PluginSet.load(cwd_plugins=False, enable=["rosout", "topic_rate"], disable=["topic_rate", "ghost"])
+    assert ps.names == ["rosout"]
+    assert [(p.plugin, p.kind) for p in ps.load_problems] == [("ghost", "config")]
+
+
+def test_import_and_validation_failures_are_reported_by_name_and_place(tmp_path):
+    folder = tmp_path / "p"
+    _write(folder, "good", GOOD)
+    _write(folder, "broken_import", "import not_a_module_xyz\n")
+    _write(folder, "broken_syntax", "def f(:\n")
+    _write(folder, "bad_api", '''
+        from stream_viz.detect.api import Plugin
+        class Future(Plugin):
+            name = "future"
+            kinds = ("node",)
+            api_version = 99
+            def check(self, ctx):
+                return []
+        class NoKinds(Plugin):
+            name = "nokinds"
+            kinds = ("gizmo",)
+            def check(self, ctx):
+                return []
+        class BadInit(Plugin):
+            name = "badinit"
+            kinds = ("node",)
+            def __init__(self):
+                raise RuntimeError("no init")
+            def check(self, ctx):
+                return []
+    ''')
+    _write(folder, "zz_dup", GOOD)  # sorted after good.py: good.py wins
+    found, problems, failed = discover([folder], entry_points=False, cwd_plugins=False)
+    assert [n for _, n, _ in found] == ["good"]
+    by = {p.plugin: p for p in problems}
+    assert set(by) == {"broken_import", "broken_syntax", "future", "nokinds", "badinit", "good"}
+    assert by["broken_import"].kind == "import"
+    assert "ModuleNotFoundError" in by["broken_import"].message
+    assert by["broken_import"].line.startswith(str(folder / "broken_import.py") + ":1")
+    assert by["broken_syntax"].kind == "import"
+    assert by["broken_syntax"].line == f"{folder / 'broken_syntax.py'}:1"
+    assert "API 99" in by["future"].message
+    assert "kinds" in by["nokinds"].message
+    assert "RuntimeError: no init" in by["badinit"].message and "bad_api.py:18" in by["badinit"].line
+    assert by["good"].kind == "duplicate" and by["good"].where.endswith("zz_dup.py")
+    assert {"broken_import", "broken_syntax", "future"} <= failed
+
+
+def test_plugins_list_in_a_module(tmp_path):
+    _write(tmp_path / "p", "listed", '''
+        from stream_viz.detect.api import Plugin
+        class _Base(Plugin):
+            kinds = ("node",)
+            def check(self, ctx):
+                return [ctx.alert("node:/a", "info", self.name)]
+        class One(_Base):
+            name = "one"
+        class Two(_Base):
+            name = "two"
+        PLUGINS = [Two, One()]
+    ''')
+    ps = PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False)
+    assert ps.names == ["two", "one"]
+    alerts, _ = _run(ps)
+    assert [a.message for a in alerts] == ["two", "one"]
+
+
+RAISING = '''
+from stream_viz.detect.api import Plugin
+class Raising(Plugin):
+    name = "raising"
+    kinds = ("node",)
+    def check(self, ctx):
+        ctx.state["n"] = ctx.state.get("n", 0) + 1
+        if ctx.state["n"] != 2:
+            raise ValueError("bad luck")
+        return [ctx.alert("node:/a", "warn", "ok")]
+'''
+
+
+def test_raising_plugin_is_reported_then_disabled_and_others_go_on(tmp_path):
+    folder = tmp_path / "p"
+    _write(folder, "good", GOOD)
+    _write(folder, "raising", RAISING)
+    ps = PluginSet.load([folder], entry_points=False, cwd_plugins=False, max_failures=3)
+    kinds = []
+    for t in range(6):
+        alerts, problems = _run(ps, t=float(t))
+        assert [a.plugin for a in alerts].count("good") == 2  # the good one always goes on
+        kinds.append([p.kind for p in problems])
+        if problems:
+            assert problems[0].plugin == "raising" and problems[0].message == "ValueError: bad luck"
+            assert problems[0].line.endswith("raising.py:9 in check")
+    # call 1 fails, call 2 works (resets), calls 3, 4, 5 fail -> disabled; then skipped
+    assert kinds == [["run"], [], ["run"], ["run"], ["run", "disabled"], []]
+    assert ps.names == ["good"]
+
+
+def test_garbage_is_dropped_and_counted(tmp_path):
+    _write(tmp_path / "p", "garbage", '''
+        from stream_viz.detect.api import Plugin
+        from stream_viz.records import Alert
+        class Garbage(Plugin):
+            name = "garbage"
+            kinds = ("node",)
+            def check(self, ctx):
+                return [
+                    ctx.alert("node:/a", "warn", "fine"),
+                    "not an alert",
+                    ctx.alert("node:/ghost", "warn", "unknown member"),
+                    ctx.alert("node:/a", "catastrophic", "unknown severity"),
+                    Alert("node:/b", "someone_else", ctx.t, "info", "renamed"),
+                    None,
+                ]
+    ''')
+    ps = PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False)
+    alerts, problems = _run(ps)
+    assert alerts == [Alert("node:/a", "garbage", 1.0, "warn", "fine"),
+                      Alert("node:/b", "garbage", 1.0, "info", "renamed")]
+    assert len(problems) == 1 and problems[0].kind == "garbage" and problems[0].count == 4
+    assert "unknown member 'node:/ghost'" in problems[0].message
+    assert "unknown severity 'catastrophic'" in problems[0].message
+
+
+def test_flood_is_truncated_and_counted(tmp_path):
+    _write(tmp_path / "p", "flood", '''
+        from stream_viz.detect.api import Plugin
+        class Flood(Plugin):
+            name = "flood"
+            kinds = ("node",)
+            def check(self, ctx):
+                return [ctx.alert("node:/a", "info", str(i)) for i in range(250)]
+        class Endless(Plugin):
+            name = "endless"
+            kinds = ("node",)
+            def check(self, ctx):
+                while True:
+                    yield ctx.alert("node:/b", "info", "again")
+    ''')
+    ps = PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False, max_alerts_per_call=100)
+    alerts, problems = _run(ps)
+    assert [a.message for a in alerts if a.plugin == "flood"] == [str(i) for i in range(100)]
+    assert sum(a.plugin == "endless" for a in alerts) == 100
+    by = {p.plugin: p for p in problems}
+    assert by["flood"].kind == "flood" and by["flood"].count == 150
+    assert by["endless"].kind == "flood" and "dropped 900+" in by["endless"].message
+
+
+def test_hanging_plugin_is_cut_off_then_disabled(tmp_path):
+    folder = tmp_path / "p"
+    _write(folder, "good", GOOD)
+    _write(folder, "hang", '''
+        import threading
+        from stream_viz.detect.api import Plugin
+        RELEASE = threading.Event()
+        class Hang(Plugin):
+            name = "hang"
+            kinds = ("node",)
+            def check(self, ctx):
+                RELEASE.wait()
+                return []
+    ''')
+    ps = PluginSet.load([folder], entry_points=False, cwd_plugins=False, timeout_s=0.05, max_failures=3)
+    seen = []
+    for t in range(4):
+        alerts, problems = _run(ps, t=float(t))
+        assert sum(a.plugin == "good" for a in alerts) == 2
+        seen.append([(p.kind, p.message.split(";")[0]) for p in problems])
+    assert seen[0] == [("timeout", "took longer than 0.05 s")]
+    assert seen[1] == [("timeout", "still running its call from t=0.000")]
+    assert seen[2][0][0] == "timeout" and seen[2][1][0] == "disabled"
+    assert seen[3] == []
+    assert ps.names == ["good"]
+    # The abandoned thread ends once its call returns.
+    import sys
+
+    mod = next(m for n, m in sys.modules.items() if n.endswith(".hang"))
+    mod.RELEASE.set()
+    ps.close()
+    hung = [th for th in threading.enumerate() if th.name == "stream-viz-plugin-hang"]
+    for th in hung:
+        th.join(2)
+    assert not any(th.is_alive() for th in hung)
+
+
+def test_inline_mode_gives_the_same_alerts(tmp_path):
+    _write(tmp_path / "p", "good", GOOD)
+    a = PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False)
+    b = PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False, isolate=False)
+    assert _run(a) == _run(b)
