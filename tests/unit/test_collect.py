@@ -1,0 +1,176 @@
+"""Pure parts of the collector on literal data: Fast DDS gids, build_model, window metrics, events."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import Log
+
+from stream_viz.collect.build import build_model
+from stream_viz.collect.fastdds import decode_gid
+from stream_viz.collect.readings import (
+    Endpoint,
+    GraphReading,
+    NodeReading,
+    PidInfo,
+    ProcessReading,
+    TopicStats,
+)
+from stream_viz.collect.rosgraph import is_hidden, is_param_service
+from stream_viz.collect.topics import diag_events, log_event, logger_node, window_metrics
+from stream_viz.model.graph import flow_edges
+from stream_viz.model.theta import theta_dict
+
+
+def test_decode_fastdds_gid():
+    # A real /rosout gid of a process with pid 5117 = 0x13fd (bytes 4-5: fd 13, little-endian).
+    gid = bytes.fromhex("010f78fdfd1355170000000000000603")
+    info = decode_gid(gid)
+    assert info.pid_low16 == 5117
+    assert info.host_id == 0x78FD
+    assert info.participant == 0
+    assert info.prefix == "010f78fdfd13551700000000"
+    # Participant index 2, pid low bits 0xffff; the entity id does not change the prefix.
+    other = decode_gid([1, 15, 0, 1, 0xFF, 0xFF, 9, 9, 2, 0, 0, 0, 0, 0, 1, 3])
+    assert (other.pid_low16, other.participant, other.host_id) == (0xFFFF, 2, 1)
+    assert decode_gid(bytes.fromhex("010f78fdfd135517000000000000ff03")).prefix == info.prefix
+
+
+def test_decode_rejects_other_vendors_and_short():
+    assert decode_gid(bytes.fromhex("0110" + "00" * 14)) is None  # Cyclone DDS vendor id
+    assert decode_gid(b"\x01\x0f\x00") is None
+
+
+def test_hidden_and_param_names():
+    assert is_hidden("/fib/_action/feedback") and is_hidden("/_stream_viz_observer_1")
+    assert not is_hidden("/ns/talker")
+    assert is_param_service("/ns/talker/get_parameters", "/ns/talker")
+    assert not is_param_service("/ns/talker/get_parameters", "/other")
+    assert not is_param_service("/ns/talker/reset", "/ns/talker")
+
+
+QOS = {"reliability": "reliable", "durability": "volatile", "history": "unknown", "depth": None}
+
+
+def _reading() -> GraphReading:
+    r = GraphReading()
+    r.nodes = {
+        "/cam": NodeReading("/cam", "cam", "/"),
+        "/ns/det": NodeReading("/ns/det", "det", "/ns", clients={"/srv": ["std_srvs/srv/Trigger"]},
+                               action_clients={"/go": ["pkg/action/Go"]}),
+        "/srvnode": NodeReading("/srvnode", "srvnode", "/", services={"/srv": ["std_srvs/srv/Trigger"]},
+                                action_servers={"/go": ["pkg/action/Go"]}),
+        "/lost": NodeReading("/lost", "lost", "/"),
+    }
+    r.topics = {"/image": ["sensor_msgs/msg/Image"], "/odd": ["nobody_msgs/msg/Odd"]}
+    r.publishers = {"/image": [Endpoint("/cam", "/image", "sensor_msgs/msg/Image", b"", QOS)],
+                    "/odd": [Endpoint("/lost", "/odd", "nobody_msgs/msg/Odd", b"", QOS)]}
+    r.subscribers = {"/image": [Endpoint("/ns/det", "/image", "sensor_msgs/msg/Image", b"", QOS)]}
+    return r
+
+
+def test_build_model_members_edges_tree():
+    pids = {"/cam": PidInfo(100, "confirmed"), "/ns/det": PidInfo(100, "confirmed"),
+            "/srvnode": PidInfo(200, "confirmed"), "/lost": PidInfo(None, "ambiguous", (5, 65541))}
+    procs = {
+        1: ProcessReading(1, None, name="init"),
+        50: ProcessReading(50, 1, name="launch"),
+        100: ProcessReading(100, 50, name="python", metrics={"cpu_percent": 12.5, "rss_mb": 80.0}),
+        200: ProcessReading(200, 50, name="python", alive=False, metrics={"cpu_percent": 3.0}),
+        7: ProcessReading(7, None, name="other-top"),
+    }
+    stats = {"/image": TopicStats(True, "", {"rate_hz": 30.0, "jitter_ms": 1.5}),
+             "/odd": TopicStats(False, "message type nobody_msgs/msg/Odd is not installed")}
+    G = build_model(_reading(), pids, procs, stats)
+    assert set(G.nodes) == {
+        "node:/cam", "node:/ns/det", "node:/srvnode", "node:/lost", "topic:/image", "topic:/odd",
+        "service:/srv", "action:/go", "process:1", "process:50", "process:100", "process:200",
+        "process:7", "root",
+    }
+    assert set(flow_edges(G)) == {
+        ("node:/cam", "topic:/image", "pub"), ("topic:/image", "node:/ns/det", "sub"),
+        ("node:/ns/det", "node:/srvnode", "send"), ("node:/lost", "topic:/odd", "pub"),
+    }
+    send = G.edges["node:/ns/det", "node:/srvnode", 0]
+    assert send["services"] == ["/srv"] and send["actions"] == ["/go"]
+    tree_edges = {(u, v) for u, v, k in G.edges(keys=True) if k == 1}
+    assert tree_edges == {
+        ("root", "process:1"), ("root", "process:7"), ("process:1", "process:50"),
+        ("process:50", "process:100"), ("process:50", "process:200"),
+        ("process:100", "node:/cam"), ("process:100", "node:/ns/det"), ("process:200", "node:/srvnode"),
+    }
+    assert G.nodes["node:/lost"]["pid"] is None
+    assert G.nodes["node:/lost"]["pid_status"] == "ambiguous"
+    assert G.nodes["node:/lost"]["pid_candidates"] == [5, 65541]
+    assert G.nodes["node:/srvnode"]["alive"] is False and G.nodes["node:/cam"]["alive"] is True
+    img = theta_dict("topic", G.nodes["topic:/image"]["theta"])
+    assert (img["rate_hz"], img["jitter_ms"], img["publishers"], img["subscribers"]) == (30.0, 1.5, 1, 1)
+    assert math.isnan(img["latency_ms"])
+    assert G.nodes["topic:/odd"]["measured"] is False
+    assert "not installed" in G.nodes["topic:/odd"]["reason"]
+    assert G.nodes["topic:/image"]["qos"] == [{"node": "/cam", "role": "pub", **QOS},
+                                             {"node": "/ns/det", "role": "sub", **QOS}]
+    det = theta_dict("node", G.nodes["node:/ns/det"]["theta"])
+    assert det == {"publishers": 0.0, "subscriptions": 1.0, "services": 0.0, "clients": 1.0}
+    assert theta_dict("process", G.nodes["process:100"]["theta"])["cpu_percent"] == 12.5
+    assert np.isnan(G.nodes["process:200"]["theta"]).all()  # dead: no metrics
+    assert theta_dict("service", G.nodes["service:/srv"]["theta"]) == {"servers": 1.0, "clients": 1.0}
+
+
+def test_build_model_single_top_has_no_root():
+    r = GraphReading(nodes={"/a": NodeReading("/a", "a", "/")})
+    G = build_model(r, {"/a": PidInfo(10, "confirmed")},
+                    {1: ProcessReading(1, None), 10: ProcessReading(10, 1)})
+    assert "root" not in G
+    assert {(u, v) for u, v, k in G.edges(keys=True) if k == 1} == {("process:1", "process:10"),
+                                                                    ("process:10", "node:/a")}
+
+
+def test_window_metrics_literal():
+    s = 1_000_000_000
+    # 5 messages 0.5 s apart over a 3 s window, 1 ms latency, 100 bytes each, seq 1,2,4,5,6.
+    buf = [(t * s // 2, t * s // 2 - 1_000_000, 100, q) for t, q in zip(range(1, 6), (1, 2, 4, 5, 6),
+                                                                         strict=True)]
+    m = window_metrics(buf, now_ns=3 * s, created_ns=0, window_ns=3 * s, n_publishers=1)
+    assert m["rate_hz"] == pytest.approx(5 / 3)
+    assert m["latency_ms"] == pytest.approx(1.0)
+    assert m["jitter_ms"] == pytest.approx(0.0)
+    assert m["bandwidth_kBps"] == pytest.approx(500 / 3 / 1000)
+    assert m["drops_per_s"] == pytest.approx(1 / 3)
+    # Two publishers: drops cannot be attributed; a young subscription: no rate at all.
+    assert "drops_per_s" not in window_metrics(buf, 3 * s, 0, 3 * s, n_publishers=2)
+    assert window_metrics(buf, 3 * s, int(2.5 * s), 3 * s, 1) == {}
+    # Silence after warm-up is a rate of 0, not unknown.
+    assert window_metrics([], 3 * s, 0, 3 * s, 1)["rate_hz"] == 0.0
+
+
+def test_log_events():
+    nodes = {"/ns/talker", "/cam"}
+    assert logger_node("ns.talker", nodes) == "/ns/talker"
+    assert logger_node("ns.talker.child", nodes) == "/ns/talker"
+    assert logger_node("ghost", nodes) == "/ghost"
+    warn = Log(level=30, name="ns.talker", msg="low", stamp=Time(sec=5, nanosec=500_000_000))
+    ev = log_event(warn, nodes)
+    assert (ev.kind, ev.member, ev.level, ev.text, ev.t) == ("log", "node:/ns/talker", "warn", "low", 5.5)
+    assert log_event(Log(level=50, name="cam", msg="x"), nodes).level == "fatal"
+    assert log_event(Log(level=20, name="cam", msg="fine"), nodes) is None
+
+
+def test_diag_events_member_and_levels():
+    msg = DiagnosticArray(status=[
+        DiagnosticStatus(level=DiagnosticStatus.ERROR, name="cam: driver", hardware_id="usb1",
+                         values=[KeyValue(key="fps", value="0")]),
+        DiagnosticStatus(level=DiagnosticStatus.OK, name="other", hardware_id="hw"),
+        DiagnosticStatus(level=DiagnosticStatus.STALE, name="nobody", hardware_id="x"),
+    ])
+    nodes = {"/cam", "/agg"}
+    evs = diag_events(msg, 1.0, ["/agg", "/cam"], nodes)  # two publishers: match by status name
+    assert [(e.member, e.level) for e in evs] == [
+        ("node:/cam", "error"), ("topic:/diagnostics", "info"), ("topic:/diagnostics", "warn")]
+    assert evs[0].data == {"name": "cam: driver", "hardware_id": "usb1", "level": 2, "values": {"fps": "0"}}
+    only = diag_events(msg, 1.0, ["/agg"], nodes)  # the only publisher gets them all
+    assert {e.member for e in only} == {"node:/agg"}
