@@ -1,0 +1,100 @@
+"""The model's layer 0 read in cause → effect direction, and fault-trajectory tracing on it.
+
+Data flow is the direction faults propagate along ``pub`` (node → topic) and ``sub`` (topic →
+node) edges. A ``send`` edge points from a service client to its server, but a fault propagates
+the other way (the client waits for the server's reply), so in the causal reading a ``send``
+edge is server → client. Edges marked ``gone`` still count: a crashed node stays a candidate.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections.abc import Container
+
+import networkx as nx
+
+SILENT_COST = 2.0  # a hop through a member with no symptom costs more than one through a symptom
+
+
+def _flow(kd: dict) -> str | None:
+    """Kind of the layer-0 edge in a keydict, or None when there is none."""
+    attrs = kd.get(0)
+    if attrs is None:
+        return None
+    return attrs.get("kind", "pub")
+
+
+def causes(G: nx.MultiDiGraph, m: str) -> list[str]:
+    """Members whose fault can propagate to ``m`` directly (its causal parents)."""
+    if m not in G:
+        return []
+    out = [u for u, kd in G._pred[m].items() if (k := _flow(kd)) is not None and k != "send"]
+    out += [v for v, kd in G._succ[m].items() if _flow(kd) == "send"]
+    return out
+
+
+def effects(G: nx.MultiDiGraph, m: str) -> list[str]:
+    """Members a fault of ``m`` can propagate to directly (its causal children)."""
+    if m not in G:
+        return []
+    out = [v for v, kd in G._succ[m].items() if (k := _flow(kd)) is not None and k != "send"]
+    out += [u for u, kd in G._pred[m].items() if _flow(kd) == "send"]
+    return out
+
+
+def is_node(G: nx.MultiDiGraph, m: str) -> bool:
+    """True for an active member (a ROS node); ids decide when ``m`` is not in ``G``."""
+    if m in G:
+        return bool(G.nodes[m].get("active", m.startswith("node:")))
+    return m.startswith("node:")
+
+
+def publishers(G: nx.MultiDiGraph, x: str) -> list[str]:
+    """Active members feeding the passive member ``x`` (a topic's publishers)."""
+    return [u for u in causes(G, x) if is_node(G, u)]
+
+
+def outputs(G: nx.MultiDiGraph, n: str) -> list[str]:
+    """Passive members the node ``n`` feeds (its published topics)."""
+    return [v for v in effects(G, n) if not is_node(G, v)]
+
+
+def hosted_nodes(G: nx.MultiDiGraph, p: str) -> list[str]:
+    """Nodes that are children of ``p`` in the process tree (layer 1): the nodes a process hosts."""
+    if p not in G:
+        return []
+    return [v for v, kd in G._succ[p].items() if 1 in kd and is_node(G, v)]
+
+
+def trace(
+    G: nx.MultiDiGraph, c: str, symptomatic: Container[str], max_len: int
+) -> tuple[dict[str, float], dict[str, str]]:
+    """Dijkstra from ``c`` along causal edges (downstream), up to ``max_len`` members per path.
+
+    Entering a member with a symptom costs 1, a silent one `SILENT_COST`, so a path through
+    symptoms is preferred. Returns ``(cost, back)``: cost per reached member, and ``back[x]`` the
+    member before ``x`` on its path from ``c`` — following ``back`` from a symptom leads
+    upstream, to ``c``: that is the fault trajectory.
+    """
+    cost: dict[str, float] = {c: 0.0}
+    hops: dict[str, int] = {c: 1}
+    back: dict[str, str] = {}
+    heap = [(0.0, c)]
+    while heap:
+        d, m = heapq.heappop(heap)
+        if d > cost[m] or hops[m] >= max_len:
+            continue
+        for x in effects(G, m):
+            nd = d + (1.0 if x in symptomatic else SILENT_COST)
+            if nd < cost.get(x, float("inf")):
+                cost[x], hops[x], back[x] = nd, hops[m] + 1, m
+                heapq.heappush(heap, (nd, x))
+    return cost, back
+
+
+def path_back(back: dict[str, str], start: str, c: str) -> list[str]:
+    """The trajectory from ``start`` (a symptom) back to ``c`` using ``back`` from `trace`."""
+    path = [start]
+    while path[-1] != c:
+        path.append(back[path[-1]])
+    return path

@@ -1,0 +1,207 @@
+"""The RCA engine: alerts in, subgraph iterations and ranked root causes out, live or offline."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import networkx as nx
+
+from stream_viz.rca.pagerank import rank_pagerank
+from stream_viz.rca.settings import RcaSettings
+from stream_viz.rca.subgraph import Iteration, SubgraphState, grow, initial_state, watch
+from stream_viz.rca.trajectories import (
+    Context,
+    RootCause,
+    make_context,
+    rank_count,
+    rank_hypothesis,
+    rank_trajectory,
+)
+from stream_viz.records import Alert
+
+RANKERS: dict[str, Callable[[Context], list[RootCause]]] = {
+    "trajectory": rank_trajectory,
+    "pagerank": rank_pagerank,
+    "hypothesis": rank_hypothesis,
+    "count": rank_count,
+}
+
+
+@dataclass
+class RcaResult:
+    """The state of the diagnosis after an update.
+
+    Attributes
+    ----------
+    iterations : list of Iteration
+        ``G_0 … G_j``, in order.
+    root_causes : list of RootCause
+        Ranked, best first (at most ``top_k``).
+    state : SubgraphState
+        The current ``G_j`` and ``W_j``.
+    alerts : int
+        Alerts seen so far; ``kept`` of them did not grow the subgraph.
+    kept : int
+    method, policy : str
+        How it was computed.
+    first_symptom : str or None
+        The member of the earliest alert of ``M_j`` in the window.
+    """
+
+    iterations: list[Iteration]
+    root_causes: list[RootCause]
+    state: SubgraphState
+    alerts: int = 0
+    kept: int = 0
+    method: str = "trajectory"
+    policy: str = "both"
+    first_symptom: str | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def to_report(self) -> dict[str, Any]:
+        """The ``iterations`` and ``root_causes`` parts of the report JSON (DESIGN.md §4)."""
+        members: set[str] = set()
+        edges: set[tuple[str, str]] = set()
+        watched: set[str] = set()
+        its = []
+        for it in self.iterations:
+            members |= it.added_members
+            edges |= it.added_edges
+            watched |= it.added_watch
+            its.append({
+                "j": it.j,
+                "t": it.t,
+                "alert": it.alert_member,
+                "plugin": it.plugin,
+                "subgraph": sorted(members),
+                "edges": [list(e) for e in sorted(edges)],
+                "watchlist": sorted(watched),
+            })
+        return {
+            "iterations": its,
+            "root_causes": [
+                {"member": rc.member, "score": rc.score, "trajectory": list(rc.trajectory),
+                 "evidence": rc.evidence}
+                for rc in self.root_causes
+            ],
+            "rca": {"method": self.method, "policy": self.policy, "first_symptom": self.first_symptom,
+                    "alerts": self.alerts, "kept": self.kept},
+        }
+
+
+class RcaEngine:
+    """Incremental diagnosis: feed each sample's alerts to `update`; it grows ``G_j`` and reranks.
+
+    Parameters
+    ----------
+    settings : RcaSettings
+        Policy, method, weights …
+    watchlist : set of str, optional
+        ``W_0`` (from the configuration and process monitoring). None watches every member of
+        the graph passed to `update` (offline analysis without a recorded watchlist).
+    """
+
+    def __init__(self, settings: RcaSettings, watchlist: Iterable[str] | None = None) -> None:
+        self.settings = settings
+        self._watch_all = watchlist is None
+        self.state = initial_state(watchlist or ())
+        self._iterations: list[Iteration] = [self.state.last]
+        self._alerts: list[Alert] = []
+        self._kept = 0
+        self._dropped = 0  # alerts pruned out of the window
+        self._evidence: dict[str, float] = {}
+        self._result = self._make_result([])
+
+    @property
+    def watchlist(self) -> frozenset[str]:
+        """The current watchlist ``W_j``."""
+        return self.state.watchlist
+
+    @property
+    def iterations(self) -> list[Iteration]:
+        """All iterations so far."""
+        return list(self._iterations)
+
+    def watch(self, members: Iterable[str]) -> None:
+        """Add members to the watchlist from outside (configuration, process anomalies)."""
+        self.state = watch(self.state, members)
+
+    def result(self) -> RcaResult:
+        """The result of the last update."""
+        return self._result
+
+    def update(
+        self, G: nx.MultiDiGraph, alerts: Iterable[Alert], evidence: Mapping[str, float] | None = None
+    ) -> RcaResult:
+        """Feed new alerts (grow the subgraph in time order) and rerank.
+
+        Parameters
+        ----------
+        G : MultiDiGraph
+            The model now (best: every member seen, vanished ones kept).
+        alerts : iterable of Alert
+            Alerts since the last update.
+        evidence : mapping, optional
+            Metric anomaly strength in [0, 1] per member (nodes or processes); replaces the
+            previous evidence when given.
+        """
+        new = sorted(alerts, key=lambda a: a.t)
+        if self._watch_all and len(self.state.watchlist) != G.number_of_nodes():
+            self.state = watch(self.state, G.nodes)
+        for a in new:
+            grown = grow(G, self.state, a, self.settings.policy)
+            if grown.last is not self.state.last:
+                self._iterations.append(grown.last)
+            elif a.member not in self.state.watchlist:
+                self._kept += 1
+            self.state = grown
+        self._alerts.extend(new)
+        self._prune()
+        changed = bool(new) or evidence is not None
+        if evidence is not None:
+            self._evidence = dict(evidence)
+        if changed:
+            ctx = make_context(G, self._alerts, self.settings, self.state.members, self._evidence)
+            self._result = self._make_result(RANKERS[self.settings.method](ctx), ctx.symptoms.first)
+        else:
+            self._result = self._make_result(self._result.root_causes, self._result.first_symptom)
+        return self._result
+
+    def _prune(self) -> None:
+        """With a window, alerts that can no longer count are dropped (their count stays)."""
+        w = self.settings.window
+        if w > 0 and self._alerts:
+            latest = max(a.t for a in self._alerts[-64:])
+            if self._alerts[0].t < latest - w:
+                keep = [a for a in self._alerts if a.t >= latest - w]
+                self._dropped += len(self._alerts) - len(keep)
+                self._alerts = keep
+
+    def _make_result(self, causes: list[RootCause], first: str | None = None) -> RcaResult:
+        return RcaResult(
+            iterations=list(self._iterations),
+            root_causes=causes,
+            state=self.state,
+            alerts=len(self._alerts) + self._dropped,
+            kept=self._kept,
+            method=self.settings.method,
+            policy=self.settings.policy,
+            first_symptom=first,
+        )
+
+
+def analyze(
+    G: nx.MultiDiGraph,
+    alerts: Iterable[Alert],
+    settings: RcaSettings,
+    watchlist: Iterable[str] | None = None,
+    evidence: Mapping[str, float] | None = None,
+) -> RcaResult:
+    """Rerun the diagnosis from scratch on ``alerts`` (offline; ``stream-viz analyze``).
+
+    ``watchlist`` is ``W_0``; None watches every member of ``G``.
+    """
+    engine = RcaEngine(settings, watchlist)
+    return engine.update(G, alerts, evidence)

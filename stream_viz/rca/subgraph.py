@@ -1,0 +1,163 @@
+"""Dynamic subgraph allocation (paper §3.3.2): ``G_j = (M_j, E_j)`` and the watchlist ``W_j``.
+
+On an alert for ``m ∈ W_j``:
+
+- ``M_{j+1} = M_j ∪ {m}``
+- ``E_{j+1} = E_j ∪ {((x, m), 0) ∈ E | x ∈ M_j}`` (``downstream``: exactly the paper); for
+  ``upstream`` and ``both`` also ``{((m, x), 0) ∈ E | x ∈ M_j}``, because there the watchlist grows
+  towards predecessors, and the edge from a newly alerting predecessor to the member it feeds
+  would otherwise never enter ``E_j``.
+- ``W_{j+1} = W_j ∪ {x | ((m, x), 0) ∈ E}`` (``downstream``), predecessors ``{x | ((x, m), 0) ∈ E}``
+  (``upstream``) or both.
+
+Alerts for members outside ``W_j`` leave the subgraph as it is (the caller keeps them), and so
+does an alert that would change nothing: only alerts that change ``M``, ``E`` or ``W`` make a new
+iteration. Iterations store what they added and point to the previous one, so a long run costs
+memory in proportion to the subgraph, not to the number of iterations times its size.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import networkx as nx
+
+from stream_viz.records import Alert
+
+Edge = tuple[str, str]
+
+
+@dataclass(frozen=True, eq=False)
+class Iteration:
+    """One stage ``j`` of the subgraph: the alert that made it and the sets ``M_j``, ``E_j``, ``W_j``.
+
+    ``members``, ``edges`` and ``watchlist`` are the full sets (computed from the ``added_*``
+    deltas along ``prev``). Iteration 0 has no alert (``alert_member`` is None).
+    """
+
+    j: int
+    t: float
+    alert_member: str | None
+    plugin: str | None
+    added_members: frozenset[str] = frozenset()
+    added_edges: frozenset[Edge] = frozenset()
+    added_watch: frozenset[str] = frozenset()
+    prev: Iteration | None = field(default=None, repr=False)
+
+    def _collect(self, attr: str) -> frozenset:
+        parts, it = [], self
+        while it is not None:
+            parts.append(getattr(it, attr))
+            it = it.prev
+        return frozenset().union(*parts)
+
+    @property
+    def members(self) -> frozenset[str]:
+        """``M_j``."""
+        return self._collect("added_members")
+
+    @property
+    def edges(self) -> frozenset[Edge]:
+        """``E_j`` as ``(u, v)`` pairs (all layer 0)."""
+        return self._collect("added_edges")
+
+    @property
+    def watchlist(self) -> frozenset[str]:
+        """``W_j``."""
+        return self._collect("added_watch")
+
+
+@dataclass(frozen=True)
+class SubgraphState:
+    """The current ``G_j`` and ``W_j``; ``last`` is iteration ``j`` (earlier ones via ``prev``).
+
+    ``pending`` holds watchlist additions made from outside since iteration ``j``; the next
+    iteration records them.
+    """
+
+    members: frozenset[str]
+    edges: frozenset[Edge]
+    watchlist: frozenset[str]
+    last: Iteration
+    pending: frozenset[str] = frozenset()
+
+    @property
+    def j(self) -> int:
+        """The current iteration index."""
+        return self.last.j
+
+    def iterations(self) -> list[Iteration]:
+        """All iterations ``0 … j``, in order."""
+        out, it = [], self.last
+        while it is not None:
+            out.append(it)
+            it = it.prev
+        return out[::-1]
+
+
+def initial_state(watchlist: Iterable[str], t: float = 0.0) -> SubgraphState:
+    """Return iteration 0: empty subgraph, watchlist ``W_0``."""
+    w0 = frozenset(watchlist)
+    return SubgraphState(frozenset(), frozenset(), w0, Iteration(0, t, None, None, added_watch=w0))
+
+
+def flow_successors(G: nx.MultiDiGraph, m: str) -> set[str]:
+    """Members ``x`` with an edge ``((m, x), 0)``."""
+    if m not in G:
+        return set()
+    return {v for _, v, k in G.out_edges(m, keys=True) if k == 0}
+
+
+def flow_predecessors(G: nx.MultiDiGraph, m: str) -> set[str]:
+    """Members ``x`` with an edge ``((x, m), 0)``."""
+    if m not in G:
+        return set()
+    return {u for u, _, k in G.in_edges(m, keys=True) if k == 0}
+
+
+def watch(state: SubgraphState, members: Iterable[str]) -> SubgraphState:
+    """Return ``state`` with ``members`` added to the current watchlist (from outside: config,
+    process monitoring); no new iteration, the next one records them."""
+    new = frozenset(members) - state.watchlist
+    if not new:
+        return state
+    return SubgraphState(state.members, state.edges, state.watchlist | new, state.last, state.pending | new)
+
+
+def grow(G: nx.MultiDiGraph, state: SubgraphState, alert: Alert, policy: str = "downstream") -> SubgraphState:
+    """Return the state after ``alert`` (``state`` itself when the alert changes nothing).
+
+    Parameters
+    ----------
+    G : MultiDiGraph
+        The full model; only layer-0 edges are used.
+    state : SubgraphState
+        ``G_j`` and ``W_j``.
+    alert : Alert
+        The alert; only its member matters for the growth.
+    policy : {"downstream", "upstream", "both"}
+        Which neighbours of the alerting member join the watchlist (module docstring).
+    """
+    m = alert.member
+    if m not in state.watchlist:
+        return state
+    add_m = frozenset() if m in state.members else frozenset({m})
+    new_edges = {(x, m) for x in flow_predecessors(G, m) if x in state.members}
+    watch_add: set[str] = set()
+    if policy in ("downstream", "both"):
+        watch_add |= flow_successors(G, m)
+    if policy in ("upstream", "both"):
+        watch_add |= flow_predecessors(G, m)
+        new_edges |= {(m, x) for x in flow_successors(G, m) if x in state.members}
+    add_e = frozenset(new_edges - state.edges)
+    add_w = frozenset(watch_add - state.watchlist)
+    if not (add_m or add_e or add_w):
+        return state
+    it = Iteration(state.j + 1, alert.t, m, alert.plugin, add_m, add_e, add_w | state.pending, state.last)
+    return SubgraphState(
+        state.members | add_m if add_m else state.members,
+        state.edges | add_e if add_e else state.edges,
+        state.watchlist | add_w if add_w else state.watchlist,
+        it,
+    )

@@ -1,0 +1,220 @@
+"""Fault trajectories and the ranking of root-cause candidates (paper §3.3.3, our reading).
+
+A root cause is a fault that causes others and is caused by none. Candidates are nodes (active
+members); symptoms of passive members are charged to their publishers (`symptoms`). Ranking in
+two stages:
+
+1. For every candidate, cheaply: the hypothesis test over the topology (``ht`` = anomaly ×
+   (1 − anomaly of its causal parents at its onset)), its direct evidence (alerts on the node
+   itself or its process, weighted by severity and plugin kind) and metric evidence.
+2. For the ``shortlist`` best: the fault trajectory — the path from the first symptom (or, when
+   that is not downstream of the candidate, its earliest downstream symptom) back to the
+   candidate, against data flow, through silent passive members where needed — and the average
+   strength of its dependencies: symptom co-occurrence (1-D ICP) and time lag against the lag
+   distribution of all alerting pairs. ``coverage`` (the share of symptoms downstream of the
+   candidate) rewards a cause that explains others.
+
+The score is the weighted mean of the components (weights from the settings); components that do
+not apply to a candidate (no dependency on its trajectory, no metric evidence given) are left out
+of its mean.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import networkx as nx
+import numpy as np
+
+from stream_viz.rca.causal import path_back, trace
+from stream_viz.rca.cooccurrence import cooccurrence
+from stream_viz.rca.settings import RcaSettings
+from stream_viz.rca.symptoms import NodeView, Symptoms, collect_symptoms, node_views
+from stream_viz.rca.timelag import LagDistribution
+from stream_viz.records import Alert
+
+
+@dataclass
+class RootCause:
+    """A ranked candidate: ``trajectory`` runs from the first symptom to ``member``."""
+
+    member: str
+    score: float
+    trajectory: list[str]
+    evidence: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Context:
+    """What every ranker needs, built once per ranking."""
+
+    G: nx.MultiDiGraph
+    settings: RcaSettings
+    symptoms: Symptoms
+    views: dict[str, NodeView]
+    has_evidence: bool
+    _lags: LagDistribution | None = None
+
+    @property
+    def lags(self) -> LagDistribution:
+        if self._lags is None:
+            self._lags = LagDistribution(self.symptoms.onset, self.settings.tolerance)
+        return self._lags
+
+
+def make_context(
+    G: nx.MultiDiGraph,
+    alerts: Iterable[Alert],
+    settings: RcaSettings,
+    members: Iterable[str] | None = None,
+    evidence: Mapping[str, float] | None = None,
+) -> Context:
+    """Collect symptoms (of ``members`` only, when given: ``M_j``) and the per-node views."""
+    s = collect_symptoms(alerts, settings, members)
+    return Context(G, settings, s, node_views(G, s, settings, evidence), bool(evidence))
+
+
+@dataclass
+class Trajectory:
+    """A candidate's trajectory with its dependency strengths and the symptoms it explains."""
+
+    path: list[str]
+    explained: list[str]
+    cooccurrence: float | None
+    timelag: float | None
+    coverage: float
+
+
+def _series(ctx: Context, m: str) -> np.ndarray:
+    return ctx.symptoms.times[m]
+
+
+def trajectory_of(ctx: Context, c: str) -> Trajectory:
+    """Trace ``c``'s fault trajectory and score its dependencies (module docstring, stage 2)."""
+    s, settings = ctx.symptoms, ctx.settings
+    cost, back = trace(ctx.G, c, s.times, settings.max_trajectory)
+    explained = [m for m in cost if m in s.times]
+    coverage = len(explained) / len(s.times) if s.times else 0.0
+    if s.first is not None and s.first in cost:
+        start = s.first
+    elif explained:
+        start = min(explained, key=lambda m: (s.onset[m], cost[m]))
+    else:
+        start = c
+    path = path_back(back, start, c)
+    # Dependencies: consecutive symptomatic members on the path (effect first, then its cause).
+    alerting = [m for m in path if m in s.times]
+    co, lag = [], []
+    for effect, cause in zip(alerting, alerting[1:], strict=False):
+        co.append(
+            cooccurrence(
+                _series(ctx, cause), _series(ctx, effect), settings.tolerance, settings.max_offset,
+                settings.icp_iterations,
+            ).strength
+        )
+        lag.append(ctx.lags.lag(s.onset[cause], s.onset[effect]).causal)
+    return Trajectory(
+        path,
+        explained,
+        float(np.mean(co)) if co else None,
+        float(np.mean(lag)) if lag else None,
+        coverage,
+    )
+
+
+def _cheap(ctx: Context, v: NodeView) -> float:
+    w = ctx.settings.weights
+    parts = [(w["topology"], v.ht), (w["direct"], v.direct)]
+    if ctx.has_evidence:
+        parts.append((w["evidence"], v.evidence))
+    return _mean(parts)
+
+
+def _mean(parts: list[tuple[float, float]]) -> float:
+    total = sum(w for w, _ in parts)
+    return sum(w * x for w, x in parts) / total if total > 0 else 0.0
+
+
+def _evidence(v: NodeView, tr: Trajectory | None = None, **extra: Any) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "anomaly": round(v.anomaly, 4),
+        "direct": round(v.direct, 4),
+        "charged": round(v.charged, 4),
+        "metric": round(v.evidence, 4),
+        "upstream": round(v.upstream, 4),
+        "hypothesis": round(v.ht, 4),
+        "symptoms": list(v.own),
+        "plugins": sorted(v.plugins),
+    }
+    if tr is not None:
+        out.update(
+            coverage=round(tr.coverage, 4),
+            cooccurrence=None if tr.cooccurrence is None else round(tr.cooccurrence, 4),
+            timelag=None if tr.timelag is None else round(tr.timelag, 4),
+            explains=len(tr.explained),
+        )
+    out.update(extra)
+    return out
+
+
+def _order(items: list[tuple[float, float, str]]) -> list[tuple[float, float, str]]:
+    """Best first: score, then earlier onset, then member id (deterministic ties)."""
+    return sorted(items, key=lambda x: (-x[0], x[1], x[2]))
+
+
+def rank_trajectory(ctx: Context) -> list[RootCause]:
+    """Our combined method: topology test, direct and metric evidence, trajectory strengths."""
+    w = ctx.settings.weights
+    pre = _order([(_cheap(ctx, v), v.onset, n) for n, v in ctx.views.items()])
+    out = []
+    for _, _, n in pre[: max(ctx.settings.shortlist, ctx.settings.top_k)]:
+        v = ctx.views[n]
+        tr = trajectory_of(ctx, n)
+        parts = [(w["topology"], v.ht * (0.5 + 0.5 * tr.coverage)), (w["direct"], v.direct)]
+        if ctx.has_evidence:
+            parts.append((w["evidence"], v.evidence))
+        if tr.cooccurrence is not None:
+            parts.append((w["cooccurrence"], tr.cooccurrence))
+        if tr.timelag is not None:
+            parts.append((w["timelag"], tr.timelag))
+        out.append(RootCause(n, _mean(parts), tr.path, _evidence(v, tr)))
+    return finish(ctx, out)
+
+
+def finish(ctx: Context, causes: list[RootCause]) -> list[RootCause]:
+    """Sort best first (ties: earlier onset, then id), keep ``top_k``, round scores."""
+    onset = {n: v.onset for n, v in ctx.views.items()}
+    ranked = sorted(causes, key=lambda rc: (-rc.score, onset.get(rc.member, np.inf), rc.member))
+    ranked = ranked[: ctx.settings.top_k]
+    for rc in ranked:
+        rc.score = round(float(rc.score), 6)
+    return ranked
+
+
+def _with_trajectories(ctx: Context, scored: list[tuple[float, float, str]], name: str) -> list[RootCause]:
+    out = []
+    for score, _, n in _order(scored)[: ctx.settings.top_k]:
+        tr = trajectory_of(ctx, n)
+        out.append(RootCause(n, score, tr.path, _evidence(ctx.views[n], tr, method=name)))
+    return finish(ctx, out)
+
+
+def rank_hypothesis(ctx: Context) -> list[RootCause]:
+    """Baseline: the topology hypothesis test alone (anomalous, parents healthy), as PyRCA's HT."""
+    return _with_trajectories(ctx, [(v.ht, v.onset, n) for n, v in ctx.views.items()], "hypothesis")
+
+
+def rank_count(ctx: Context) -> list[RootCause]:
+    """Baseline: alert count × severity on the node, its process and (× charge) its outputs.
+
+    GRANO's root-cause relevance; like BARO / n-sigma it ranks by how loud a member is.
+    """
+    rel = ctx.symptoms.relevance
+    scored = []
+    for n, v in ctx.views.items():
+        total = sum(rel[m] * (1.0 if m == n or m.startswith("process:") else ctx.settings.charge) for m in v.own)
+        scored.append((total, v.onset, n))
+    top = max((x for x, _, _ in scored), default=0.0) or 1.0
+    return _with_trajectories(ctx, [(x / top, o, n) for x, o, n in scored], "count")
