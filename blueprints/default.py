@@ -1,0 +1,86 @@
+"""The default Rerun layout of a STREAM recording, built in code and sent with the recording.
+
+Change it by editing `build_blueprint` (or passing your own ``rrb.Blueprint`` to
+``stream_viz.viz.recorder.Recorder(blueprint=...)``), or save it as an ``.rbl`` with
+`save_blueprint`, rearrange it in the viewer and save it from there (see docs/viz.md).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+
+import rerun.blueprint as rrb
+
+from stream_viz.viz import paths
+
+APP_ID = "stream_viz"
+
+
+def metric_views(watched: Iterable[str]) -> list[rrb.TimeSeriesView]:
+    """Return one time-series view per watched member (all its θ series and its alert markers)."""
+    views = []
+    for member in dict.fromkeys(watched):
+        views.append(rrb.TimeSeriesView(origin=paths.metrics_path(member), name=f"θ {member}"))
+    return views
+
+
+def build_blueprint(
+    watched: Iterable[str] = (),
+    timeline: str = paths.TIME,
+    paused: bool | None = None,
+    collapse_panels: bool = False,
+) -> rrb.Blueprint:
+    """Return the default layout.
+
+    Top, full width: the system graph with the RCA overlays (one GraphView of ``/system``,
+    ``/rca/subgraph`` and ``/rca/trajectory``). Below: metrics, report / process tree, alert log.
+
+    Parameters
+    ----------
+    watched : iterable of str
+        Members (ids) given their own metric plot; without any, one plot per kind (topics, processes).
+    timeline : str
+        The timeline the time panel shows: ``time`` (live, default) or ``rca_iteration``
+        (step through the RCA iterations; metrics are on ``time`` only).
+    paused : bool, optional
+        Start paused; default: paused on ``rca_iteration``, following live on ``time``.
+    collapse_panels : bool
+        Hide the side and time panels (for screenshots).
+    """
+    if paused is None:
+        paused = timeline == paths.RCA_ITERATION
+    graph = rrb.GraphView(
+        origin="/",
+        contents=[paths.RCA_SUBGRAPH, paths.RCA_TRAJECTORY, paths.SYSTEM],  # overlays under the labels
+        name="System graph + RCA overlays",
+    )
+    metrics = metric_views(watched) or [
+        rrb.TimeSeriesView(origin=f"{paths.METRICS}/topic", name="Topics"),
+        rrb.TimeSeriesView(origin=f"{paths.METRICS}/process", name="Processes"),
+    ]
+    bottom = rrb.Horizontal(
+        rrb.Tabs(*metrics, name="Metrics"),
+        rrb.Tabs(
+            rrb.TextDocumentView(origin=paths.RCA_REPORT, name="Root causes"),
+            rrb.GraphView(origin=paths.PROCESS_TREE, name="Process tree"),
+        ),
+        rrb.TextLogView(origin=paths.ALERTS, name="Alerts"),
+        column_shares=[2, 2, 2],
+    )
+    return rrb.Blueprint(
+        rrb.Vertical(graph, bottom, row_shares=[3, 2]),
+        rrb.TimePanel(timeline=timeline, play_state="paused" if paused else "following",
+                      state="collapsed" if collapse_panels else None),
+        collapse_panels=collapse_panels,
+    )
+
+
+def save_blueprint(path: str | Path, app_id: str = APP_ID, **kwargs) -> Path:
+    """Write `build_blueprint` (``kwargs`` passed on) as an ``.rbl`` for ``app_id``; return the path.
+
+    Open it with ``rerun recording.rrd layout.rbl``; the app id must match the recording's.
+    """
+    path = Path(path)
+    build_blueprint(**kwargs).save(app_id, str(path))
+    return path

@@ -1,0 +1,111 @@
+"""``/metrics/<kind>/<member>/theta``: θ of processes and topics as time series, sent in batches.
+
+One entity per member holds all its θ series (one column each, named in a static
+``SeriesLines``): per-row overhead (row id, time) is shared by the whole vector, which keeps a
+recording several times smaller than one entity per attribute. The key series (a topic's rate,
+a process's CPU and memory) are visible by default; the others are one click in the legend.
+"""
+
+from __future__ import annotations
+
+import weakref
+from collections.abc import Iterable
+from typing import Any
+
+import networkx as nx
+import numpy as np
+import rerun as rr
+
+from stream_viz.model.ids import kind_of, name_of
+from stream_viz.model.theta import SCHEMAS
+from stream_viz.viz import paths, style
+
+METRIC_KINDS = ("process", "topic")
+VISIBLE = {"topic": ("rate_hz",), "process": ("cpu_percent", "rss_mb")}
+# Entities already styled, per recording (SeriesLines are static: logged once per member).
+_styled: weakref.WeakKeyDictionary[rr.RecordingStream, set[str]] = weakref.WeakKeyDictionary()
+
+
+def _t_graph(sample: Any) -> tuple[float, nx.MultiDiGraph]:
+    if isinstance(sample, tuple):
+        return float(sample[0]), sample[1]
+    return float(sample.t), sample.graph
+
+
+def metric_columns(
+    batch: Iterable[Any], kinds: Iterable[str] = METRIC_KINDS
+) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Return ``member -> (times (T,), values (T, len(schema)))`` from a batch of samples.
+
+    Rows where θ is entirely unknown (NaN) are left out; a NaN inside a row stays (a gap).
+
+    Parameters
+    ----------
+    batch : iterable
+        ``(t, G)`` pairs or `stream_viz.records.Sample` objects, θ on the members of ``G``.
+    kinds : iterable of str
+        Member kinds whose θ is sent.
+    """
+    kinds = set(kinds)
+    rows: dict[str, tuple[list[float], list[np.ndarray]]] = {}
+    for sample in batch:
+        t, G = _t_graph(sample)
+        for m, data in G.nodes(data=True):
+            kind, theta = data.get("kind"), data.get("theta")
+            if kind not in kinds or theta is None or data.get("gone"):
+                continue
+            theta = np.asarray(theta, dtype=float)
+            if theta.shape != (len(SCHEMAS[kind]),) or not np.isfinite(theta).any():
+                continue
+            ts, xs = rows.setdefault(m, ([], []))
+            ts.append(t)
+            xs.append(theta)
+    return {m: (np.asarray(ts), np.vstack(xs)) for m, (ts, xs) in rows.items()}
+
+
+def member_label(G: nx.MultiDiGraph | None, member: str) -> str:
+    """Return a readable name of a member for legends (a process: ``name (pid)``)."""
+    label = name_of(member)
+    if G is not None and member in G:
+        data = G.nodes[member]
+        if data.get("kind") == "process":
+            name = data.get("name") or data.get("exe")
+            return f"{name} ({label})" if name else f"pid {label}"
+        label = str(data.get("label") or label)
+    return label
+
+
+def style_series(rec: rr.RecordingStream, G: nx.MultiDiGraph | None, member: str) -> None:
+    """Log the static ``SeriesLines`` of a member's θ entity (names, colours, visible series)."""
+    kind = kind_of(member)
+    schema = SCHEMAS[kind]
+    label = member_label(G, member)
+    rec.log(
+        paths.metrics_path(member, paths.THETA),
+        rr.SeriesLines(names=[f"{label} {a}" for a in schema],
+                       colors=[style.rgb_for_index(i) for i in range(len(schema))],
+                       visible_series=[a in VISIBLE.get(kind, schema[:1]) for a in schema]),
+        static=True,
+    )
+
+
+def log_metrics(rec: rr.RecordingStream, batch: Iterable[Any], kinds: Iterable[str] = METRIC_KINDS) -> int:
+    """Send θ of the batch's processes and topics, one ``send_columns`` per member; return #rows.
+
+    New members are styled once (static ``SeriesLines`` with readable names).
+    """
+    batch = list(batch)
+    if not batch:
+        return 0
+    last_G = _t_graph(batch[-1])[1]
+    styled = _styled.setdefault(rec, set())
+    n = 0
+    for member, (ts, xs) in sorted(metric_columns(batch, kinds).items()):
+        path = paths.metrics_path(member, paths.THETA)
+        if path not in styled:
+            style_series(rec, last_G, member)
+            styled.add(path)
+        rec.send_columns(path, indexes=[rr.TimeColumn(paths.TIME, timestamp=ts)],
+                         columns=rr.Scalars.columns(scalars=xs))
+        n += len(ts)
+    return n

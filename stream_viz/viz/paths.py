@@ -1,0 +1,36 @@
+"""Rerun entity paths and timelines of a STREAM recording (DESIGN.md §4), in one place."""
+
+from __future__ import annotations
+
+import rerun as rr
+
+from stream_viz.model.ids import kind_of, name_of
+
+# Timelines: wall clock (timestamp seconds) and the RCA iteration j (sequence).
+TIME = "time"
+RCA_ITERATION = "rca_iteration"
+
+SYSTEM = "/system"  # G_0: GraphNodes + directed GraphEdges in one entity
+PROCESS_TREE = "/process_tree"  # T_1 with the virtual root
+METRICS = "/metrics"  # /metrics/<kind>/<member name>/theta: Scalars, one series per θ attribute
+ALERTS = "/alerts"  # TextLog
+RCA = "/rca"
+RCA_SUBGRAPH = "/rca/subgraph"  # G_j and W_j, drawn over /system at the same positions
+RCA_TRAJECTORY = "/rca/trajectory"  # top fault trajectory, same positions
+RCA_REPORT = "/rca/report"  # TextDocument (markdown)
+
+THETA = "theta"  # leaf under a member's metric subtree: all its θ series (one entity: a small .rrd)
+ALERT_MARKERS = "alerts"  # leaf under a member's metric subtree holding SeriesPoints markers
+
+
+def member_path(member: str) -> str:
+    """Return a member's entity sub-path: ``topic:/a/b`` -> ``topic/a/b``, ``process:7`` -> ``process/7``."""
+    kind = kind_of(member)
+    parts = [rr.escape_entity_path_part(p) for p in name_of(member).split("/") if p]
+    return "/".join([kind, *parts]) if kind != "root" else "root"
+
+
+def metrics_path(member: str, leaf: str | None = None) -> str:
+    """Return ``/metrics/<kind>/<name>`` of a member, or of a leaf below it (`THETA`, `ALERT_MARKERS`)."""
+    base = f"{METRICS}/{member_path(member)}"
+    return f"{base}/{leaf}" if leaf else base

@@ -1,0 +1,251 @@
+"""The Rerun side of a run: one own ``RecordingStream`` going to a viewer and/or an ``.rrd`` file.
+
+Viewer modes: ``spawn`` (native viewer, needs a display), ``serve`` (gRPC server + web viewer on
+localhost), ``none``, or the gRPC URL of a running viewer (``rerun+http://host:port/proxy``). With
+``save`` the same stream is also written to a file (sinks are teed), default blueprint included.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+from urllib.parse import quote
+
+import networkx as nx
+import rerun as rr
+import rerun.blueprint as rrb
+
+from stream_viz.errors import ConfigError, OutputError
+from stream_viz.model.graph import flow_edges
+from stream_viz.records import Alert
+from stream_viz.viz import paths, style
+from stream_viz.viz.alerts import log_alerts
+from stream_viz.viz.layout import Layout
+from stream_viz.viz.metrics import log_metrics
+from stream_viz.viz.process_tree import log_process_tree
+from stream_viz.viz.rca import log_rca, log_report
+from stream_viz.viz.screenshot import rerun_executable
+from stream_viz.viz.system import log_system
+
+VIEWER_MODES = ("spawn", "serve", "none")
+GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
+DEFAULT_GRPC_PORT = 9876
+DEFAULT_WEB_PORT = 9090
+TELEMETRY_ENV = "STREAM_VIZ_RERUN_TELEMETRY"  # set to 1 to allow Rerun's usage analytics
+
+
+def disable_rerun_telemetry(enabled: bool | None = None) -> bool:
+    """Turn Rerun's usage analytics and OpenTelemetry tracing off for this process and its children.
+
+    Rerun's analytics skip any process whose environment has ``CI`` set (and are forced on by
+    ``FORCE_RERUN_ANALYTICS=1``); its tracing runs only with ``TELEMETRY_ENABLED=true``. Both are
+    inherited by a spawned viewer. ``enabled`` (default: env ``STREAM_VIZ_RERUN_TELEMETRY=1``)
+    leaves Rerun's own settings alone. Returns whether telemetry was left enabled.
+    """
+    if enabled is None:
+        enabled = os.environ.get(TELEMETRY_ENV, "").strip().lower() in ("1", "true", "yes", "on")
+    if not enabled:
+        os.environ.setdefault("CI", "1")
+        os.environ.setdefault("TELEMETRY_ENABLED", "false")
+    return enabled
+
+
+def check_writable(path: str | Path) -> Path:
+    """Return ``path`` if a recording can be written there, else raise `OutputError` naming it."""
+    path = Path(path)
+    if path.is_dir():
+        raise OutputError(f"cannot write recording {path}: it is a directory")
+    if not path.parent.is_dir():
+        raise OutputError(f"cannot write recording {path}: directory {path.parent} does not exist")
+    existed = path.exists()
+    try:
+        with open(path, "ab"):
+            pass
+    except OSError as e:
+        raise OutputError(f"cannot write recording {path}: {e.strerror or e}") from e
+    if not existed:
+        path.unlink(missing_ok=True)
+    return path
+
+
+def has_display() -> bool:
+    """Return True if a native window can be opened (X11/Wayland on Linux; always elsewhere)."""
+    if not sys.platform.startswith("linux"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def _stderr(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+class Recorder:
+    """A recording stream of a STREAM run and what it has drawn so far.
+
+    Parameters
+    ----------
+    app_id : str
+        Rerun application id (a saved ``.rbl`` must use the same).
+    viewer : str
+        ``spawn``, ``serve``, ``none`` or a gRPC URL (``rerun+http://127.0.0.1:9876/proxy``).
+    save : Path, optional
+        Also write the recording (with its default blueprint) to this ``.rrd``.
+    memory_limit : str
+        Memory limit of the spawned viewer / the served gRPC buffer.
+    web_port, grpc_port : int, optional
+        Ports of ``serve`` (web viewer, gRPC) and ``spawn`` (gRPC).
+    blueprint : rrb.Blueprint, optional
+        Default layout; `stream_viz_blueprints.default.build_blueprint()` if not given.
+    telemetry : bool, optional
+        Allow Rerun's usage analytics (default off; see `disable_rerun_telemetry`).
+    announce : callable
+        Where to tell the user the viewer URL (default: stderr).
+    """
+
+    def __init__(
+        self,
+        app_id: str = "stream_viz",
+        viewer: str = "none",
+        save: str | Path | None = None,
+        memory_limit: str = "512MiB",
+        web_port: int | None = None,
+        grpc_port: int | None = None,
+        blueprint: rrb.Blueprint | None = None,
+        telemetry: bool | None = None,
+        announce: Callable[[str], None] = _stderr,
+    ) -> None:
+        # Every check before anything is opened (and before monitoring starts).
+        if viewer not in VIEWER_MODES and not viewer.startswith(GRPC_SCHEMES):
+            raise ConfigError(
+                f"--viewer {viewer!r}: expected spawn, serve, none or a gRPC URL such as "
+                f"rerun+http://127.0.0.1:{DEFAULT_GRPC_PORT}/proxy")
+        self.save = check_writable(save) if save is not None else None
+        if viewer == "spawn":
+            if not has_display():
+                raise OutputError("--viewer spawn needs a display (DISPLAY/WAYLAND_DISPLAY unset); "
+                                  "use --viewer serve and open the printed URL, or --save FILE.rrd")
+            if rerun_executable() is None:
+                raise OutputError("--viewer spawn: the 'rerun' viewer executable is not on PATH")
+        disable_rerun_telemetry(telemetry)
+        if blueprint is None:
+            from stream_viz_blueprints.default import build_blueprint
+
+            blueprint = build_blueprint()
+        self.viewer, self.app_id, self.url = viewer, app_id, None
+        self.layout: Layout | None = None
+        self.status: dict[str, str] = {}
+        self._system_sig: Any = None
+        self._tree_sig: Any = None
+        self._closed = False
+        enabled = viewer != "none" or self.save is not None
+        # Nothing to send to: disabled, so the stream does not buffer the whole run in memory.
+        self.rec = rr.RecordingStream(app_id, default_enabled=enabled)
+        self.rec.set_log_time_enabled(False)  # our own `time` timeline is the clock
+        sinks: list[Any] = []
+        try:
+            if viewer == "spawn":
+                port = grpc_port or DEFAULT_GRPC_PORT
+                self.rec.spawn(port=port, connect=False, memory_limit=memory_limit, hide_welcome_screen=True)
+                self.url = f"rerun+http://127.0.0.1:{port}/proxy"
+                sinks.append(rr.GrpcSink(self.url))
+            elif viewer == "serve":
+                server = rr.GrpcServerSink("127.0.0.1", grpc_port or DEFAULT_GRPC_PORT,
+                                           server_memory_limit=memory_limit)
+                sinks.append(server)
+                grpc_url = server.uri
+            elif viewer != "none":
+                self.url = viewer
+                sinks.append(rr.GrpcSink(viewer))
+            if self.save is not None:
+                sinks.append(rr.FileSink(str(self.save)))
+            if sinks:
+                self.rec.set_sinks(*sinks, default_blueprint=blueprint)
+            if viewer == "serve":
+                port = web_port or DEFAULT_WEB_PORT
+                rr.serve_web_viewer(web_port=port, open_browser=False, connect_to=grpc_url)
+                self.url = f"http://127.0.0.1:{port}/?url={quote(grpc_url, safe='')}"
+        except (RuntimeError, OSError, ValueError) as e:
+            raise OutputError(f"--viewer {viewer}: could not start the Rerun sink: {e}") from e
+        if viewer == "serve":
+            announce(f"Rerun web viewer: {self.url}")
+        elif viewer == "spawn":
+            announce(f"Rerun viewer spawned, streaming to {self.url}")
+
+    # -- time -----------------------------------------------------------------------------------
+    def set_time(self, t: float) -> None:
+        """Set the ``time`` timeline (wall clock seconds) for what is logged next."""
+        self.rec.set_time(paths.TIME, timestamp=float(t))
+
+    # -- entities -------------------------------------------------------------------------------
+    def system(self, G: nx.MultiDiGraph, t: float | None = None, gone: Collection[str] = (),
+               force: bool = False) -> bool:
+        """Log ``/system`` (and ``/process_tree``) if the graph, gone set or alert status changed.
+
+        Returns True if ``/system`` was logged.
+        """
+        if t is not None:
+            self.set_time(t)
+        gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
+        sig = (frozenset(G.nodes), frozenset(flow_edges(G)), gone_all, frozenset(self.status.items()),
+               frozenset((m, lab) for m, lab in G.nodes(data="label")))
+        tree_sig = (frozenset((u, v, k) for u, v, k in G.edges(keys=True) if k >= 1), gone_all)
+        if tree_sig != self._tree_sig or force:
+            log_process_tree(self.rec, G)
+            self._tree_sig = tree_sig
+        if sig == self._system_sig and not force:
+            return False
+        self.layout = log_system(self.rec, G, self.layout, gone=gone_all, status=self.status)
+        self._system_sig = sig
+        return True
+
+    def metrics(self, batch: Iterable[Any]) -> int:
+        """Send a batch of ``(t, G)`` samples' θ (processes, topics); return the number of values."""
+        return log_metrics(self.rec, batch)
+
+    def alerts(self, alerts: Sequence[Alert]) -> int:
+        """Log alerts (text log + markers); alerted members get their severity's colour in ``/system``."""
+        for a in sorted(alerts, key=lambda a: a.t):
+            if style.SEVERITY_RANK.get(a.severity, 0) >= style.SEVERITY_RANK["warn"]:
+                self.status[a.member] = a.severity
+        return log_alerts(self.rec, alerts)
+
+    def rca(self, G: nx.MultiDiGraph, iteration: Mapping[str, Any],
+            root_causes: Sequence[Mapping[str, Any]] = (), gone: Collection[str] = ()) -> None:
+        """Log one RCA iteration (overlays + report) on both timelines."""
+        gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
+        self.layout = log_rca(self.rec, G, self.layout, iteration, root_causes,
+                              gone=sorted(gone_all), status=self.status)
+
+    def report(self, markdown: str, t: float | None = None) -> None:
+        """Log a markdown report at ``/rca/report``."""
+        if t is not None:
+            self.set_time(t)
+        log_report(self.rec, markdown)
+
+    # -- end ------------------------------------------------------------------------------------
+    def flush(self, timeout: float = 5.0) -> None:
+        """Flush pending data to the sinks; never raises (a vanished viewer must not stop a run)."""
+        try:
+            self.rec.flush(timeout_sec=timeout)
+        except Exception as e:
+            _stderr(f"stream-viz: flushing the Rerun recording: {e}")
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Flush and disconnect, so the ``.rrd`` gets its footer. Safe to call twice."""
+        if self._closed:
+            return
+        self._closed = True
+        self.flush(timeout)
+        try:
+            self.rec.disconnect()
+        except Exception as e:
+            _stderr(f"stream-viz: closing the Rerun recording: {e}")
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

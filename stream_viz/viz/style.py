@@ -1,0 +1,43 @@
+"""Colours and sizes: what tells member kinds, states and severities apart in the viewer."""
+
+from __future__ import annotations
+
+# RGB; active members (ROS nodes) are big blue discs, distributors smaller and warm/green.
+KIND_COLOR = {
+    "node": (66, 133, 244),
+    "topic": (245, 166, 35),
+    "service": (52, 168, 83),
+    "action": (171, 71, 188),
+    "process": (0, 150, 136),
+    "host": (96, 125, 139),
+    "root": (120, 120, 120),
+}
+KIND_RADIUS = {"node": 16.0, "topic": 9.0, "service": 8.0, "action": 9.0,
+               "process": 12.0, "host": 14.0, "root": 10.0}
+GONE_COLOR = (150, 150, 150)
+GONE_SUFFIX = " (gone)"
+
+SEVERITY_COLOR = {
+    "info": (120, 180, 255),
+    "warn": (255, 200, 0),
+    "error": (230, 57, 53),
+    "fatal": (150, 0, 20),
+}
+# Rerun's TextLog levels (the viewer colours and filters by these).
+SEVERITY_LEVEL = {"info": "INFO", "warn": "WARN", "error": "ERROR", "fatal": "CRITICAL"}
+SEVERITY_RANK = {"info": 1, "warn": 2, "error": 3, "fatal": 4}
+
+# RCA overlays, drawn over /system at the same positions.
+SUBGRAPH_COLOR = (230, 57, 53)  # members of G_j
+WATCH_COLOR = (255, 215, 0)  # W_j not (yet) in G_j
+ALERT_COLOR = (150, 0, 20)  # the member whose alert grew G_j at this iteration
+TRAJECTORY_COLOR = (200, 0, 200)
+ROOT_CAUSE_COLOR = (0, 220, 255)
+OVERLAY_RADIUS = 26.0  # overlay discs, in scene units (a label box is ~100 units wide)
+
+
+def rgb_for_index(i: int) -> tuple[int, int, int]:
+    """Return a distinct colour for series ``i`` (a small qualitative palette, cycled)."""
+    palette = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
+               (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207)]
+    return palette[i % len(palette)]
