@@ -116,12 +116,13 @@ def main(argv: list[str] | None = None) -> int:
     sims = {n.name: SimNode(n, ctx, topo.node_names()) for n in group.nodes}
     # one single-threaded executor (and thread) per node: a hung node blocks only itself, and it is
     # ~10x cheaper in CPU than one MultiThreadedExecutor for the whole process
-    executors = []
+    executors, spinners = [], []
     for s in sims.values():
         ex = SingleThreadedExecutor(context=ctx)
         ex.add_node(s.node)
         executors.append(ex)
-        threading.Thread(target=_spin, args=(ex,), daemon=True, name=f"spin{s.spec.name}").start()
+        spinners.append(threading.Thread(target=_spin, args=(ex,), daemon=True, name=f"spin{s.spec.name}"))
+        spinners[-1].start()
     if args.fault and args.target and args.at is not None:
         threading.Thread(target=_inject, args=(args.fault, args.target, args.at, sims, run_dir, STOP),
                          daemon=True, name="inject").start()
@@ -133,9 +134,12 @@ def main(argv: list[str] | None = None) -> int:
     STOP.set()
     for ex in executors:
         ex.shutdown(timeout_sec=1.0)
+    for t in spinners:  # a node still in use by a spinning executor would not really be destroyed
+        t.join(2.0)
     for s in sims.values():
         s.destroy()
     ctx.try_shutdown()
+    ctx.destroy()  # deletes the DDS participant: peers see the nodes leave at once
     sys.stdout.flush()
     os._exit(0)  # skip joining stuck executor threads
 

@@ -1,0 +1,236 @@
+"""The demo robot against the real thing: its graph matches topology.py, every fault really happens."""
+
+from __future__ import annotations
+
+import importlib
+import itertools
+import os
+import statistics
+import threading
+import time
+
+import psutil
+import pytest
+from rosenv import wait_for
+
+from stream_viz.demo.robot import FaultSpec, Robot
+from stream_viz.demo.topology import DEMO
+from stream_viz.errors import DemoError
+
+pytestmark = pytest.mark.ros
+AT = 6.0  # fault injected this many seconds after start
+
+
+class Observer:
+    """A plain rclpy node in its own context, spun in a thread, recording arrival times."""
+
+    def __init__(self, domain: int) -> None:
+        import rclpy
+        from rclpy.context import Context
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+
+        self.ctx = Context()
+        rclpy.init(context=self.ctx, domain_id=domain, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node("demo_observer", context=self.ctx)
+        self.ex = SingleThreadedExecutor(context=self.ctx)
+        self.ex.add_node(self.node)
+        self.arrivals: dict[str, list[tuple[float, object]]] = {}
+        threading.Thread(target=self._spin, daemon=True).start()
+
+    def _spin(self) -> None:
+        try:
+            self.ex.spin()
+        except Exception:
+            pass
+
+    def watch(self, topic: str, type_name: str) -> list[tuple[float, object]]:
+        pkg, kind, cls = type_name.split("/")
+        msg_type = getattr(importlib.import_module(f"{pkg}.{kind}"), cls)
+        got = self.arrivals.setdefault(topic, [])
+        self.node.create_subscription(msg_type, topic, lambda m: got.append((time.time(), m)), 50)
+        return got
+
+    def close(self) -> None:
+        self.ex.shutdown(1.0)
+        self.node.destroy_node()
+        self.ctx.try_shutdown()
+
+    def node_names(self) -> set[str]:
+        return {f"{ns.rstrip('/')}/{n}" for n, ns in self.node.get_node_names_and_namespaces()}
+
+    def rosout_pids(self) -> dict[str, int]:
+        """Node fqn → low 16 bits of its pid, from the Fast DDS GUID of its /rosout publisher."""
+        out = {}
+        for info in self.node.get_publishers_info_by_topic("/rosout"):
+            gid = bytes(info.endpoint_gid)
+            out[f"{info.node_namespace.rstrip('/')}/{info.node_name}"] = int.from_bytes(gid[4:6], "little")
+        return out
+
+
+@pytest.fixture
+def observer(ros_domain):
+    obs = Observer(ros_domain)
+    yield obs
+    obs.close()
+
+
+def _window(arrivals, t0: float, t1: float) -> list[float]:
+    return [t for t, _ in list(arrivals) if t0 <= t < t1]
+
+
+def test_graph_matches_topology_and_stop_leaves_nothing(observer):
+    with Robot(env=dict(os.environ)) as robot:
+        robot.wait_ready(30)
+        expected = set(DEMO.node_names())
+        wait_for(lambda: expected <= observer.node_names(), timeout=15)
+        assert len(expected) >= 10 and len(set(robot.pids().values())) >= 5
+        topics = dict(observer.node.get_topic_names_and_types())
+        for topic, type_name in DEMO.topics().items():
+            assert type_name in topics.get(topic, []), topic
+        for spec in DEMO.nodes():
+            ns, _, name = spec.name.rpartition("/")
+            ns = ns or "/"
+            pubs = {t for t, _ in observer.node.get_publisher_names_and_types_by_node(name, ns)}
+            subs = {t for t, _ in observer.node.get_subscriber_names_and_types_by_node(name, ns)}
+            srvs = {t for t, _ in observer.node.get_service_names_and_types_by_node(name, ns)}
+            clis = {t for t, _ in observer.node.get_client_names_and_types_by_node(name, ns)}
+            assert {p.topic for p in spec.pubs} <= pubs, spec.name
+            assert {s.topic for s in spec.subs} <= subs, spec.name
+            assert {s.name for s in spec.services} <= srvs, spec.name
+            assert {c.name for c in spec.clients} <= clis, spec.name
+        wait_for(lambda: expected <= set(observer.rosout_pids()), timeout=10)
+        low = observer.rosout_pids()
+        node_pids = robot.node_pids()
+        assert set(node_pids) == expected
+        for node, pid in node_pids.items():
+            assert low[node] == pid & 0xFFFF, node
+        # data flows end to end: sensors → perception → planning → control
+        wheel = observer.watch("/wheel_cmd", "std_msgs/msg/Float64MultiArray")
+        wait_for(lambda: len(wheel) >= 5, timeout=15)
+        pids = list(robot.pids().values())
+    assert not [p for p in pids if psutil.pid_exists(p) and psutil.Process(p).status() != "zombie"]
+    codes = {g: p.returncode for g, p in robot.procs.items()}
+    assert set(codes.values()) == {0}, codes  # ended by SIGINT, not SIGKILL
+    try:
+        wait_for(lambda: not (expected & observer.node_names()), timeout=5)
+    except TimeoutError:
+        raise AssertionError(f"still in the graph: {expected & observer.node_names()}") from None
+
+
+def test_bad_fault_specs_name_the_choices():
+    with pytest.raises(DemoError, match="crash"):
+        FaultSpec("explode", "/lidar_driver", 1.0)
+    with pytest.raises(DemoError, match="/lidar_driver"):
+        Robot(fault=FaultSpec("crash", "/nope", 1.0))
+
+
+def _run_fault(observer, fault: str, target: str, watch: tuple[str, str] | None = None, after: float = 4.0):
+    arrivals = observer.watch(*watch) if watch else None
+    robot = Robot(env=dict(os.environ), fault=FaultSpec(fault, target, AT))
+    robot.start()
+    try:
+        robot.wait_ready(30)
+        info = wait_for(robot.injected, timeout=AT + 10)
+        assert info["fault"] == fault and info["target"] == f"node:{target}"
+        assert abs(info["t"] - robot.fault_at) < 2.0
+        return robot, info, arrivals
+    except BaseException:
+        robot.stop()
+        raise
+
+
+def test_crash_kills_the_target_process(observer):
+    robot, _info, _ = _run_fault(observer, "crash", "/lidar_driver")
+    try:
+        proc = robot.procs["lidar"]
+        wait_for(lambda: proc.poll() is not None, timeout=5)
+        assert proc.returncode == -9
+        assert sum(robot.alive().values()) == len(DEMO.groups) - 1
+    finally:
+        robot.stop()
+
+
+@pytest.mark.parametrize(("fault", "target", "topic", "type_name"), [
+    ("hang", "/imu_driver", "/imu", "sensor_msgs/msg/Imu"),
+    ("degrade", "/wheel_odometry", "/odom", "nav_msgs/msg/Odometry"),
+])
+def test_rate_drops(observer, fault, target, topic, type_name):
+    robot, info, arrivals = _run_fault(observer, fault, target, (topic, type_name))
+    try:
+        t = info["t"]
+        time.sleep(max(0.0, t + 4.5 - time.time()))
+        before = len(_window(arrivals, t - 3, t)) / 3
+        later = len(_window(arrivals, t + 0.5, t + 4.5)) / 4
+        assert before > 10
+        assert later < (0.05 if fault == "hang" else 0.5) * before, (before, later)
+        assert all(robot.alive().values())  # the process stays
+    finally:
+        robot.stop()
+
+
+def test_delay_raises_jitter(observer):
+    robot, info, arrivals = _run_fault(observer, "delay", "/imu_driver", ("/imu", "sensor_msgs/msg/Imu"))
+    try:
+        t = info["t"]
+        time.sleep(max(0.0, t + 5 - time.time()))
+        gaps = lambda ts: [b - a for a, b in itertools.pairwise(ts)]  # noqa: E731
+        before = statistics.pstdev(gaps(_window(arrivals, t - 3, t)))
+        later = gaps(_window(arrivals, t + 0.5, t + 5))
+        assert len(later) >= 5
+        assert statistics.pstdev(later) > max(3 * before, 0.02), (before, statistics.pstdev(later))
+    finally:
+        robot.stop()
+
+
+def test_cpu_burns_in_the_target_process(observer):
+    robot, _info, _ = _run_fault(observer, "cpu", "/camera_driver")
+    try:
+        proc = psutil.Process(robot.node_pids()["/camera_driver"])
+        proc.cpu_percent()
+        time.sleep(2.0)
+        assert proc.cpu_percent() > 50
+    finally:
+        robot.stop()
+
+
+def test_leak_grows_rss(observer):
+    robot, _info, _ = _run_fault(observer, "leak", "/map_server")
+    try:
+        proc = psutil.Process(robot.node_pids()["/map_server"])
+        rss0 = proc.memory_info().rss
+        time.sleep(3.0)
+        assert proc.memory_info().rss - rss0 > 30 * 2**20
+    finally:
+        robot.stop()
+
+
+def test_errlog_reaches_rosout(observer):
+    logs = observer.watch("/rosout", "rcl_interfaces/msg/Log")
+    robot, _info, _ = _run_fault(observer, "errlog", "/obstacle_detector")
+    try:
+        errors = lambda: [m for _, m in list(logs) if m.level == 40 and m.name == "obstacle_detector"]  # noqa: E731
+        assert len(wait_for(lambda: len(errors()) >= 2 and errors(), timeout=5)) >= 2
+    finally:
+        robot.stop()
+    others = [m for _, m in logs if m.level >= 40 and m.name != "obstacle_detector"]
+    assert not others
+
+
+def test_diag_reports_error_for_the_target(observer):
+    diags = observer.watch("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
+    robot, info, _ = _run_fault(observer, "diag", "/localization")
+    try:
+        def levels():
+            out = {}
+            for t, arr in list(diags):
+                for st in arr.status:
+                    level = st.level if isinstance(st.level, int) else ord(st.level)
+                    out.setdefault((st.name, t >= info["t"]), set()).add(level)
+            return out
+        wait_for(lambda: 2 in levels().get(("/localization", True), set()), timeout=5)
+        lv = levels()
+        assert lv[("/localization", False)] == {0}  # OK before the injection
+        assert lv[("/lidar_driver", True)] == {0}  # others stay OK
+    finally:
+        robot.stop()
