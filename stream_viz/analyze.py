@@ -1,0 +1,58 @@
+"""``stream-viz analyze``: rerun the root-cause analysis offline on a saved alert database."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import time
+from typing import Any
+
+from stream_viz.config import load_config
+from stream_viz.detect.store import AlertStore
+from stream_viz.errors import StoreError
+from stream_viz.rca.engine import analyze
+from stream_viz.report import build_report, check_writable, write_report
+
+
+def run_analyze(args: argparse.Namespace) -> dict[str, Any]:
+    """Read the model snapshot and alerts from ``--db``, rank root causes, print and write them."""
+    config = load_config(args.config)
+    settings = config.rca
+    overrides = {k: v for k, v in (("policy", args.policy), ("method", args.method)) if v}
+    if overrides:
+        settings = dataclasses.replace(settings, **overrides)
+        settings = type(settings).from_dict(dataclasses.asdict(settings), "command line")
+    if args.report:
+        check_writable(args.report, "report")
+    if args.save:
+        check_writable(args.save, "recording")
+    store = AlertStore(args.db, readonly=True)
+    try:
+        G = store.latest_snapshot()
+        alerts = store.alerts()
+        watch = store.get_meta("watchlist")
+        started = store.get_meta("started_at") or (alerts[0].t if alerts else time.time())
+        ended = store.get_meta("ended_at") or (alerts[-1].t if alerts else started)
+        injected = store.get_meta("injected")
+    finally:
+        store.close()
+    if G is None:
+        raise StoreError(f"{args.db}: holds no model snapshot (was it written by stream-viz monitor?)")
+    if not alerts:
+        raise StoreError(f"{args.db}: holds no alerts, nothing to analyse")
+    result = analyze(G, alerts, settings, set(watch) if watch else None)
+    report = build_report(G, alerts, result.to_report(), started, ended, injected)
+    for rank, rc in enumerate(report["root_causes"][:10], 1):
+        print(f"{rank}. {rc['member']}  score {rc['score']:.2f}  trajectory: {' <- '.join(rc['trajectory'])}")
+    if args.report:
+        write_report(args.report, report)
+        print(f"report: {args.report}")
+    if args.save:
+        from stream_viz.live_view import save_diagnosis
+
+        save_diagnosis(args.save, G, alerts, result)
+        print(f"recording: {args.save}")
+    if not args.report and not report["root_causes"]:
+        print(json.dumps({"root_causes": []}))
+    return report

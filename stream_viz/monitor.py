@@ -1,0 +1,179 @@
+"""The live pipeline: collect → detect → diagnose → show, one sample per period.
+
+Everything the run produces is kept as it arrives (alerts committed to the database per sample,
+recording streamed), so ending the run any way loses nothing already collected.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+from stream_viz.collect.collector import Collector
+from stream_viz.config import Config, load_config
+from stream_viz.detect.registry import load_plugins
+from stream_viz.detect.store import AlertStore, default_db_path
+from stream_viz.detect.watchlist import initial_watchlist, process_anomalies
+from stream_viz.model.graph import new_graph
+from stream_viz.model.history import History
+from stream_viz.model.seen import remember
+from stream_viz.progress import Progress
+from stream_viz.rca.engine import RcaEngine
+from stream_viz.records import Alert
+from stream_viz.report import build_report, check_writable, write_report
+from stream_viz.live_view import LiveView
+
+
+class Monitor:
+    """One monitoring run: owns the collector, plugins, alert store, RCA engine and the view."""
+
+    def __init__(
+        self,
+        config: Config,
+        *,
+        db: Path | None = None,
+        save: Path | None = None,
+        report: Path | None = None,
+        viewer: str = "none",
+        progress: Progress | None = None,
+        domain_id: int | None = None,
+    ) -> None:
+        # Outputs are checked before anything starts: a typo must not cost a run.
+        self.report_path = check_writable(report, "report") if report else None
+        if save:
+            check_writable(save, "recording")
+        self.config = config
+        self.progress = progress or Progress()
+        self.db_path = Path(db) if db else default_db_path()
+        self.store = AlertStore(self.db_path)
+        self.started_at = time.time()
+        self.store.set_meta("started_at", self.started_at)
+        self.plugins = load_plugins(config)
+        for problem in self.plugins.problems:
+            self.progress.say(f"plugin problem: {problem}")
+        self.store.add_problems(self.plugins.problems)
+        self.view = LiveView(viewer=viewer, save=save)
+        self.history = History(maxlen=config.monitor.history)
+        self.engine = RcaEngine(config.rca, watchlist=set())
+        self.seen = new_graph()
+        self.alerts: list[Alert] = []
+        self.samples = 0
+        self.injected: Mapping[str, Any] | None = None
+        self.collector = Collector(domain_id, topic_metrics=config.monitor.topic_metrics)
+        self.collector.start()
+
+    # -- one tick ---------------------------------------------------------------------------
+    def step(self) -> None:
+        """Take one sample and push it through detection, the RCA and the view."""
+        sample = self.collector.sample()
+        t = sample.t
+        self.samples += 1
+        self.seen = remember(self.seen, sample.graph, t)
+        for m, theta in sample.graph.nodes(data="theta"):
+            if theta is not None:
+                self.history.add(m, t, theta)
+        if sample.diff or self.samples == 1:
+            self.store.add_snapshot(t, self.seen)
+        self.engine.watch(self._watch_additions(sample.graph))
+        alerts, problems = self.plugins.run(sample, frozenset(self.engine.watchlist), self.history)
+        self.store.add_alerts(alerts)
+        if problems:
+            self.store.add_problems(problems)
+            for p in problems:
+                self.progress.say(f"plugin problem: {p}")
+        self.alerts.extend(alerts)
+        result = self.engine.update(self.seen, alerts)
+        self.view.update(t, sample, self.seen, alerts, result)
+        self.progress.update(self._status(t, result))
+
+    def _watch_additions(self, G) -> set[str]:
+        if self.samples == 1:
+            return initial_watchlist(G, self.config.watchlist, self.history)
+        return process_anomalies(G, self.history) | initial_watchlist(G, self.config.watchlist, self.history)
+
+    def _status(self, t: float, result) -> str:
+        kinds: dict[str, int] = {}
+        for _, k in self.seen.nodes(data="kind"):
+            kinds[k] = kinds.get(k, 0) + 1
+        top = result.root_causes[0] if result.root_causes else None
+        top_txt = f"top root cause: {top.member} ({top.score:.2f})" if top else "no root cause yet"
+        return (
+            f"[{t - self.started_at:6.1f}s] {kinds.get('node', 0)} nodes, {kinds.get('topic', 0)} topics, "
+            f"{kinds.get('process', 0)} processes | {len(self.alerts)} alerts | {top_txt}"
+        )
+
+    # -- the whole run ----------------------------------------------------------------------
+    def run(self, duration: float | None, stop: threading.Event, on_tick: Callable[[], None] | None = None) -> None:
+        """Sample every period until ``duration`` passed or ``stop`` is set."""
+        period = self.config.monitor.period
+        end = None if duration is None else time.monotonic() + duration
+        next_t = time.monotonic()
+        while not stop.is_set():
+            self.step()
+            if on_tick:
+                on_tick()
+            next_t += period
+            now = time.monotonic()
+            if end is not None and now >= end:
+                break
+            wait = next_t - now if end is None else min(next_t, end) - now
+            if wait < 0:  # fell behind: skip missed ticks rather than burst
+                next_t = now
+                wait = 0
+            stop.wait(wait)
+
+    def close(self) -> dict[str, Any]:
+        """Stop observing, write the report, flush the recording and the database; return the report."""
+        ended_at = time.time()
+        self.collector.close()
+        self.progress.done()
+        report = build_report(
+            self.seen, self.alerts, self.engine.result().to_report(), self.started_at, ended_at, self.injected,
+        )
+        try:
+            if self.report_path:
+                write_report(self.report_path, report)
+        finally:
+            self.store.set_meta("ended_at", ended_at)
+            if self.injected:
+                self.store.set_meta("injected", dict(self.injected))
+            self.store.close()
+            self.view.close()
+        return report
+
+
+def install_stop_handlers(stop: threading.Event) -> None:
+    """SIGINT and SIGTERM end the run cleanly (the report is written, exit code 0)."""
+
+    def handler(signum, frame) -> None:  # noqa: ARG001
+        stop.set()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+
+
+def run_monitor(args: argparse.Namespace) -> dict[str, Any]:
+    """``stream-viz monitor``: attach to the system on ROS_DOMAIN_ID until --duration or a signal."""
+    config = load_config(args.config)
+    stop = threading.Event()
+    install_stop_handlers(stop)
+    mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=args.viewer or "none")
+    mon.progress.say(f"alert database: {mon.db_path}")
+    try:
+        mon.run(args.duration, stop)
+    finally:
+        report = mon.close()
+    _print_outputs(mon, args)
+    return report
+
+
+def _print_outputs(mon: Monitor, args: argparse.Namespace) -> None:
+    if args.save:
+        mon.progress.say(f"recording: {args.save}  (open with: rerun {args.save})")
+    if args.report:
+        mon.progress.say(f"report: {args.report}")
