@@ -36,13 +36,38 @@ def incompatible(pub_qos: Any, sub_qos: Any) -> list[str]:
     return why
 
 
+def _endpoints(G: Any, topic: str) -> tuple[dict[str, list[Any]], dict[str, list[Any]]]:
+    """Publisher and subscriber nodes of ``topic`` with their QoS profiles.
+
+    The topic attribute ``qos`` (a list of ``{"node", "role", "reliability", "durability", …}``,
+    one per endpoint, as the collector writes it) is used when present, else an edge's ``qos``.
+    """
+    pubs: dict[str, list[Any]] = {u: [] for u, _, k in G.in_edges(topic, keys=True) if k == 0}
+    subs: dict[str, list[Any]] = {v: [] for _, v, k in G.out_edges(topic, keys=True) if k == 0}
+    for q in G.nodes[topic].get("qos") or ():
+        if not isinstance(q, dict):
+            continue
+        side = pubs if q.get("role") == "pub" else subs if q.get("role") == "sub" else None
+        node = q.get("node", "")
+        member = node if str(node).startswith("node:") else f"node:{node}"
+        if side is not None and member in side:
+            side[member].append(q)
+    for u, _, k, q in G.in_edges(topic, keys=True, data="qos"):
+        if k == 0 and q is not None and not pubs[u]:
+            pubs[u].append(q)
+    for _, v, k, q in G.out_edges(topic, keys=True, data="qos"):
+        if k == 0 and q is not None and not subs[v]:
+            subs[v].append(q)
+    return pubs, subs
+
+
 class GraphAnomalies(Plugin):
     """Alerts on:
 
     * two nodes with one name (node attribute ``instances`` > 1, as the collector counts them): error;
     * a subscriber whose topic has had no publisher for ``grace_s``: warn on the subscriber;
-    * incompatible QoS between a publisher and a subscriber of a topic (edge attribute ``qos``,
-      a dict with ``reliability`` and ``durability``): error on the subscriber.
+    * incompatible QoS between a publisher and a subscriber of a topic (see `_endpoints`):
+      error on the subscriber.
 
     A topic is checked when it or the subscriber is watched; topics in ``ignore_topics`` never.
     """
@@ -68,21 +93,21 @@ class GraphAnomalies(Plugin):
         for topic, kind in G.nodes(data="kind"):
             if kind != "topic" or topic in ignore:
                 continue
-            pubs = [(u, d.get("qos")) for u, _, k, d in G.in_edges(topic, keys=True, data=True) if k == 0]
-            subs = [(v, d.get("qos")) for _, v, k, d in G.out_edges(topic, keys=True, data=True) if k == 0]
-            subs = [(v, q) for v, q in subs if topic in ctx.watch or v in ctx.watch]
+            pubs, subs = _endpoints(G, topic)
+            subs = {v: q for v, q in subs.items() if topic in ctx.watch or v in ctx.watch}
             if not subs:
                 continue
             if not pubs and s["no_publisher"]:
                 current.add(topic)
                 since = orphan_since.setdefault(topic, ctx.t)
                 if ctx.t - since >= s["grace_s"]:
-                    for v, _ in sorted(subs, key=lambda x: x[0]):
+                    for v in sorted(subs):
                         yield ctx.alert(v, "warn", f"subscribes to {topic} which has had no publisher for "
                                         f"{ctx.t - since:.0f} s", symptom="no_publisher", topic=topic)
             if pubs and s["qos"]:
-                for v, sq in sorted(subs, key=lambda x: x[0]):
-                    bad = sorted({f"{u}: {w}" for u, pq in pubs for w in incompatible(pq, sq)})
+                for v in sorted(subs):
+                    bad = sorted({f"{u}: {w}" for u, pqs in pubs.items() for pq in pqs
+                                  for sq in subs[v] for w in incompatible(pq, sq)})
                     if bad:
                         yield ctx.alert(v, "error", f"QoS incompatible on {topic}: " + "; ".join(bad),
                                         symptom="qos_incompatible", topic=topic)

@@ -27,7 +27,7 @@ class MemberGone(Plugin):
     """Alerts when a process dies (``exit`` event: error on its node(s), and on the process when
     it has no node), restarts (``restart`` event: warn), a node leaves the graph without its
     process having been seen to exit (``left_severity``), or a node carries ``alive=False``
-    (error, every sample while it lasts).
+    (its process is gone while DDS still lists it: error, every sample while it lasts).
 
     Alerts whether or not the member is watched unless ``watched_only``: a death is evidence,
     not an attribute to screen.
@@ -44,18 +44,24 @@ class MemberGone(Plugin):
         def ok(m: str) -> bool:
             return not s["watched_only"] or m in ctx.watch
 
+        said: set[str] = set()
         for e in ctx.events:
             if e.kind == "exit":
+                # The collector sends one exit event per node of the process and one for the
+                # process; a process with nodes is reported on its nodes.
                 targets = [e.member]
                 if kind_of(e.member) == "process":
                     nodes = set(hosted_nodes(ctx.graph, e.member)) | set(e.data.get("nodes", ()))
                     targets = sorted(nodes) or [e.member]
-                how = e.text or "exited"
                 for m in targets:
                     exited.add(m)
-                    if ok(m):
-                        yield ctx.alert(m, "error", f"process died: {how}", symptom="exit",
-                                        process=e.member, **{k: v for k, v in e.data.items() if k != "nodes"})
+                    if m in said or not ok(m):
+                        continue
+                    said.add(m)
+                    sev = "error" if kind_of(m) == "node" else e.level
+                    yield ctx.alert(m, sev, f"process died: {e.text or 'exited'}", symptom="exit",
+                                    process=e.data.get("process", e.member),
+                                    clean=not e.data.get("still_listed", ()))
             elif e.kind == "restart" and ok(e.member):
                 yield ctx.alert(e.member, "warn", f"restarted: {e.text or 'new process'}", symptom="restart",
                                 **e.data)
@@ -64,6 +70,6 @@ class MemberGone(Plugin):
                 yield ctx.alert(m, s["left_severity"], "left the graph", symptom="left")
         for m in sorted(ctx.diff.added_members):
             exited.discard(m)  # back again: a later departure is news
-        for m, alive in ctx.graph.nodes(data="alive"):
-            if alive is False and ok(m):
+        for m, d in ctx.graph.nodes(data=True):
+            if d.get("kind") == "node" and d.get("alive") is False and m not in said and ok(m):
                 yield ctx.alert(m, "error", "not alive", symptom="not_alive")

@@ -21,8 +21,9 @@ class ProcessResources(Plugin):
     * CPU / memory: ``value - median ≥ max(k·σ, min_rise)`` (σ = 1.4826·MAD of the process's own
       past after ``warmup_s``, frozen while alerting) for ``confirm`` samples; the absolute
       floors (``cpu_min_rise`` percentage points, ``rss_min_rise_mb``) keep idle noise quiet.
-    * growth: the least-squares slope of RSS over the last ``trend_s`` is at least
-      ``growth_mb_per_s`` and RSS grew at least ``growth_min_mb`` in that window.
+    * growth: the least-squares slope of RSS over a recent window (``trend_s``/6, /2, whole) is
+      at least ``growth_mb_per_s``, RSS grew at least ``growth_min_mb`` in it and rose in at
+      least ``growth_steady`` of the steps (a leak, not one big allocation).
 
     Alerts go to the nodes the process hosts (``alert_on = "nodes"``; the process itself when
     it hosts none), to the process (``"process"``) or both (``"both"``). A process is checked
@@ -41,7 +42,8 @@ class ProcessResources(Plugin):
         "rss_min_rise_mb": 100.0,
         "growth_mb_per_s": 1.0,
         "growth_min_mb": 20.0,
-        "trend_s": 30.0,
+        "trend_s": 60.0,
+        "growth_steady": 0.7,
         "confirm": 2,
         "alert_on": "nodes",
     }
@@ -98,18 +100,28 @@ class ProcessResources(Plugin):
 
     @staticmethod
     def _growth(ctx: PluginContext, proc: str) -> float | None:
+        """Return the RSS growth rate (MB/s) when memory grows steadily, else None.
+
+        Checked over the last ``trend_s``/6, /2 and whole (a fast leak shows in the short window,
+        a slow one in the long); steady means at least ``growth_steady`` of the increments are
+        positive, so one big allocation (a step) does not count as a leak.
+        """
         s = ctx.settings
         times, values = ctx.past(proc, "rss_mb")
         if len(times) == 0 or ctx.t - times[0] < s["warmup_s"]:
             return None
-        now = ctx.value(proc, "rss_mb")
-        recent = times >= ctx.t - s["trend_s"]
-        t = np.append(times[recent], ctx.t)
-        v = np.append(values[recent], now)
-        ok = np.isfinite(v)
-        if ok.sum() < 5:
-            return None
-        rate = slope(t, v)
-        if np.isfinite(rate) and rate >= s["growth_mb_per_s"] and np.ptp(v[ok]) >= s["growth_min_mb"]:
-            return rate
+        t_all = np.append(times, ctx.t)
+        v_all = np.append(values, ctx.value(proc, "rss_mb"))
+        for span in (s["trend_s"] / 6, s["trend_s"] / 2, s["trend_s"]):
+            recent = t_all >= ctx.t - span
+            t, v = t_all[recent], v_all[recent]
+            ok = np.isfinite(v)
+            t, v = t[ok], v[ok]
+            if len(v) < 5:
+                continue
+            rate = slope(t, v)
+            steady = np.mean(np.diff(v) > 0.01)
+            if (np.isfinite(rate) and rate >= s["growth_mb_per_s"] and v[-1] - v.min() >= s["growth_min_mb"]
+                    and steady >= s["growth_steady"]):
+                return rate
         return None

@@ -15,7 +15,7 @@ class TopicRate(Plugin):
     """Alerts when a watched topic's rate drops or it goes silent.
 
     * silence (error): no message for ``max(silence_periods / rate, silence_min_s)`` after
-      having had messages;
+      having had messages (a zero rate means none for the collector's ``rate_window_s``, 3 s);
     * drop (warn): ``rate < drop_ratio × baseline`` for ``confirm`` samples, the baseline being
       the median of the topic's own rate after ``warmup_s`` (frozen while alerting);
     * below expectation (warn): ``rate < (1 - expected_tolerance) × expected_rate_hz`` from the
@@ -35,6 +35,7 @@ class TopicRate(Plugin):
         "silence_periods": 3.0,
         "silence_min_s": 1.0,
         "expected_tolerance": 0.3,
+        "rate_window_s": 3.0,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -54,7 +55,8 @@ class TopicRate(Plugin):
             elif topic in last_msg:
                 t_last, rate_last = last_msg[topic]
                 ref = base[0] if base and base[0] > 0 else rate_last
-                quiet = ctx.t - t_last
+                # A zero rate already means no message in the collector's whole rate window.
+                quiet = max(ctx.t - t_last, s["rate_window_s"])
                 if quiet >= max(s["silence_periods"] / ref, s["silence_min_s"]):
                     fired = True
                     yield ctx.alert(topic, "error", f"silent for {quiet:.1f} s (was {ref:.3g} Hz)",

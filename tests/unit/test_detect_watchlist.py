@@ -1,0 +1,71 @@
+"""W_0: config patterns, process monitoring, modes; and the pure baseline helpers."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stream_viz.config import WatchlistConfig
+from stream_viz.detect.baseline import robust, slope
+from stream_viz.detect.watchlist import initial_watchlist, match_members, process_anomalies
+from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
+from stream_viz.model.history import History
+from stream_viz.model.theta import make_theta
+
+
+def _graph(n_extra=0):
+    G = new_graph()
+    for name, pid in (("/camera_left", 1), ("/camera_right", 1), ("/planner", 2)):
+        add_member(G, f"node:{name}", pid=pid)
+    add_member(G, "topic:/camera/image")
+    add_flow_edge(G, "node:/camera_left", "topic:/camera/image", "pub")
+    for pid in (1, 2):
+        add_member(G, f"process:{pid}", pid=pid)
+    add_tree_edge(G, "process:1", "node:/camera_left")
+    add_tree_edge(G, "process:1", "node:/camera_right")
+    add_tree_edge(G, "process:2", "node:/planner")
+    for i in range(n_extra):
+        add_member(G, f"topic:/extra{i}")
+    return G
+
+
+def test_match_members():
+    G = _graph()
+    assert match_members(G, ["node:/camera*"]) == {"node:/camera_left", "node:/camera_right"}
+    assert match_members(G, ["/camera*"]) == {"node:/camera_left", "node:/camera_right",
+                                              "topic:/camera/image"}
+    assert match_members(G, ["node:/planner", "process:?"]) == {"node:/planner", "process:1", "process:2"}
+    assert match_members(G, ["node:/nothing"]) == set()
+
+
+def _history(cpu_last):
+    h = History()
+    for t in range(20):
+        for pid in (1, 2):
+            cpu = 5.0 + (t % 3) if not (pid == 2 and t == 19) else cpu_last
+            h.add(f"process:{pid}", float(t), make_theta("process", {"cpu_percent": cpu, "rss_mb": 50.0}))
+    return h
+
+
+def test_process_anomalies_flag_the_process_and_its_nodes():
+    G = _graph()
+    assert process_anomalies(G, _history(6.0)) == set()
+    assert process_anomalies(G, _history(90.0)) == {"process:2", "node:/planner"}
+
+
+def test_initial_watchlist_modes():
+    small, big = _graph(), _graph(n_extra=400)
+    assert initial_watchlist(small, WatchlistConfig(mode="auto"), None) == set(small.nodes)
+    assert initial_watchlist(big, {"mode": "all"}, None) == set(big.nodes)
+    cfg = WatchlistConfig(mode="auto", members=("node:/camera_l*",))
+    assert initial_watchlist(big, cfg, None) == {"node:/camera_left", "process:1", "process:2"}
+    assert initial_watchlist(big, cfg, _history(90.0)) == {"node:/camera_left", "process:1", "process:2",
+                                                           "node:/planner"}
+    assert initial_watchlist(small, {"mode": "config", "members": []}, None) == {"process:1", "process:2"}
+
+
+def test_robust_and_slope():
+    med, sigma, n = robust(np.array([1.0, 2.0, 3.0, 100.0, np.nan]))
+    assert (med, n) == (2.5, 4)
+    assert np.isclose(sigma, 1.4826 * 1.0)
+    assert slope(np.array([0.0, 1.0, 2.0]), np.array([1.0, 3.0, 5.0])) == 2.0
+    assert np.isnan(slope(np.array([1.0]), np.array([1.0])))
