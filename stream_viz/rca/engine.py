@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import networkx as nx
@@ -111,6 +112,7 @@ class RcaEngine:
         self._alerts: list[Alert] = []
         self._kept = 0
         self._dropped = 0  # alerts pruned out of the window
+        self._outside: dict[str, list[Alert]] = {}  # kept alerts per unwatched member (replay)
         self._evidence: dict[str, float] = {}
         self._result = self._make_result([])
 
@@ -150,24 +152,43 @@ class RcaEngine:
         new = sorted(alerts, key=lambda a: a.t)
         if self._watch_all and len(self.state.watchlist) != G.number_of_nodes():
             self.state = watch(self.state, G.nodes)
+        if self._outside:  # members watched from outside since: their kept alerts first
+            for m in [m for m in self._outside if m in self.state.watchlist]:
+                for k in self._outside.pop(m):
+                    self._feed(G, k)
         for a in new:
-            grown = grow(G, self.state, a, self.settings.policy)
-            if grown.last is not self.state.last:
-                self._iterations.append(grown.last)
-            elif a.member not in self.state.watchlist:
-                self._kept += 1
-            self.state = grown
+            self._feed(G, a)
         self._alerts.extend(new)
         self._prune()
         changed = bool(new) or evidence is not None
         if evidence is not None:
             self._evidence = dict(evidence)
         if changed:
-            ctx = make_context(G, self._alerts, self.settings, self.state.members, self._evidence)
+            first = self._iterations[1].alert_member if len(self._iterations) > 1 else None
+            ctx = make_context(G, self._alerts, self.settings, self.state.members, self._evidence, first)
             self._result = self._make_result(RANKERS[self.settings.method](ctx), ctx.symptoms.first)
         else:
             self._result = self._make_result(self._result.root_causes, self._result.first_symptom)
         return self._result
+
+    def _feed(self, G: nx.MultiDiGraph, alert: Alert) -> None:
+        """Grow with ``alert``; with ``replay``, also with kept alerts of members it made watched."""
+        queue = deque([alert])
+        while queue:
+            a = queue.popleft()
+            before = self.state
+            if a.member not in before.watchlist:
+                self._kept += 1
+                if self.settings.replay:
+                    self._outside.setdefault(a.member, []).append(a)
+                continue
+            self.state = grow(G, before, a, self.settings.policy)
+            if self.state.last is before.last:
+                continue
+            self._iterations.append(self.state.last)
+            for m in self.state.last.added_watch:
+                # Replayed at the current time so iteration times stay in order.
+                queue.extend(replace(k, t=max(k.t, a.t)) for k in self._outside.pop(m, ()))
 
     def _prune(self) -> None:
         """With a window, alerts that can no longer count are dropped (their count stays)."""
@@ -178,6 +199,10 @@ class RcaEngine:
                 keep = [a for a in self._alerts if a.t >= latest - w]
                 self._dropped += len(self._alerts) - len(keep)
                 self._alerts = keep
+                for m in list(self._outside):
+                    self._outside[m] = [a for a in self._outside[m] if a.t >= latest - w]
+                    if not self._outside[m]:
+                        del self._outside[m]
 
     def _make_result(self, causes: list[RootCause], first: str | None = None) -> RcaResult:
         return RcaResult(

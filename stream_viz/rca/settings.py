@@ -64,6 +64,9 @@ class RcaSettings:
         How many candidates (after the cheap topology test) get the full trajectory analysis.
     pagerank_alpha : float
         Damping factor of the PageRank baseline.
+    replay : bool
+        When a member joins the watchlist, its earlier alerts (kept because it was not watched
+        then, within the window) grow the subgraph at once. False: the paper's rule strictly.
     """
 
     policy: str = "both"
@@ -80,6 +83,7 @@ class RcaSettings:
     top_k: int = 5
     shortlist: int = 20
     pagerank_alpha: float = 0.85
+    replay: bool = True
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str) -> RcaSettings:
@@ -142,6 +146,10 @@ def _check(key: str, value: Any, default: Any, where: str) -> Any:
         if not isinstance(value, list | tuple) or not all(isinstance(v, str) for v in value):
             raise _bad(where, key, value, "a list of plugin names")
         return tuple(value)
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise _bad(where, key, value, "true or false")
+        return value
     if isinstance(default, str):
         if not isinstance(value, str):
             raise _bad(where, key, value, "a string")

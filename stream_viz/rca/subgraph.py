@@ -7,8 +7,10 @@ On an alert for ``m ∈ W_j``:
   ``upstream`` and ``both`` also ``{((m, x), 0) ∈ E | x ∈ M_j}``, because there the watchlist grows
   towards predecessors, and the edge from a newly alerting predecessor to the member it feeds
   would otherwise never enter ``E_j``.
-- ``W_{j+1} = W_j ∪ {x | ((m, x), 0) ∈ E}`` (``downstream``), predecessors ``{x | ((x, m), 0) ∈ E}``
-  (``upstream``) or both.
+- ``W_{j+1} = W_j ∪ {x | ((m, x), 0) ∈ E}`` (``downstream``: the paper); ``upstream`` adds the
+  causal parents of ``m`` instead — its predecessors (for a ``send`` edge client → server: the
+  server) and, when ``m`` is passive, also the parents of its publishers (`upstream_of`), so the
+  search can pass a silent, hung publisher; ``both`` adds both sets.
 
 Alerts for members outside ``W_j`` leave the subgraph as it is (the caller keeps them), and so
 does an alert that would change nothing: only alerts that change ``M``, ``E`` or ``W`` make a new
@@ -23,6 +25,7 @@ from dataclasses import dataclass, field
 
 import networkx as nx
 
+from stream_viz.rca.causal import causes, is_node
 from stream_viz.records import Alert
 
 Edge = tuple[str, str]
@@ -116,6 +119,20 @@ def flow_predecessors(G: nx.MultiDiGraph, m: str) -> set[str]:
     return {u for u, _, k in G.in_edges(m, keys=True) if k == 0}
 
 
+def upstream_of(G: nx.MultiDiGraph, m: str) -> set[str]:
+    """What ``upstream`` watches after an alert on ``m``: its causal parents (predecessors; the
+    server for a service client) and, when ``m`` is passive, the parents of its publishers — a
+    silent topic is charged to its publisher, whose inputs are where to look next even when the
+    publisher itself raises nothing (hang)."""
+    parents = set(causes(G, m))
+    if not is_node(G, m):
+        for p in list(parents):
+            if is_node(G, p):
+                parents |= set(causes(G, p))
+    parents.discard(m)
+    return parents
+
+
 def watch(state: SubgraphState, members: Iterable[str]) -> SubgraphState:
     """Return ``state`` with ``members`` added to the current watchlist (from outside: config,
     process monitoring); no new iteration, the next one records them."""
@@ -148,7 +165,7 @@ def grow(G: nx.MultiDiGraph, state: SubgraphState, alert: Alert, policy: str = "
     if policy in ("downstream", "both"):
         watch_add |= flow_successors(G, m)
     if policy in ("upstream", "both"):
-        watch_add |= flow_predecessors(G, m)
+        watch_add |= upstream_of(G, m)
         new_edges |= {(m, x) for x in flow_successors(G, m) if x in state.members}
     add_e = frozenset(new_edges - state.edges)
     add_w = frozenset(watch_add - state.watchlist)

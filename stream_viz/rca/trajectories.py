@@ -7,8 +7,8 @@ two stages:
 1. For every candidate, cheaply: the hypothesis test over the topology (``ht`` = anomaly ×
    (1 − anomaly of its causal parents at its onset)), its direct evidence (alerts on the node
    itself or its process, weighted by severity and plugin kind) and metric evidence.
-2. For the ``shortlist`` best: the fault trajectory — the path from the first symptom (or, when
-   that is not downstream of the candidate, its earliest downstream symptom) back to the
+2. For the ``shortlist`` best: the fault trajectory — the path from the first detected symptom
+   (or, when that is not downstream of the candidate, the farthest symptom it explains) back to the
    candidate, against data flow, through silent passive members where needed — and the average
    strength of its dependencies: symptom co-occurrence (1-D ICP) and time lag against the lag
    distribution of all alerting pairs. ``coverage`` (the share of symptoms downstream of the
@@ -21,6 +21,7 @@ of its mean.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -55,6 +56,7 @@ class Context:
     symptoms: Symptoms
     views: dict[str, NodeView]
     has_evidence: bool
+    first: str | None = None  # the first detected symptom (alert of iteration 1)
     _lags: LagDistribution | None = None
 
     @property
@@ -70,10 +72,17 @@ def make_context(
     settings: RcaSettings,
     members: Iterable[str] | None = None,
     evidence: Mapping[str, float] | None = None,
+    first: str | None = None,
 ) -> Context:
-    """Collect symptoms (of ``members`` only, when given: ``M_j``) and the per-node views."""
+    """Collect symptoms (of ``members`` only, when given: ``M_j``) and the per-node views.
+
+    ``first`` is the first detected symptom, where trajectories start (default: the member of
+    the earliest alert).
+    """
     s = collect_symptoms(alerts, settings, members)
-    return Context(G, settings, s, node_views(G, s, settings, evidence), bool(evidence))
+    if first is not None and first not in s.times:
+        first = None
+    return Context(G, settings, s, node_views(G, s, settings, evidence), bool(evidence), first)
 
 
 @dataclass
@@ -97,17 +106,19 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
     cost, back = trace(ctx.G, c, s.times, settings.max_trajectory)
     explained = [m for m in cost if m in s.times]
     coverage = len(explained) / len(s.times) if s.times else 0.0
-    if s.first is not None and s.first in cost:
-        start = s.first
-    elif explained:
-        start = min(explained, key=lambda m: (s.onset[m], cost[m]))
+    first = ctx.first or s.first
+    own = ctx.views[c].own if c in ctx.views else []
+    if first is not None and first in cost and first != c and first not in own:
+        start = first
+    elif explained:  # the farthest symptom it explains: the whole propagation is shown
+        start = max(explained, key=lambda m: (cost[m], -s.onset[m], m))
     else:
         start = c
     path = path_back(back, start, c)
     # Dependencies: consecutive symptomatic members on the path (effect first, then its cause).
     alerting = [m for m in path if m in s.times]
     co, lag = [], []
-    for effect, cause in zip(alerting, alerting[1:], strict=False):
+    for effect, cause in itertools.pairwise(alerting):
         co.append(
             cooccurrence(
                 _series(ctx, cause), _series(ctx, effect), settings.tolerance, settings.max_offset,
@@ -126,10 +137,10 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
 
 def _cheap(ctx: Context, v: NodeView) -> float:
     w = ctx.settings.weights
-    parts = [(w["topology"], v.ht), (w["direct"], v.direct)]
+    parts = [(w["topology"], v.anomaly), (w["direct"], v.direct)]
     if ctx.has_evidence:
         parts.append((w["evidence"], v.evidence))
-    return _mean(parts)
+    return (1.0 - v.upstream) * _mean(parts)
 
 
 def _mean(parts: list[tuple[float, float]]) -> float:
@@ -172,14 +183,16 @@ def rank_trajectory(ctx: Context) -> list[RootCause]:
     for _, _, n in pre[: max(ctx.settings.shortlist, ctx.settings.top_k)]:
         v = ctx.views[n]
         tr = trajectory_of(ctx, n)
-        parts = [(w["topology"], v.ht * (0.5 + 0.5 * tr.coverage)), (w["direct"], v.direct)]
+        parts = [(w["topology"], v.anomaly * (0.5 + 0.5 * tr.coverage)), (w["direct"], v.direct)]
         if ctx.has_evidence:
             parts.append((w["evidence"], v.evidence))
         if tr.cooccurrence is not None:
             parts.append((w["cooccurrence"], tr.cooccurrence))
         if tr.timelag is not None:
             parts.append((w["timelag"], tr.timelag))
-        out.append(RootCause(n, _mean(parts), tr.path, _evidence(v, tr)))
+        # "Caused by none": everything that speaks for a member counts only as far as its own
+        # causes were healthy when its symptoms began (a victim's trajectory can be strong too).
+        out.append(RootCause(n, (1.0 - v.upstream) * _mean(parts), tr.path, _evidence(v, tr)))
     return finish(ctx, out)
 
 
@@ -214,7 +227,8 @@ def rank_count(ctx: Context) -> list[RootCause]:
     rel = ctx.symptoms.relevance
     scored = []
     for n, v in ctx.views.items():
-        total = sum(rel[m] * (1.0 if m == n or m.startswith("process:") else ctx.settings.charge) for m in v.own)
+        own = (1.0 if m == n or m.startswith("process:") else ctx.settings.charge for m in v.own)
+        total = sum(rel[m] * f for m, f in zip(v.own, own, strict=True))
         scored.append((total, v.onset, n))
     top = max((x for x, _, _ in scored), default=0.0) or 1.0
     return _with_trajectories(ctx, [(x / top, o, n) for x, o, n in scored], "count")
