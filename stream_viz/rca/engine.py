@@ -150,6 +150,7 @@ class RcaEngine:
             previous evidence when given.
         """
         new = sorted(alerts, key=lambda a: a.t)
+        before = self.state.last
         if self._watch_all and len(self.state.watchlist) != G.number_of_nodes():
             self.state = watch(self.state, G.nodes)
         if self._outside:  # members watched from outside since: their kept alerts first
@@ -160,7 +161,7 @@ class RcaEngine:
             self._feed(G, a)
         self._alerts.extend(new)
         self._prune()
-        changed = bool(new) or evidence is not None
+        changed = bool(new) or evidence is not None or self.state.last is not before
         if evidence is not None:
             self._evidence = dict(evidence)
         if changed:

@@ -51,5 +51,5 @@ def test_bad_values_name_key_and_file(d, words):
 
 
 def test_not_a_table():
-    with pytest.raises(ConfigError, match="cfg.toml"):
+    with pytest.raises(ConfigError, match=r"cfg\.toml"):
         RcaSettings.from_dict(["policy"], "cfg.toml")  # type: ignore[arg-type]

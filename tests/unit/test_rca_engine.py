@@ -1,0 +1,215 @@
+"""Root-cause ranking on synthetic alert series with known causes, all methods on the same input."""
+
+from __future__ import annotations
+
+import json
+
+import networkx as nx
+import numpy as np
+import pytest
+
+from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
+from stream_viz.rca import RcaEngine, RcaSettings, analyze
+from stream_viz.rca.pagerank import personalized_pagerank
+from stream_viz.records import Alert
+
+SENSOR, PERC, PLAN, CTRL = "node:/sensor", "node:/perception", "node:/planner", "node:/controller"
+SCAN, OBJ, CMD = "topic:/scan", "topic:/objects", "topic:/cmd"
+MAP, PLANTOPIC = "node:/map_server", "topic:/plan"
+METHODS = ("trajectory", "pagerank", "hypothesis", "count")
+
+
+@pytest.fixture
+def G():
+    """sensor → /scan → perception → /objects → planner → /cmd → controller; planner calls map_server
+    and publishes /plan; perception runs in process 42."""
+    g = new_graph()
+    for m in (SENSOR, PERC, PLAN, CTRL, SCAN, OBJ, CMD, MAP, PLANTOPIC, "process:42", "process:1"):
+        add_member(g, m)
+    add_flow_edge(g, SENSOR, SCAN, "pub")
+    add_flow_edge(g, SCAN, PERC, "sub")
+    add_flow_edge(g, PERC, OBJ, "pub")
+    add_flow_edge(g, OBJ, PLAN, "sub")
+    add_flow_edge(g, PLAN, CMD, "pub")
+    add_flow_edge(g, CMD, CTRL, "sub")
+    add_flow_edge(g, PLAN, MAP, "send")
+    add_flow_edge(g, PLAN, PLANTOPIC, "pub")
+    add_tree_edge(g, "process:1", "process:42")
+    add_tree_edge(g, "process:42", PERC)
+    return g
+
+
+def al(member, plugin, t, severity="error"):
+    return Alert(member, plugin, float(t), severity, f"{plugin} on {member}")
+
+
+def crash(t0=100.0):
+    return [
+        al(PERC, "member_gone", t0, "fatal"),
+        al(OBJ, "topic_rate", t0 + 1),
+        al(CMD, "topic_rate", t0 + 2),
+        al(CTRL, "rosout", t0 + 3),
+        al(CTRL, "rosout", t0 + 4),
+        al(OBJ, "topic_rate", t0 + 5),
+        al(CMD, "topic_rate", t0 + 6),
+    ]
+
+
+def hang(t0=100.0):
+    # the sensor raises nothing itself; its topic goes silent, then everything downstream;
+    # the planner complains loudly on /rosout (the loud victim)
+    out = [al(SCAN, "topic_rate", t0), al(OBJ, "topic_rate", t0 + 1), al(CMD, "topic_rate", t0 + 2)]
+    out += [al(PLAN, "rosout", t0 + 2 + k) for k in range(6)]
+    return out
+
+
+def top(result):
+    return result.root_causes[0]
+
+
+def test_crash_blames_the_crashed_node_with_its_trajectory(G):
+    r = analyze(G, crash(), RcaSettings(), None)
+    assert top(r).member == PERC
+    # first symptom is the crashed node itself: the trajectory shows its farthest effect
+    assert top(r).trajectory == [CTRL, CMD, PLAN, OBJ, PERC]
+    assert top(r).evidence["upstream"] == 0.0 and top(r).evidence["coverage"] == 1.0
+    assert [rc.member for rc in r.root_causes] == [PERC, CTRL, PLAN]
+    # seen from a watchlist at the robot's output, as in the paper: from /cmd back to the cause
+    r2 = analyze(G, crash(), RcaSettings(policy="both"), {CMD})
+    assert top(r2).member == PERC
+    assert top(r2).trajectory == [CMD, PLAN, OBJ, PERC]
+    assert r2.first_symptom == PERC
+
+
+def test_hang_blames_the_silent_upstream_node_not_the_loud_victim(G):
+    r = analyze(G, hang(), RcaSettings(), None)
+    assert top(r).member == SENSOR
+    assert top(r).trajectory == [CMD, PLAN, OBJ, PERC, SCAN, SENSOR]
+    assert top(r).evidence["direct"] == 0.0 and top(r).evidence["charged"] > 0
+    assert analyze(G, hang(), RcaSettings(method="hypothesis"), None).root_causes[0].member == SENSOR
+    # the anomaly-magnitude baseline falls for the loud victim, as the peers did
+    assert analyze(G, hang(), RcaSettings(method="count"), None).root_causes[0].member == PLAN
+
+
+def test_error_log_without_downstream_effect(G):
+    alerts = [al(CTRL, "rosout", 50 + k) for k in range(5)]
+    for method in METHODS:
+        r = analyze(G, alerts, RcaSettings(method=method), None)
+        assert [rc.member for rc in r.root_causes] == [CTRL], method
+        assert top(r).trajectory == [CTRL]
+    # error severity 0.8, nothing upstream, explains every symptom
+    assert analyze(G, alerts, RcaSettings(), None).root_causes[0].score == pytest.approx(0.8)
+
+
+def test_process_alerts_and_metric_evidence_are_charged_to_hosted_nodes(G):
+    r = analyze(G, [al("process:42", "process_resources", 10, "warn")], RcaSettings(), None)
+    assert top(r).member == PERC and top(r).evidence["symptoms"] == ["process:42"]
+    r = analyze(G, [], RcaSettings(), None, evidence={"process:42": 0.9, CTRL: 0.2})
+    assert [rc.member for rc in r.root_causes] == [PERC, CTRL]
+    assert top(r).evidence["metric"] == 0.9
+
+
+def test_a_service_server_is_upstream_of_its_client(G):
+    alerts = [al(MAP, "diagnostics", 10), al(PLANTOPIC, "topic_rate", 11), al(CMD, "topic_rate", 11)]
+    r = analyze(G, alerts, RcaSettings(), None)
+    assert top(r).member == MAP
+    assert top(r).trajectory[-2:] == [PLAN, MAP]
+    planner = next(rc for rc in r.root_causes if rc.member == PLAN)
+    assert planner.evidence["upstream"] > 0.5
+
+
+def test_pagerank_baseline_runs_on_the_same_alerts(G):
+    for alerts in (crash(), hang()):
+        r = analyze(G, alerts, RcaSettings(method="pagerank"), None)
+        assert r.method == "pagerank" and len(r.root_causes) == 3
+        assert all(0 <= rc.score <= 1 for rc in r.root_causes) and top(r).score == 1.0
+        assert all(rc.member.startswith("node:") for rc in r.root_causes)
+        assert top(r).evidence["method"] == "pagerank"
+    assert top(analyze(G, crash(), RcaSettings(method="pagerank"), None)).member == PERC
+    # the walk restarts at the loudest member: the planner's six error logs win the hang
+    assert top(analyze(G, hang(), RcaSettings(method="pagerank"), None)).member == PLAN
+
+
+def test_personalized_pagerank_matches_networkx_definition():
+    g = nx.DiGraph()
+    edges = [("a", "b", 1.0), ("b", "c", 2.0), ("b", "a", 1.0), ("c", "a", 0.5), ("d", "c", 1.0)]
+    g.add_weighted_edges_from(edges)
+    g.add_node("e")  # dangling, isolated
+    pers = {"a": 0.0, "b": 1.0, "c": 3.0, "d": 0.0, "e": 1.0}
+    nodes = sorted(g)
+    got = personalized_pagerank(nodes, edges, pers, alpha=0.85)
+    # reference: networkx's Google matrix (numpy only), its stationary vector by power iteration
+    M = np.asarray(nx.google_matrix(g, alpha=0.85, personalization=pers, nodelist=nodes, weight="weight"))
+    x = np.full(len(nodes), 1 / len(nodes))
+    for _ in range(1000):
+        x = x @ M
+    assert [got[n] for n in nodes] == pytest.approx(list(x), abs=1e-8)
+    assert sum(got.values()) == pytest.approx(1.0)
+
+
+def test_incremental_updates_equal_offline_analysis(G):
+    alerts = [*crash(), al(SENSOR, "rosout", 103, "warn")]
+    eng = RcaEngine(RcaSettings(), watchlist={CMD})
+    assert eng.watchlist == frozenset({CMD})
+    seen = []
+    for batch in (alerts[:2], alerts[2:4], [], alerts[4:]):
+        res = eng.update(G, batch)
+        seen.append(res.state.j)
+    assert seen == sorted(seen) and eng.result() is res
+    off = analyze(G, alerts, RcaSettings(), {CMD})
+    assert [(rc.member, rc.score, rc.trajectory) for rc in res.root_causes] == [
+        (rc.member, rc.score, rc.trajectory) for rc in off.root_causes
+    ]
+    assert [it.members for it in res.iterations] == [it.members for it in off.iterations]
+    assert CTRL in eng.watchlist and PLAN in eng.watchlist
+
+
+def test_alerts_outside_the_watchlist_are_kept_not_grown(G):
+    alerts = [al(CTRL, "rosout", 1), al(SENSOR, "rosout", 2)]
+    r = analyze(G, alerts, RcaSettings(policy="downstream"), {CTRL})
+    assert r.state.members == frozenset({CTRL}) and r.kept == 1 and r.alerts == 2
+    assert [rc.member for rc in r.root_causes] == [CTRL]  # the ranking works on G_j
+    # without replay, an alert that came before its member was watched never enters G_j
+    strict = analyze(G, crash(), RcaSettings(policy="both", replay=False), {CMD})
+    assert PERC not in strict.state.members
+    replayed = analyze(G, crash(), RcaSettings(policy="both"), {CMD})
+    assert PERC in replayed.state.members
+
+
+def test_outside_watch_and_evidence_updates(G):
+    eng = RcaEngine(RcaSettings(), watchlist=set())
+    assert eng.update(G, [al(CTRL, "rosout", 1)]).root_causes == []  # nothing watched yet
+    eng.watch({CTRL})
+    res = eng.update(G, [])  # the kept alert is replayed once its member is watched
+    assert [rc.member for rc in res.root_causes] == [CTRL]
+    res = eng.update(G, [], evidence={"process:42": 1.0})
+    assert top(res).member == PERC
+
+
+def test_report_contract(G):
+    r = analyze(G, crash(), RcaSettings(top_k=2), {CMD})
+    rep = json.loads(json.dumps(r.to_report()))
+    assert set(rep) >= {"iterations", "root_causes"}
+    its = rep["iterations"]
+    assert [it["j"] for it in its] == list(range(len(its)))
+    assert its[0]["alert"] is None and its[0]["subgraph"] == [] and its[0]["watchlist"] == [CMD]
+    assert its[1] == {
+        "j": 1, "t": 102.0, "alert": CMD, "plugin": "topic_rate", "subgraph": [CMD], "edges": [],
+        "watchlist": sorted({CMD, CTRL, PLAN, OBJ, MAP}),  # the planner's server is upstream too
+    }
+    for it in its:
+        assert {"j", "t", "subgraph", "watchlist", "edges", "alert"} <= set(it)
+        assert all(len(e) == 2 and set(e) <= set(it["subgraph"]) for e in it["edges"])
+    assert len(rep["root_causes"]) == 2
+    assert rep["root_causes"][0]["member"] == PERC
+    assert {"member", "score", "trajectory"} <= set(rep["root_causes"][0])
+    assert rep["root_causes"][0]["trajectory"][0] == CMD and rep["root_causes"][0]["trajectory"][-1] == PERC
+
+
+def test_window_forgets_old_alerts(G):
+    old = [al(CTRL, "rosout", 0)]
+    new = [al(PERC, "member_gone", 1000, "fatal")]
+    r = analyze(G, old + new, RcaSettings(window=60), None)
+    assert [rc.member for rc in r.root_causes] == [PERC]
+    r = analyze(G, old + new, RcaSettings(window=0), None)
+    assert {rc.member for rc in r.root_causes} == {PERC, CTRL}
