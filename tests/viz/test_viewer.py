@@ -1,0 +1,125 @@
+"""The recording as a person sees it: a real headless viewer, a vanished viewer, the web server."""
+
+from __future__ import annotations
+
+import ctypes.util
+import os
+import signal
+import socket
+import subprocess
+import time
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+from stream_viz_blueprints.default import build_blueprint
+
+from stream_viz.viz import paths
+from stream_viz.viz.recorder import TELEMETRY_ENV, Recorder, disable_rerun_telemetry
+from stream_viz.viz.sample import demo_graph
+from stream_viz.viz.screenshot import rerun_executable, screenshot
+from stream_viz.viz.style import KIND_COLOR
+from viz.rrd import rows
+
+T0 = 1_700_000_000.0
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _renderer_missing() -> str | None:
+    if rerun_executable() is None:
+        return "the 'rerun' viewer executable is not installed"
+    if ctypes.util.find_library("vulkan") is None:
+        return "no Vulkan loader (Debian: apt-get install mesa-vulkan-drivers libvulkan1)"
+    return None
+
+
+def _demo_recording(path, collapse=True):
+    G = demo_graph()
+    it = {"j": 1, "t": T0 + 5, "subgraph": ["topic:/objects", "node:/planner"],
+          "watchlist": ["node:/controller"], "edges": [["topic:/objects", "node:/planner"]],
+          "alert": "node:/planner"}
+    rc = [{"member": "node:/detector", "score": 0.9,
+           "trajectory": ["node:/planner", "topic:/objects", "node:/detector"]}]
+    with Recorder(save=path, blueprint=build_blueprint(collapse_panels=collapse)) as r:
+        r.system(G, t=T0)
+        r.metrics([(T0 + i, G) for i in range(5)])
+        r.rca(G, it, rc)
+    return G
+
+
+def test_rendered_recording_shows_the_graph(tmp_path):
+    reason = _renderer_missing()
+    if reason:
+        pytest.skip(f"headless renderer unavailable: {reason}")
+    rrd, png = tmp_path / "demo.rrd", tmp_path / "demo.png"
+    _demo_recording(rrd)
+    screenshot(rrd, png, timeline=paths.RCA_ITERATION, time_value=1)
+    Image = pytest.importorskip("PIL.Image", reason="Pillow decodes the PNG")
+
+    img = np.asarray(Image.open(png).convert("RGB"))
+    assert img.shape[0] >= 600 and img.shape[1] >= 1000
+    colors = {tuple(int(c) for c in px) for px in img.reshape(-1, 3)[::7]}
+    assert len(colors) > 200, "the picture is nearly blank"
+    # Node labels are drawn in the kind colours (node blue, topic orange): both present on screen.
+    for kind in ("node", "topic"):
+        want = np.array(KIND_COLOR[kind])
+        close = np.abs(img.astype(int) - want).sum(axis=2) < 40
+        assert close.sum() > 50, f"no {kind} colour {tuple(want)} in the rendered graph"
+
+
+def test_a_viewer_that_goes_away_does_not_stop_the_file(tmp_path):
+    exe = rerun_executable()
+    if exe is None or ctypes.util.find_library("vulkan") is None:
+        pytest.skip("needs the rerun viewer and a Vulkan loader to run a viewer to connect to")
+    port = _free_port()
+    viewer = subprocess.Popen([exe, "--headless", "--hide-welcome-screen", f"--port={port}"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              start_new_session=True, env=dict(os.environ, CI="1"))
+    rrd = tmp_path / "tee.rrd"
+    try:
+        time.sleep(2.0)
+        r = Recorder(viewer=f"rerun+http://127.0.0.1:{port}/proxy", save=rrd)
+        G = demo_graph()
+        r.system(G, t=T0)
+        r.metrics([(T0 + i, G) for i in range(3)])
+        r.flush()
+    finally:
+        os.killpg(viewer.pid, signal.SIGKILL)
+        viewer.wait(10)
+    r.metrics([(T0 + i, G) for i in range(3, 6)])  # viewer gone: no exception
+    r.close(timeout=3)
+    assert r.url.endswith("/proxy")
+    theta = [row for row in rows(rrd)["/metrics/topic/image/theta"] if "Scalars:scalars" in row]
+    assert len(theta) == 6
+    assert paths.SYSTEM in RrdReader(str(rrd)).store().schema().entity_paths()  # footer written
+
+
+def test_serve_gives_a_local_web_viewer_url(tmp_path):
+    grpc_port, web_port = _free_port(), _free_port()
+    said = []
+    r = Recorder(viewer="serve", grpc_port=grpc_port, web_port=web_port, save=tmp_path / "s.rrd",
+                 announce=said.append)
+    try:
+        assert r.url.startswith(f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp")
+        assert said == [f"Rerun web viewer: {r.url}"]
+        with socket.create_connection(("127.0.0.1", grpc_port), timeout=5):
+            pass  # the gRPC server listens
+        r.system(demo_graph(), t=T0)
+    finally:
+        r.close()
+    assert paths.SYSTEM in rows(tmp_path / "s.rrd")
+
+
+def test_telemetry_off_by_default_and_opt_in(monkeypatch):
+    for var in ("CI", "TELEMETRY_ENABLED", TELEMETRY_ENV):
+        monkeypatch.delenv(var, raising=False)
+    monkeypatch.setenv(TELEMETRY_ENV, "1")
+    assert disable_rerun_telemetry() is True and "CI" not in os.environ
+    monkeypatch.delenv(TELEMETRY_ENV)
+    Recorder().close()  # Rerun analytics skip processes whose environment has CI set
+    assert os.environ.get("CI") == "1" and os.environ.get("TELEMETRY_ENABLED") == "false"
