@@ -1,0 +1,279 @@
+"""Each built-in plugin against a real ROS 2 system observed through the Collector.
+
+Every run starts healthy (no alert of the plugin under test may come then), then the test
+creates a flag file and the child turns sick in one way (silence, CPU hog, leak, crash, error
+logs, diagnostics, bursty publishing, bad QoS). One more run of a healthy system checks all
+built-ins at once for false alarms.
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+
+import pytest
+from rosenv import wait_for
+
+from stream_viz.collect.collector import Collector
+from stream_viz.detect.api import record_history
+from stream_viz.detect.registry import PluginSet
+from stream_viz.model.diff import GraphDiff
+from stream_viz.model.history import History
+
+pytestmark = pytest.mark.ros
+
+PERIOD = 0.5
+# Shorter warm-ups than the defaults so a test needs seconds, not minutes; the logic is the same.
+FAST = {
+    "topic_rate": {"warmup_s": 4.0, "refresh_s": 2.0},
+    "topic_latency": {"warmup_s": 4.0, "refresh_s": 2.0},
+    "process_resources": {"warmup_s": 4.0, "refresh_s": 2.0, "min_samples": 6},
+    "graph_anomalies": {"grace_s": 2.0},
+}
+
+TALKER = """
+import os, sys, threading, time
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+mode, flag = sys.argv[1], sys.argv[2]
+rclpy.init()
+n = Node('talker')
+qos = QoSProfile(depth=10)
+if mode == 'qos':
+    qos.reliability = ReliabilityPolicy.BEST_EFFORT
+pub = n.create_publisher(String, '/chatter', qos)
+dpub = n.create_publisher(DiagnosticArray, '/diagnostics', 10)
+sick = False
+hog, leak = [], []
+def tick():
+    global sick
+    if not sick and os.path.exists(flag):
+        sick = True
+        if mode == 'cpu':
+            def burn():
+                while True:
+                    pass
+            threading.Thread(target=burn, daemon=True).start()
+    if mode == 'silence' and sick:
+        return
+    if mode == 'burst' and sick:
+        if int(time.monotonic() * 20) % 5:
+            return
+        for _ in range(5):
+            pub.publish(String(data='x'))
+        return
+    pub.publish(String(data='x'))
+def slow():
+    if not sick:
+        return
+    if mode == 'mem':
+        leak.append(bytearray(8 * 1024 * 1024))
+        leak[-1][::4096] = b'x' * len(leak[-1][::4096])
+    if mode == 'log':
+        n.get_logger().error('camera driver lost the device')
+    if mode == 'diag':
+        st = DiagnosticStatus(level=DiagnosticStatus.ERROR, name='talker: motor', message='overheat')
+        dpub.publish(DiagnosticArray(status=[st]))
+n.create_timer(0.05, tick)
+n.create_timer(0.25, slow)
+print('ready', flush=True)
+rclpy.spin(n)
+"""
+
+LISTENER = """
+import sys
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+rclpy.init()
+n = Node(sys.argv[1] if len(sys.argv) > 1 else 'listener')
+topic = sys.argv[2] if len(sys.argv) > 2 else '/chatter'
+reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+n.create_subscription(String, topic, lambda m: None, reliable)
+print('ready', flush=True)
+rclpy.spin(n)
+"""
+
+
+class Run:
+    """Observe the domain, run plugins on every sample, remember alerts with their time."""
+
+    def __init__(self, ros_domain, plugins, settings=None):
+        self.collector = Collector(ros_domain)
+        self.collector.start()
+        settings = {k: v for k, v in (settings or FAST).items() if k in plugins}
+        # A generous deadline: the shared test machine can stall a thread for seconds.
+        self.plugins = PluginSet.load(enable=plugins, settings=settings, cwd_plugins=False, timeout_s=10.0)
+        self.history = History(maxlen=600)
+        self.alerts, self.problems, self.G = [], [], None
+
+    def step(self):
+        s = self.collector.sample()
+        record_history(self.history, s.graph, s.t)
+        alerts, problems = self.plugins.run(s.t, s.graph, s.graph.nodes, self.history, s.events,
+                                            s.diff or GraphDiff())
+        self.alerts += alerts
+        self.problems += problems
+        self.G = s.graph
+        return s
+
+    def observe(self, seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.step()
+            time.sleep(PERIOD)
+
+    def until(self, pred, timeout):
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            self.step()
+            found = [a for a in self.alerts if pred(a)]
+            if found:
+                return found
+            time.sleep(PERIOD)
+        return []
+
+    def close(self):
+        self.plugins.close()
+        self.collector.close()
+
+
+@pytest.fixture
+def run_of(ros_domain):
+    runs = []
+
+    def make(plugins, settings=None):
+        r = Run(ros_domain, plugins, settings)
+        runs.append(r)
+        return r
+
+    yield make
+    for r in runs:
+        r.close()
+
+
+def _start(children, tmp_path, mode, listener=True):
+    flag = tmp_path / f"sick_{mode}"
+    talker = children.python(TALKER, mode, str(flag), name=f"talker_{mode}")
+    lst = children.python(LISTENER, name="listener") if listener else None
+    return flag, talker, lst
+
+
+def _ready(run, *members, timeout=30.0):
+    wait_for(lambda: (run.step(), all(m in run.G for m in members))[1], timeout=timeout, period=PERIOD)
+
+
+def _sick_after_healthy(run, flag, plugin, member, healthy_s, timeout=30.0, symptom=None):
+    """Observe healthy for ``healthy_s`` (no alert of ``plugin`` allowed), then turn sick and wait."""
+    run.observe(healthy_s)
+    before = [a for a in run.alerts if a.plugin == plugin]
+    assert before == [], f"false alarms while healthy: {before}"
+    flag.touch()
+    t_sick = time.time()
+    found = run.until(lambda a: a.plugin == plugin and a.member == member
+                      and (symptom is None or a.data.get("symptom") == symptom), timeout)
+    assert found, f"{plugin} never alerted on {member}; alerts: {run.alerts}; problems: {run.problems}"
+    assert found[0].t >= t_sick - PERIOD
+    assert run.problems == []
+    return found[0]
+
+
+def test_topic_rate_silence(children, tmp_path, run_of):
+    flag, _, _ = _start(children, tmp_path, "silence")
+    run = run_of(["topic_rate"])
+    _ready(run, "node:/talker", "node:/listener")
+    wait_for(lambda: (run.step(), run.G.nodes["topic:/chatter"]["measured"])[1], timeout=20, period=PERIOD)
+    a = _sick_after_healthy(run, flag, "topic_rate", "topic:/chatter", healthy_s=6.0, symptom="silence")
+    assert a.severity == "error"
+
+
+def test_topic_latency_jitter_when_bursty(children, tmp_path, run_of):
+    flag, _, _ = _start(children, tmp_path, "burst")
+    run = run_of(["topic_latency"])
+    _ready(run, "node:/talker", "node:/listener")
+    a = _sick_after_healthy(run, flag, "topic_latency", "topic:/chatter", healthy_s=8.0,
+                            symptom="jitter_rise")
+    assert a.severity == "warn"
+
+
+def test_process_resources_cpu_hog(children, tmp_path, run_of):
+    flag, _, _ = _start(children, tmp_path, "cpu")
+    run = run_of(["process_resources"])
+    _ready(run, "node:/talker")
+    a = _sick_after_healthy(run, flag, "process_resources", "node:/talker", healthy_s=8.0)
+    assert "cpu" in a.data["symptoms"]
+
+
+def test_process_resources_memory_leak(children, tmp_path, run_of):
+    flag, _, _ = _start(children, tmp_path, "mem", listener=False)
+    run = run_of(["process_resources"])
+    _ready(run, "node:/talker")
+    a = _sick_after_healthy(run, flag, "process_resources", "node:/talker", healthy_s=8.0)
+    assert {"memory", "memory_growth"} & set(a.data["symptoms"])
+
+
+def test_member_gone_on_sigkill(children, tmp_path, run_of):
+    _, talker, _ = _start(children, tmp_path, "none")
+    run = run_of(["member_gone"])
+    _ready(run, "node:/talker", "node:/listener")
+    run.observe(3.0)
+    assert run.alerts == []
+    children.end(talker, signal.SIGKILL)
+    t_kill = time.time()
+    found = run.until(lambda a: a.member == "node:/talker", 15.0)
+    assert found and found[0].severity == "error" and found[0].data["symptom"] == "exit"
+    assert found[0].t - t_kill < 5.0  # from the OS at once, not after the 20 s DDS lease
+    assert not any(a.member == "node:/listener" for a in run.alerts)
+
+
+def test_rosout_errors(children, tmp_path, run_of):
+    flag, _, _ = _start(children, tmp_path, "log", listener=False)
+    run = run_of(["rosout"])
+    _ready(run, "node:/talker")
+    a = _sick_after_healthy(run, flag, "rosout", "node:/talker", healthy_s=3.0)
+    assert a.severity == "error" and "lost the device" in a.message
+
+
+def test_diagnostics_errors(children, tmp_path, run_of):
+    flag, _, _ = _start(children, tmp_path, "diag", listener=False)
+    run = run_of(["diagnostics"])
+    _ready(run, "node:/talker")
+    a = _sick_after_healthy(run, flag, "diagnostics", "node:/talker", healthy_s=3.0)
+    assert a.severity == "error" and "overheat" in a.message
+
+
+def test_graph_anomalies_qos_and_orphan_subscriber(children, tmp_path, run_of):
+    _start(children, tmp_path, "qos")  # best-effort publisher, reliable subscriber on /chatter
+    children.python(LISTENER, "lonely", "/nobody_publishes", name="lonely")
+    run = run_of(["graph_anomalies"])
+    _ready(run, "node:/talker", "node:/listener", "node:/lonely")
+    found = run.until(lambda a: a.member == "node:/lonely", 20.0)
+    assert found and found[0].data["symptom"] == "no_publisher"
+    qos = [a for a in run.alerts if a.member == "node:/listener"]
+    assert qos and qos[0].severity == "error" and qos[0].data["symptom"] == "qos_incompatible"
+    assert not any(a.member == "node:/talker" for a in run.alerts)
+
+
+def test_graph_anomalies_duplicate_names(children, tmp_path, run_of):
+    children.python(LISTENER, "twin", name="twin_a")
+    children.python(LISTENER, "twin", name="twin_b")
+    run = run_of(["graph_anomalies"])
+    _ready(run, "node:/twin")
+    run.observe(2.0)
+    if "instances" not in run.G.nodes["node:/twin"]:
+        pytest.xfail("the collector does not count nodes sharing a name yet (node attribute 'instances')")
+    assert any(a.member == "node:/twin" and a.data["symptom"] == "duplicate_name" for a in run.alerts)
+
+
+def test_healthy_system_no_alerts_from_any_builtin(children, tmp_path, run_of):
+    _start(children, tmp_path, "none")
+    run = run_of(["diagnostics", "graph_anomalies", "member_gone", "process_resources", "rosout",
+                  "topic_latency", "topic_rate"])
+    _ready(run, "node:/talker", "node:/listener")
+    run.observe(15.0)
+    assert run.alerts == []
+    assert run.problems == []
