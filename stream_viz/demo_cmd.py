@@ -21,6 +21,13 @@ def default_viewer() -> str:
     return "spawn" if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") else "none"
 
 
+def demo_env(domain: int) -> dict[str, str]:
+    """The environment of the demo: its own ROS domain, discovery on this machine only."""
+    os.environ["ROS_DOMAIN_ID"] = str(domain)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    return dict(os.environ)
+
+
 def run_demo(args: argparse.Namespace) -> dict[str, Any]:
     """Start the robot, monitor it with a fault injected at ``--at`` s, print the diagnosis."""
     config = load_config(args.config)
@@ -29,23 +36,28 @@ def run_demo(args: argparse.Namespace) -> dict[str, Any]:
     viewer = args.viewer or default_viewer()
     stop = threading.Event()
     install_stop_handlers(stop)
-    with Robot(fault=fault) as robot:
+    env = demo_env(args.domain)
+    robot = Robot(env=env, fault=fault)  # checks the target against the robot's nodes
+    # The monitor checks its outputs before any robot process starts: a bad path costs nothing.
+    mon = Monitor(config, db=args.db, save=save, report=args.report, viewer=viewer, domain_id=args.domain)
+    try:
+        mon.progress.say(f"demo robot on ROS_DOMAIN_ID={args.domain}: {len(robot.topology.node_names())} "
+                         f"nodes; {args.fault} of {fault.target} at +{args.at:g} s; {args.duration:g} s run")
         robot.start()
-        mon = Monitor(config, db=args.db, save=save, report=args.report, viewer=viewer)
+        robot.wait_ready(timeout=30.0)
+        deadline = robot.started_at + args.duration
+
+        def note_injection() -> None:
+            if mon.injected is None:
+                mon.injected = robot.injected() or None
+
+        mon.run(max(0.0, deadline - time.time()), stop, on_tick=note_injection)
+        note_injection()
+    finally:
         try:
-            mon.progress.say(f"demo robot up: {len(robot.node_pids())} nodes; "
-                             f"{args.fault} of {args.target} at +{args.at:g} s")
-            robot.wait_ready(timeout=20.0)
-            deadline = time.monotonic() + args.duration
-
-            def note_injection() -> None:
-                if mon.injected is None:
-                    mon.injected = robot.injected() or None
-
-            mon.run(max(0.0, deadline - time.monotonic()), stop, on_tick=note_injection)
-            note_injection()
-        finally:
             report = mon.close()
+        finally:
+            robot.stop()
     _print_diagnosis(report, save, mon)
     return report
 

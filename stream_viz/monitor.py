@@ -16,9 +16,10 @@ from typing import Any
 
 from stream_viz.collect.collector import Collector
 from stream_viz.config import Config, load_config
-from stream_viz.detect.registry import load_plugins
+from stream_viz.detect.registry import PluginSet
 from stream_viz.detect.store import AlertStore, default_db_path
 from stream_viz.detect.watchlist import initial_watchlist, process_anomalies
+from stream_viz.live_view import LiveView
 from stream_viz.model.graph import new_graph
 from stream_viz.model.history import History
 from stream_viz.model.seen import remember
@@ -26,7 +27,6 @@ from stream_viz.progress import Progress
 from stream_viz.rca.engine import RcaEngine
 from stream_viz.records import Alert
 from stream_viz.report import build_report, check_writable, write_report
-from stream_viz.live_view import LiveView
 
 
 class Monitor:
@@ -53,14 +53,16 @@ class Monitor:
         self.store = AlertStore(self.db_path)
         self.started_at = time.time()
         self.store.set_meta("started_at", self.started_at)
-        self.plugins = load_plugins(config)
-        for problem in self.plugins.problems:
+        self.plugins = PluginSet.from_config(config)
+        for problem in self.plugins.load_problems:
             self.progress.say(f"plugin problem: {problem}")
-        self.store.add_problems(self.plugins.problems)
+        self.store.add_problems(self.plugins.load_problems, t=self.started_at)
         self.view = LiveView(viewer=viewer, save=save)
         self.history = History(maxlen=config.monitor.history)
         self.engine = RcaEngine(config.rca, watchlist=set())
         self.seen = new_graph()
+        self.external_watch: set[str] = set()
+        self._unreadable: dict[str, str] = {}
         self.alerts: list[Alert] = []
         self.samples = 0
         self.injected: Mapping[str, Any] | None = None
@@ -79,11 +81,24 @@ class Monitor:
                 self.history.add(m, t, theta)
         if sample.diff or self.samples == 1:
             self.store.add_snapshot(t, self.seen)
-        self.engine.watch(self._watch_additions(sample.graph))
-        alerts, problems = self.plugins.run(sample, frozenset(self.engine.watchlist), self.history)
-        self.store.add_alerts(alerts)
+        # A member we may not read stays unreadable: record it when that changes, not every tick.
+        fresh = {m: why for m, why in sample.unreadable.items() if self._unreadable.get(m) != why}
+        if fresh:
+            self.store.add_unreadable(t, fresh)
+        self._unreadable = dict(sample.unreadable)
+        added = self._watch_additions(sample.graph) - self.external_watch
+        if added:
+            self.external_watch |= added
+            self.engine.watch(added)
+        fired, problems = self.plugins.run(
+            t, sample.graph, self.engine.watchlist, self.history, sample.events, sample.diff,
+            self.config.expected_rates,
+        )
+        # The store rate-limits an ongoing symptom (episodes); the RCA sees what the database
+        # keeps, so `analyze` on the file reproduces the live diagnosis.
+        alerts = self.store.add(fired)
         if problems:
-            self.store.add_problems(problems)
+            self.store.add_problems(problems, t=t)
             for p in problems:
                 self.progress.say(f"plugin problem: {p}")
         self.alerts.extend(alerts)
@@ -108,7 +123,9 @@ class Monitor:
         )
 
     # -- the whole run ----------------------------------------------------------------------
-    def run(self, duration: float | None, stop: threading.Event, on_tick: Callable[[], None] | None = None) -> None:
+    def run(
+        self, duration: float | None, stop: threading.Event, on_tick: Callable[[], None] | None = None
+    ) -> None:
         """Sample every period until ``duration`` passed or ``stop`` is set."""
         period = self.config.monitor.period
         end = None if duration is None else time.monotonic() + duration
@@ -133,13 +150,16 @@ class Monitor:
         self.collector.close()
         self.progress.done()
         report = build_report(
-            self.seen, self.alerts, self.engine.result().to_report(), self.started_at, ended_at, self.injected,
+            self.seen, self.alerts, self.engine.result().to_report(),
+            self.started_at, ended_at, self.injected,
         )
         try:
             if self.report_path:
                 write_report(self.report_path, report)
         finally:
             self.store.set_meta("ended_at", ended_at)
+            self.store.set_meta("watchlist", sorted(self.external_watch))
+            self.plugins.close()
             if self.injected:
                 self.store.set_meta("injected", dict(self.injected))
             self.store.close()
@@ -150,7 +170,7 @@ class Monitor:
 def install_stop_handlers(stop: threading.Event) -> None:
     """SIGINT and SIGTERM end the run cleanly (the report is written, exit code 0)."""
 
-    def handler(signum, frame) -> None:  # noqa: ARG001
+    def handler(signum, frame) -> None:
         stop.set()
 
     signal.signal(signal.SIGINT, handler)

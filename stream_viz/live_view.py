@@ -1,0 +1,84 @@
+"""What the monitor shows: feeds each sample, its alerts and the diagnosis to a Rerun `Recorder`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import networkx as nx
+
+from stream_viz.records import Alert, Sample
+from stream_viz.viz.rca import report_markdown
+from stream_viz.viz.recorder import Recorder
+
+
+class LiveView:
+    """Logs the system when it changes, metrics in batches, alerts, and each new RCA iteration.
+
+    Parameters
+    ----------
+    viewer : str
+        ``spawn``, ``serve``, ``none`` or a gRPC URL.
+    save : Path, optional
+        Also write the recording here.
+    metrics_every : float
+        Seconds of metric samples sent in one ``send_columns`` batch.
+    """
+
+    def __init__(self, viewer: str = "none", save: Path | None = None, metrics_every: float = 5.0) -> None:
+        self.rec = Recorder(viewer=viewer, save=save)
+        self.metrics_every = metrics_every
+        self._batch: list[tuple[float, nx.MultiDiGraph]] = []
+        self._iterations = 0
+        self._causes: list[Any] = []
+
+    @property
+    def url(self) -> str | None:
+        return self.rec.url
+
+    def update(
+        self, t: float, sample: Sample, seen: nx.MultiDiGraph, alerts: list[Alert], result: Any
+    ) -> None:
+        """Log one monitor tick."""
+        self.rec.set_time(t)
+        if alerts:
+            self.rec.alerts(alerts)  # before the graph, so alerted members are coloured now
+        self.rec.system(seen, t)
+        self._batch.append((t, sample.graph))
+        if t - self._batch[0][0] >= self.metrics_every:
+            self._flush_metrics()
+        report = result.to_report()
+        causes = report["root_causes"]
+        new = report["iterations"][self._iterations:]
+        for it in new:
+            self.rec.rca(seen, it, causes)
+        self._iterations = len(report["iterations"])
+        if not new and causes != self._causes and report["iterations"]:
+            self.rec.report(report_markdown(causes, report["iterations"][-1]), t)
+        self._causes = causes
+
+    def _flush_metrics(self) -> None:
+        if self._batch:
+            self.rec.metrics(self._batch)
+            self._batch = []
+
+    def close(self) -> None:
+        """Send what is pending and close the recording (the ``.rrd`` gets its footer)."""
+        try:
+            self._flush_metrics()
+        finally:
+            self.rec.close()
+
+
+def save_diagnosis(path: Path, G: nx.MultiDiGraph, alerts: list[Alert], result: Any) -> None:
+    """Write an offline diagnosis (``stream-viz analyze --save``) as a recording."""
+    rec = Recorder(viewer="none", save=path)
+    try:
+        t0 = min((a.t for a in alerts), default=0.0)
+        rec.system(G, t0)
+        rec.alerts(alerts)
+        report = result.to_report()
+        for it in report["iterations"]:
+            rec.rca(G, it, report["root_causes"])
+    finally:
+        rec.close()
