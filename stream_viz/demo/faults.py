@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 from stream_viz.errors import DemoError
+
+STOP = threading.Event()  # the process is ending: releases hung callbacks, ends fault threads
 
 FAULTS: dict[str, str] = {
     "crash": "the target's process kills itself (SIGKILL): every node of that process is gone",

@@ -17,7 +17,7 @@ import threading
 import time
 from pathlib import Path
 
-from stream_viz.demo.faults import FAULTS
+from stream_viz.demo.faults import FAULTS, STOP
 from stream_viz.demo.topology import DEMO, Topology
 
 LEAK_RATE = 20 * 2**20  # bytes per second
@@ -86,6 +86,12 @@ def _spin(executor) -> None:
         pass
 
 
+def _watch_parent(parent: int) -> None:
+    while not STOP.wait(0.5):
+        if os.getppid() != parent:  # the parent died: end with it
+            STOP.set()
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m stream_viz.demo.robot_process",
                                  description="Run one process (group of nodes) of the demo robot.")
@@ -96,21 +102,23 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--target", help="fqn of the faulty node")
     ap.add_argument("--at", type=float, help="unix time of the injection")
     args = ap.parse_args(argv)
+    parent = os.getppid()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: STOP.set())
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True, name="watch-parent").start()
 
     import rclpy
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
-    from stream_viz.demo.sim_node import STOP, SimNode
+    from stream_viz.demo.sim_node import SimNode
 
     topo = Topology.load(args.topology) if args.topology else DEMO
     group = topo.group(args.group)
     run_dir = Path(args.run_dir)
-    parent = os.getppid()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: STOP.set())
-
+    if STOP.is_set():  # ended (or orphaned) while importing
+        return 0
     ctx = Context()
     rclpy.init(context=ctx, signal_handler_options=SignalHandlerOptions.NO)
     sims = {n.name: SimNode(n, ctx, topo.node_names()) for n in group.nodes}
@@ -128,10 +136,8 @@ def main(argv: list[str] | None = None) -> int:
                          daemon=True, name="inject").start()
     _write_json(run_dir / f"{group.name}.ready", {"pid": os.getpid(), "nodes": list(sims)})
 
-    while not STOP.wait(0.5):
-        if os.getppid() != parent:  # the parent died: end with it
-            break
-    STOP.set()
+    while not STOP.wait(0.5):  # a timeout keeps the main thread responsive to signals
+        pass
     for ex in executors:
         ex.shutdown(timeout_sec=1.0)
     for t in spinners:  # a node still in use by a spinning executor would not really be destroyed

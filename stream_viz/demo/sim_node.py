@@ -9,7 +9,6 @@ callback passes :meth:`SimNode._gate` (hang, delay) and every publish :meth:`Sim
 from __future__ import annotations
 
 import random
-import threading
 import time
 from functools import partial
 from typing import Any
@@ -17,10 +16,10 @@ from typing import Any
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
+from stream_viz.demo.faults import STOP
 from stream_viz.demo.messages import factory, fill_response, load_type
 from stream_viz.demo.topology import NodeSpec, PubSpec
 
-STOP = threading.Event()  # set when the process is ending: releases hung callbacks
 _DIAG = "diagnostic_msgs/msg/DiagnosticArray"
 
 

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import importlib
 import itertools
+import json
 import os
+import signal
 import statistics
 import threading
 import time
@@ -18,7 +20,7 @@ from stream_viz.demo.topology import DEMO
 from stream_viz.errors import DemoError
 
 pytestmark = pytest.mark.ros
-AT = 6.0  # fault injected this many seconds after start
+AT = 10.0  # fault injected this many seconds after start (start-up is slow on a loaded machine)
 
 
 class Observer:
@@ -133,7 +135,7 @@ def _run_fault(observer, fault: str, target: str, watch: tuple[str, str] | None 
         robot.wait_ready(30)
         info = wait_for(robot.injected, timeout=AT + 10)
         assert info["fault"] == fault and info["target"] == f"node:{target}"
-        assert abs(info["t"] - robot.fault_at) < 2.0
+        assert robot.fault_at - 0.5 < info["t"] < robot.fault_at + 5  # late only if start-up was slow
         return robot, info, arrivals
     except BaseException:
         robot.stop()
@@ -160,9 +162,9 @@ def test_rate_drops(observer, fault, target, topic, type_name):
     try:
         t = info["t"]
         time.sleep(max(0.0, t + 4.5 - time.time()))
-        before = len(_window(arrivals, t - 3, t)) / 3
+        before = len(_window(arrivals, t - 2.5, t)) / 2.5
         later = len(_window(arrivals, t + 0.5, t + 4.5)) / 4
-        assert before > 10
+        assert before > 10, (len(arrivals), arrivals[:1] and arrivals[0][0] - t, robot.log_tail("base"))
         assert later < (0.05 if fault == "hang" else 0.5) * before, (before, later)
         assert all(robot.alive().values())  # the process stays
     finally:
@@ -175,7 +177,7 @@ def test_delay_raises_jitter(observer):
         t = info["t"]
         time.sleep(max(0.0, t + 5 - time.time()))
         gaps = lambda ts: [b - a for a, b in itertools.pairwise(ts)]  # noqa: E731
-        before = statistics.pstdev(gaps(_window(arrivals, t - 3, t)))
+        before = statistics.pstdev(gaps(_window(arrivals, t - 2.5, t)))
         later = gaps(_window(arrivals, t + 0.5, t + 5))
         assert len(later) >= 5
         assert statistics.pstdev(later) > max(3 * before, 0.02), (before, statistics.pstdev(later))
@@ -186,10 +188,13 @@ def test_delay_raises_jitter(observer):
 def test_cpu_burns_in_the_target_process(observer):
     robot, _info, _ = _run_fault(observer, "cpu", "/camera_driver")
     try:
-        proc = psutil.Process(robot.node_pids()["/camera_driver"])
-        proc.cpu_percent()
-        time.sleep(2.0)
-        assert proc.cpu_percent() > 50
+        # compared with a process of the same shape (one sensor driver), over the same 3 s
+        burner, calm = (psutil.Process(robot.node_pids()[n]) for n in ("/camera_driver", "/lidar_driver"))
+        cpu = lambda p: sum(p.cpu_times()[:2])  # noqa: E731
+        b0, c0 = cpu(burner), cpu(calm)
+        time.sleep(3.0)
+        burnt, idle = cpu(burner) - b0, cpu(calm) - c0
+        assert burnt > 0.6 and burnt > 4 * idle, (burnt, idle)
     finally:
         robot.stop()
 
@@ -234,3 +239,24 @@ def test_diag_reports_error_for_the_target(observer):
         assert lv[("/lidar_driver", True)] == {0}  # others stay OK
     finally:
         robot.stop()
+
+
+def test_children_end_when_the_parent_is_terminated(children, tmp_path):
+    out = tmp_path / "pids.txt"
+    parent = children.python(f"""
+        import json, time
+        from stream_viz.demo.robot import Robot
+        robot = Robot()
+        robot.start()
+        robot.wait_ready(30)
+        open({str(out)!r}, "w").write(json.dumps(list(robot.pids().values())))
+        time.sleep(60)
+    """, name="robot_parent")
+    pids = json.loads(wait_for(lambda: out.exists() and out.read_text(), timeout=40))
+    assert all(psutil.pid_exists(p) for p in pids)
+    os.kill(parent.pid, signal.SIGTERM)  # default action: no atexit, no stop()
+    parent.wait(5)
+
+    def gone():
+        return not [p for p in pids if psutil.pid_exists(p) and psutil.Process(p).status() != "zombie"]
+    wait_for(gone, timeout=10)
