@@ -76,6 +76,7 @@ class GraphAnomalies(Plugin):
     kinds = ("node", "topic")
     settings: ClassVar[dict[str, Any]] = {
         "grace_s": 5.0, "ignore_topics": [], "duplicates": True, "no_publisher": True, "qos": True,
+        "recheck_s": 10.0,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -88,8 +89,36 @@ class GraphAnomalies(Plugin):
                     yield ctx.alert(node, "error", f"{n} nodes share this name", symptom="duplicate_name",
                                     instances=n)
         orphan_since = ctx.state.setdefault("orphan_since", {})
-        ignore = {t if t.startswith("topic:") else f"topic:{t}" for t in s["ignore_topics"]}
         current = set()
+        for topic, orphan, subs, qos_bad in self._analyse(ctx):
+            if orphan and s["no_publisher"]:
+                current.add(topic)
+                since = orphan_since.setdefault(topic, ctx.t)
+                if ctx.t - since >= s["grace_s"]:
+                    for v in subs:
+                        yield ctx.alert(v, "warn", f"subscribes to {topic} which has had no publisher for "
+                                        f"{ctx.t - since:.0f} s", symptom="no_publisher", topic=topic)
+            if s["qos"]:
+                for v, bad in qos_bad:
+                    yield ctx.alert(v, "error", f"QoS incompatible on {topic}: " + "; ".join(bad),
+                                    symptom="qos_incompatible", topic=topic)
+        for topic in list(orphan_since):
+            if topic not in current:
+                del orphan_since[topic]
+
+    @staticmethod
+    def _analyse(ctx: PluginContext) -> list[tuple[str, bool, list[str], list[tuple[str, list[str]]]]]:
+        """Per topic with watched subscribers: orphaned?, the subscribers, QoS mismatches.
+
+        The structure only changes with the graph, so this is redone only when the diff or the
+        watchlist changed, or every ``recheck_s``; cheap on 1,000 members.
+        """
+        s, G = ctx.settings, ctx.graph
+        cached = ctx.state.get("analysis")
+        if (cached is not None and not ctx.diff and cached[0] == ctx.watch and ctx.t < cached[1]):
+            return cached[2]
+        ignore = {t if t.startswith("topic:") else f"topic:{t}" for t in s["ignore_topics"]}
+        out = []
         for topic, kind in G.nodes(data="kind"):
             if kind != "topic" or topic in ignore:
                 continue
@@ -97,20 +126,12 @@ class GraphAnomalies(Plugin):
             subs = {v: q for v, q in subs.items() if topic in ctx.watch or v in ctx.watch}
             if not subs:
                 continue
-            if not pubs and s["no_publisher"]:
-                current.add(topic)
-                since = orphan_since.setdefault(topic, ctx.t)
-                if ctx.t - since >= s["grace_s"]:
-                    for v in sorted(subs):
-                        yield ctx.alert(v, "warn", f"subscribes to {topic} which has had no publisher for "
-                                        f"{ctx.t - since:.0f} s", symptom="no_publisher", topic=topic)
-            if pubs and s["qos"]:
-                for v in sorted(subs):
-                    bad = sorted({f"{u}: {w}" for u, pqs in pubs.items() for pq in pqs
-                                  for sq in subs[v] for w in incompatible(pq, sq)})
-                    if bad:
-                        yield ctx.alert(v, "error", f"QoS incompatible on {topic}: " + "; ".join(bad),
-                                        symptom="qos_incompatible", topic=topic)
-        for topic in list(orphan_since):
-            if topic not in current:
-                del orphan_since[topic]
+            qos_bad = []
+            for v in sorted(subs):
+                bad = sorted({f"{u}: {w}" for u, pqs in pubs.items() for pq in pqs
+                              for sq in subs[v] for w in incompatible(pq, sq)})
+                if bad:
+                    qos_bad.append((v, bad))
+            out.append((topic, not pubs, sorted(subs), qos_bad))
+        ctx.state["analysis"] = (ctx.watch, ctx.t + s["recheck_s"], out)
+        return out

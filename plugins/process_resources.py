@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Iterator
 from typing import Any, ClassVar
 
@@ -60,6 +61,8 @@ class ProcessResources(Plugin):
                 parents = [make_id("process", pid)]
             procs.update(parents)
         alerting = ctx.state.setdefault("alerting", set())
+        for gone in ctx.diff.removed_members:  # bound the state when processes come and go
+            ctx.state.get("rss", {}).pop(gone, None)
         for proc in sorted(procs):
             found = []
             for attr, floor, what in (("cpu_percent", s["cpu_min_rise"], "cpu"),
@@ -107,11 +110,23 @@ class ProcessResources(Plugin):
         positive, so one big allocation (a step) does not count as a leak.
         """
         s = ctx.settings
-        times, values = ctx.past(proc, "rss_mb")
-        if len(times) == 0 or ctx.t - times[0] < s["warmup_s"]:
+        # Own bounded (t, rss) window per process: cheaper than reading the whole history.
+        windows = ctx.state.setdefault("rss", {})
+        q = windows.get(proc)
+        if q is None:
+            times, values = ctx.past(proc, "rss_mb")
+            q = windows[proc] = deque(zip(times.tolist(), values.tolist(), strict=True))
+            ctx.state.setdefault("first", {})[proc] = times[0] if len(times) else ctx.t
+        q.append((ctx.t, ctx.value(proc, "rss_mb")))
+        while q and q[0][0] < ctx.t - s["trend_s"]:
+            q.popleft()
+        if ctx.t - ctx.state["first"][proc] < s["warmup_s"] or len(q) < 5:
             return None
-        t_all = np.append(times, ctx.t)
-        v_all = np.append(values, ctx.value(proc, "rss_mb"))
+        rss = [v for _, v in q if v == v]
+        if not rss or rss[-1] - min(rss) < s["growth_min_mb"]:
+            return None  # the common, healthy case: no numpy needed
+        t_all = np.array([t for t, _ in q])
+        v_all = np.array([v for _, v in q])
         for span in (s["trend_s"] / 6, s["trend_s"] / 2, s["trend_s"]):
             recent = t_all >= ctx.t - span
             t, v = t_all[recent], v_all[recent]

@@ -20,6 +20,7 @@ from stream_viz.model.theta import SCHEMAS
 from stream_viz.records import Alert, Event
 
 API_VERSION = 1
+_INDEX = {kind: {name: i for i, name in enumerate(names)} for kind, names in SCHEMAS.items()}
 
 
 @dataclass
@@ -61,25 +62,25 @@ class PluginContext:
     state: dict[str, Any] = field(default_factory=dict)
     expected_rates: dict[str, float] = field(default_factory=dict)
     plugin: str = ""
+    # Watched members per kind, sorted; computed once per sample and shared by all plugins.
+    by_kind: dict[str, list[str]] | None = field(default=None, repr=False)
 
     def watched(self, kind: str) -> Iterator[str]:
         """Yield the watched members of ``kind`` present in the graph, sorted."""
-        nodes = self.graph.nodes
-        for m in sorted(self.watch):
-            if m in nodes and nodes[m].get("kind") == kind:
-                yield m
+        if self.by_kind is None:
+            self.by_kind = watched_by_kind(self.graph, self.watch)
+        yield from self.by_kind.get(kind, ())
 
     def value(self, member: str, attr: str) -> float:
         """Return θ[attr] of ``member`` now; NaN when unknown or not measured."""
         attrs = self.graph.nodes.get(member)
-        if attrs is None or attrs.get("theta") is None:
+        if attrs is None:
             return float("nan")
-        schema = SCHEMAS.get(attrs.get("kind", ""), ())
-        if attr not in schema:
+        theta = attrs.get("theta")
+        i = _INDEX.get(attrs.get("kind", ""), {}).get(attr)
+        if theta is None or i is None or i >= len(theta):
             return float("nan")
-        theta = attrs["theta"]
-        i = schema.index(attr)
-        return float(theta[i]) if i < len(theta) else float("nan")
+        return float(theta[i])
 
     def past(self, member: str, attr: str) -> tuple[np.ndarray, np.ndarray]:
         """Return ``(times, values)`` of θ[attr] of ``member`` strictly before ``t``."""
@@ -116,6 +117,16 @@ class Plugin:
     def check(self, ctx: PluginContext) -> Iterable[Alert]:
         """Return (or yield) the alerts for the sample in ``ctx``."""
         raise NotImplementedError
+
+
+def watched_by_kind(G: nx.MultiDiGraph, watch: Iterable[str]) -> dict[str, list[str]]:
+    """Return kind → sorted watched members present in ``G``."""
+    out: dict[str, list[str]] = {}
+    kinds = G.nodes(data="kind")
+    for m in sorted(watch):
+        if m in G:
+            out.setdefault(kinds[m], []).append(m)
+    return out
 
 
 def record_history(history: History, G: nx.MultiDiGraph, t: float) -> None:

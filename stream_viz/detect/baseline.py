@@ -66,18 +66,21 @@ def cached_baseline(
     """
     cache = ctx.state.setdefault("_baselines", {})
     key = (member, attr)
-    hit = cache.get(key)
-    if hit is not None and (frozen or ctx.t - hit[0] < refresh_s):
+    hit = cache.get(key)  # (next refresh time, baseline or None)
+    if hit is not None and (ctx.t < hit[0] or (frozen and hit[1] is not None)):
         return hit[1]
     times, values = ctx.past(member, attr)
     if len(times) == 0 or ctx.t - times[0] < warmup_s:
-        return hit[1] if hit else None
+        # Warming up: look again when the warm-up can be over, not on every call.
+        ready = times[0] + warmup_s if len(times) else ctx.t
+        cache[key] = (min(ready, ctx.t + refresh_s), hit[1] if hit else None)
+        return cache[key][1]
     med, sigma, n = robust(values[-window:])
     if n < min_samples:
-        return hit[1] if hit else None
-    cache[key] = (ctx.t, (med, sigma, n))
+        cache[key] = (ctx.t + min(refresh_s, 1.0), hit[1] if hit else None)
+        return cache[key][1]
+    cache[key] = (ctx.t + refresh_s, (med, sigma, n))
     return med, sigma, n
-
 
 def streak(state: dict[str, Any], key: Any, condition: bool) -> int:
     """Count consecutive calls with ``condition`` true for ``key`` (0 once it is false)."""

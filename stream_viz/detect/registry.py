@@ -30,7 +30,7 @@ from typing import Any
 
 import networkx as nx
 
-from stream_viz.detect.api import API_VERSION, Plugin, PluginContext, settings_types_ok
+from stream_viz.detect.api import API_VERSION, Plugin, PluginContext, settings_types_ok, watched_by_kind
 from stream_viz.errors import ConfigError
 from stream_viz.model.diff import GraphDiff
 from stream_viz.model.history import History
@@ -436,13 +436,14 @@ class PluginSet:
         events = list(events)
         rates = dict(expected_rates or {})
         known = set(graph.nodes) | set(diff.removed_members) | {e.member for e in events}
+        by_kind = watched_by_kind(graph, watch)
         alerts: list[Alert] = []
         problems: list[PluginProblem] = []
         for lp in self.plugins:
             if lp.disabled:
                 continue
             ctx = PluginContext(t, graph, watch, history, events, diff, lp.settings, lp.state, rates,
-                                plugin=lp.name)
+                                plugin=lp.name, by_kind=by_kind)
             items, more, problem = self._call(lp, ctx)
             if problem is not None:
                 problems.append(problem)
