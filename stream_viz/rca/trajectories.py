@@ -14,9 +14,10 @@ two stages:
    distribution of all alerting pairs. ``coverage`` (the share of symptoms downstream of the
    candidate) rewards a cause that explains others.
 
-The score is the weighted mean of the components (weights from the settings); components that do
-not apply to a candidate (no dependency on its trajectory, no metric evidence given) are left out
-of its mean.
+The score is ``ht`` times the support: the weighted mean (weights from the settings) of
+``0.5 + 0.5·coverage`` (topology), direct evidence, metric evidence (left out when none was given
+at all), co-occurrence and time lag (0 when the trajectory has no dependency: the candidate
+explains no other symptom).
 """
 
 from __future__ import annotations
@@ -104,7 +105,10 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
     """Trace ``c``'s fault trajectory and score its dependencies (module docstring, stage 2)."""
     s, settings = ctx.symptoms, ctx.settings
     cost, back = trace(ctx.G, c, s.times, settings.max_trajectory)
-    explained = [m for m in cost if m in s.times]
+    # A symptom that began before the candidate's own (beyond the tolerance) is not its effect.
+    onset = ctx.views[c].onset if c in ctx.views else np.inf
+    since = onset - settings.tolerance if np.isfinite(onset) else -np.inf  # metric evidence only: no time
+    explained = [m for m in cost if m in s.times and s.onset[m] >= since]
     coverage = len(explained) / len(s.times) if s.times else 0.0
     first = ctx.first or s.first
     own = ctx.views[c].own if c in ctx.views else []
@@ -137,10 +141,10 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
 
 def _cheap(ctx: Context, v: NodeView) -> float:
     w = ctx.settings.weights
-    parts = [(w["topology"], v.anomaly), (w["direct"], v.direct)]
+    parts = [(w["topology"], 1.0), (w["direct"], v.direct)]
     if ctx.has_evidence:
         parts.append((w["evidence"], v.evidence))
-    return (1.0 - v.upstream) * _mean(parts)
+    return v.ht * _mean(parts)
 
 
 def _mean(parts: list[tuple[float, float]]) -> float:
@@ -183,16 +187,17 @@ def rank_trajectory(ctx: Context) -> list[RootCause]:
     for _, _, n in pre[: max(ctx.settings.shortlist, ctx.settings.top_k)]:
         v = ctx.views[n]
         tr = trajectory_of(ctx, n)
-        parts = [(w["topology"], v.anomaly * (0.5 + 0.5 * tr.coverage)), (w["direct"], v.direct)]
+        parts = [(w["topology"], 0.5 + 0.5 * tr.coverage), (w["direct"], v.direct)]
         if ctx.has_evidence:
             parts.append((w["evidence"], v.evidence))
-        if tr.cooccurrence is not None:
-            parts.append((w["cooccurrence"], tr.cooccurrence))
-        if tr.timelag is not None:
-            parts.append((w["timelag"], tr.timelag))
-        # "Caused by none": everything that speaks for a member counts only as far as its own
-        # causes were healthy when its symptoms began (a victim's trajectory can be strong too).
-        out.append(RootCause(n, (1.0 - v.upstream) * _mean(parts), tr.path, _evidence(v, tr)))
+        # No dependency on the trajectory: it explains no other symptom, so nothing speaks for it
+        # as a cause of others (a root cause causes others).
+        parts.append((w["cooccurrence"], tr.cooccurrence or 0.0))
+        parts.append((w["timelag"], tr.timelag or 0.0))
+        # The hypothesis test (anomalous, and "caused by none": its causes were healthy when its
+        # symptoms began) carries the score; the trajectory's support scales it. A victim's
+        # trajectory can be strong too, so support alone must not outrank the test.
+        out.append(RootCause(n, v.ht * _mean(parts), tr.path, _evidence(v, tr)))
     return finish(ctx, out)
 
 

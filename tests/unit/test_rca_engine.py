@@ -97,8 +97,9 @@ def test_error_log_without_downstream_effect(G):
         r = analyze(G, alerts, RcaSettings(method=method), None)
         assert [rc.member for rc in r.root_causes] == [CTRL], method
         assert top(r).trajectory == [CTRL]
-    # error severity 0.8, nothing upstream, explains every symptom
-    assert analyze(G, alerts, RcaSettings(), None).root_causes[0].score == pytest.approx(0.8)
+    # hypothesis test 0.8 (error, nothing upstream) × support: topology 1 (explains every symptom,
+    # weight 3), direct 0.8 (weight 1), no dependency on its trajectory (co-occurrence, time lag 0)
+    assert analyze(G, alerts, RcaSettings(), None).root_causes[0].score == pytest.approx(0.8 * 3.8 / 6)
 
 
 def test_process_alerts_and_metric_evidence_are_charged_to_hosted_nodes(G):
