@@ -109,14 +109,14 @@ def flow_successors(G: nx.MultiDiGraph, m: str) -> set[str]:
     """Members ``x`` with an edge ``((m, x), 0)``."""
     if m not in G:
         return set()
-    return {v for _, v, k in G.out_edges(m, keys=True) if k == 0}
+    return {v for v, keys in G._succ[m].items() if 0 in keys}
 
 
 def flow_predecessors(G: nx.MultiDiGraph, m: str) -> set[str]:
     """Members ``x`` with an edge ``((x, m), 0)``."""
     if m not in G:
         return set()
-    return {u for u, _, k in G.in_edges(m, keys=True) if k == 0}
+    return {u for u, keys in G._pred[m].items() if 0 in keys}
 
 
 def upstream_of(G: nx.MultiDiGraph, m: str) -> set[str]:
