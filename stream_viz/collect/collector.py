@@ -17,7 +17,7 @@ from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.pidmap import PidResolver
 from stream_viz.collect.processes import ProcessSampler
 from stream_viz.collect.readings import GraphReading, PidInfo, ProcessReading
-from stream_viz.collect.rosgraph import read_graph
+from stream_viz.collect.rosgraph import QosCache, read_graph
 from stream_viz.collect.topics import TopicMonitor, diag_events, log_event
 from stream_viz.errors import CollectError
 from stream_viz.model.diff import diff
@@ -62,6 +62,7 @@ class Collector:
         self.topics: TopicMonitor | None = None
         self.resolver: PidResolver | None = None
         self.sampler = ProcessSampler()
+        self.qos = QosCache()
         self._prev = new_graph()
         self._prev_pids: dict[str, int | None] = {}
         self._dead: dict[int, ProcessReading] = {}
@@ -98,7 +99,7 @@ class Collector:
             raise CollectError("Collector.sample() called before start() (or after close())")
         t = time.time()
         reading = read_graph(self.node, own=self.own, include_hidden=self.include_hidden,
-                             include_internal=self.include_internal)
+                             include_internal=self.include_internal, qos=self.qos)
         self.topics.update(reading.topics)
         pids = self.resolver.resolve(reading.rosout_gids)
         for fqn in reading.nodes:

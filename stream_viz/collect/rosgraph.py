@@ -7,6 +7,7 @@ are left out by default: they would swamp the model and tie every node to every 
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from rclpy.node import Node, NodeNameNonExistentError
@@ -58,8 +59,39 @@ def _keep(name: str, include_hidden: bool) -> bool:
     return include_hidden or not is_hidden(name)
 
 
+class QosCache:
+    """QoS per (topic, node, role), refreshed only for topics whose endpoint set changed.
+
+    ``get_*_info_by_topic`` scans every endpoint of the graph (one call costs O(endpoints)), so
+    calling it for every topic every sample is quadratic; per-node queries are cheap. Stale topics
+    are refreshed within ``budget_s`` per sample, the rest on the next samples.
+    """
+
+    def __init__(self, budget_s: float = 0.03) -> None:
+        self.budget_s = budget_s
+        self._known: dict[str, frozenset[tuple[str, str]]] = {}
+        self._qos: dict[tuple[str, str, str], dict[str, Any]] = {}
+
+    def refresh(self, node: Node, topic: str, endpoints: frozenset[tuple[str, str]],
+                nodes: dict[str, NodeReading], deadline: float) -> None:
+        if self._known.get(topic) == endpoints or time.monotonic() > deadline:
+            return
+        for role, call in (("pub", node.get_publishers_info_by_topic),
+                           ("sub", node.get_subscriptions_info_by_topic)):
+            for e in _endpoints(call(topic), topic, nodes):
+                self._qos[(topic, e.node, role)] = e.qos
+        self._known[topic] = endpoints
+
+    def get(self, topic: str, node: str, role: str) -> dict[str, Any]:
+        return self._qos.get((topic, node, role), {})
+
+    def forget(self, topics: set[str]) -> None:
+        self._known = {t: v for t, v in self._known.items() if t in topics}
+        self._qos = {k: v for k, v in self._qos.items() if k[0] in topics}
+
+
 def read_graph(node: Node, *, own: str, include_hidden: bool = False,
-               include_internal: bool = False) -> GraphReading:
+               include_internal: bool = False, qos: QosCache | None = None) -> GraphReading:
     """Return the ROS graph as node ``node`` sees it now.
 
     Parameters
@@ -72,17 +104,25 @@ def read_graph(node: Node, *, own: str, include_hidden: bool = False,
         Keep hidden nodes, topics and services (``_`` names, action internals).
     include_internal : bool
         Keep parameter services, ``/rosout`` and ``/parameter_events``.
+    qos : QosCache, optional
+        Where endpoint QoS is kept between samples (a fresh one reads every topic's QoS).
     """
+    qos = qos or QosCache(budget_s=float("inf"))
     r = GraphReading()
     for name, ns in node.get_node_names_and_namespaces():
         fqn = node_fqn(ns, name)
         if fqn == own or name == UNKNOWN_NODE or not _keep(fqn, include_hidden):
             continue
         r.nodes[fqn] = NodeReading(fqn, name, ns)
+    def topic_ok(t: str) -> bool:
+        return _keep(t, include_hidden) and (include_internal or t not in INFRA_TOPICS)
+    ends: dict[str, dict[str, list[str]]] = {"pub": {}, "sub": {}}
     for fqn, nr in list(r.nodes.items()):
         try:
             servers = node.get_service_names_and_types_by_node(nr.name, nr.namespace)
             clients = node.get_client_names_and_types_by_node(nr.name, nr.namespace)
+            pubs = node.get_publisher_names_and_types_by_node(nr.name, nr.namespace)
+            subs = node.get_subscriber_names_and_types_by_node(nr.name, nr.namespace)
         except NodeNameNonExistentError:
             # Vanished between the listing and this query: skip it for this sample.
             r.skipped[fqn] = "node vanished during the graph read"
@@ -97,14 +137,20 @@ def read_graph(node: Node, *, own: str, include_hidden: bool = False,
                 if not include_internal and is_param_service(sname, fqn):
                     continue
                 dst[sname] = list(types)
-    for topic, types in node.get_topic_names_and_types():
-        if not _keep(topic, include_hidden) or (not include_internal and topic in INFRA_TOPICS):
-            continue
-        pubs = _endpoints(node.get_publishers_info_by_topic(topic), topic, r.nodes)
-        subs = _endpoints(node.get_subscriptions_info_by_topic(topic), topic, r.nodes)
-        if not pubs and not subs:  # only we (or not yet named endpoints) use it
-            continue
-        r.topics[topic], r.publishers[topic], r.subscribers[topic] = list(types), pubs, subs
+        for role, lst in (("pub", pubs), ("sub", subs)):
+            for topic, types in lst:
+                if topic_ok(topic):
+                    ends[role].setdefault(topic, []).append(fqn)
+                    r.topics.setdefault(topic, list(types))
+    deadline = time.monotonic() + qos.budget_s
+    for topic in sorted(r.topics):
+        pubs_, subs_ = sorted(set(ends["pub"].get(topic, []))), sorted(set(ends["sub"].get(topic, [])))
+        key = frozenset([(n, "pub") for n in pubs_] + [(n, "sub") for n in subs_])
+        qos.refresh(node, topic, key, r.nodes, deadline)
+        t0 = r.topics[topic][0] if r.topics[topic] else ""
+        r.publishers[topic] = [Endpoint(n, topic, t0, b"", qos.get(topic, n, "pub")) for n in pubs_]
+        r.subscribers[topic] = [Endpoint(n, topic, t0, b"", qos.get(topic, n, "sub")) for n in subs_]
+    qos.forget(set(r.topics))
     for ep in _endpoints(node.get_publishers_info_by_topic("/rosout"), "/rosout", r.nodes):
         r.rosout_gids.setdefault(ep.node, ep.gid)
     return r
