@@ -63,6 +63,7 @@ class Monitor:
         self.seen = new_graph()
         self.external_watch: set[str] = set()
         self._unreadable: dict[str, str] = {}
+        self._evidence: dict[str, float] = {}
         self.alerts: list[Alert] = []
         self.samples = 0
         self.injected: Mapping[str, Any] | None = None
@@ -86,7 +87,8 @@ class Monitor:
         if fresh:
             self.store.add_unreadable(t, fresh)
         self._unreadable = dict(sample.unreadable)
-        added = self._watch_additions(sample.graph) - self.external_watch
+        anomalous = process_anomalies(sample.graph, self.history) if self.samples > 1 else set()
+        added = self._watch_additions(sample.graph, anomalous) - self.external_watch
         if added:
             self.external_watch |= added
             self.engine.watch(added)
@@ -102,14 +104,19 @@ class Monitor:
             for p in problems:
                 self.progress.say(f"plugin problem: {p}")
         self.alerts.extend(alerts)
-        result = self.engine.update(self.seen, alerts)
+        # Process-metric anomalies count as evidence too, not only as watchlist entries.
+        # Passed only when it changed: an unchanged sample with no alerts costs no rerank.
+        evidence = {m: 1.0 for m in anomalous}
+        changed = evidence != self._evidence
+        self._evidence = evidence
+        result = self.engine.update(self.seen, alerts, evidence if changed else None)
         self.view.update(t, sample, self.seen, alerts, result)
         self.progress.update(self._status(t, result))
 
-    def _watch_additions(self, G) -> set[str]:
-        if self.samples == 1:
-            return initial_watchlist(G, self.config.watchlist, self.history)
-        return process_anomalies(G, self.history) | initial_watchlist(G, self.config.watchlist, self.history)
+    def _watch_additions(self, G, anomalous: set[str]) -> set[str]:
+        # W_0 as the paper says: configured members and process monitoring; "auto"/"all" modes
+        # keep adding members as they appear.
+        return anomalous | initial_watchlist(G, self.config.watchlist, None)
 
     def _status(self, t: float, result) -> str:
         kinds: dict[str, int] = {}
