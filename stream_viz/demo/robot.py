@@ -87,6 +87,22 @@ class Robot:
             raise DemoError(f"cannot start group {g.name!r}: {exc}") from exc
         return self
 
+    def inject(self, fault: FaultSpec) -> float:
+        """Inject ``fault`` ``fault.at`` s from now into the running system; returns that unix time.
+
+        One fault per run: DemoError if one was given to the constructor or injected already.
+        """
+        fault.check(self.topology.node_names())
+        if not self.procs or self.run_dir is None:
+            raise DemoError("start the robot before injecting a fault")
+        if self.fault is not None:
+            raise DemoError(f"a fault is already set for this run: {self.fault}")
+        self.fault, self.fault_at = fault, time.time() + fault.at
+        tmp = self.run_dir / "fault.json.tmp"
+        tmp.write_text(json.dumps({"fault": fault.fault, "target": fault.target, "at": self.fault_at}))
+        os.replace(tmp, self.run_dir / "fault.json")
+        return self.fault_at
+
     def wait_ready(self, timeout: float = 30.0) -> None:
         """Block until every process has created its nodes and spins (DemoError on death/timeout)."""
         deadline = time.monotonic() + timeout

@@ -79,6 +79,21 @@ def _inject(fault: str, target: str, at: float, sims: dict, run_dir: Path, stop:
         threading.Thread(target=work or _errlog, args=args, daemon=True, name=f"fault-{fault}").start()
 
 
+def _injector(args: argparse.Namespace, sims: dict, run_dir: Path) -> None:
+    """The fault from the command line, else the first ``<run-dir>/fault.json`` (Robot.inject)."""
+    if args.fault and args.target and args.at is not None:
+        _inject(args.fault, args.target, args.at, sims, run_dir, STOP)
+        return
+    path = run_dir / "fault.json"
+    while not STOP.wait(0.2):
+        try:
+            spec = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+        _inject(spec["fault"], spec["target"], spec["at"], sims, run_dir, STOP)
+        return
+
+
 def _spin(executor) -> None:
     try:
         executor.spin()
@@ -131,9 +146,7 @@ def main(argv: list[str] | None = None) -> int:
         executors.append(ex)
         spinners.append(threading.Thread(target=_spin, args=(ex,), daemon=True, name=f"spin{s.spec.name}"))
         spinners[-1].start()
-    if args.fault and args.target and args.at is not None:
-        threading.Thread(target=_inject, args=(args.fault, args.target, args.at, sims, run_dir, STOP),
-                         daemon=True, name="inject").start()
+    threading.Thread(target=_injector, args=(args, sims, run_dir), daemon=True, name="inject").start()
     _write_json(run_dir / f"{group.name}.ready", {"pid": os.getpid(), "nodes": list(sims)})
 
     while not STOP.wait(0.5):  # a timeout keeps the main thread responsive to signals

@@ -127,30 +127,38 @@ def test_bad_fault_specs_name_the_choices():
         Robot(fault=FaultSpec("crash", "/nope", 1.0))
 
 
-def _run_fault(observer, fault: str, target: str, watch: tuple[str, str] | None = None, after: float = 4.0):
+def _run_fault(observer, fault: str, target: str, watch: tuple[str, str] | None = None):
+    """Start the robot, let ``watch`` flow for 3 s, then inject ``fault`` via Robot.inject."""
     arrivals = observer.watch(*watch) if watch else None
-    robot = Robot(env=dict(os.environ), fault=FaultSpec(fault, target, AT))
+    robot = Robot(env=dict(os.environ))
     robot.start()
     try:
-        robot.wait_ready(30)
-        info = wait_for(robot.injected, timeout=AT + 10)
+        robot.wait_ready(60)
+        if arrivals is not None:
+            wait_for(lambda: arrivals, timeout=30)
+        time.sleep(3.0)
+        at = robot.inject(FaultSpec(fault, target, 0.2))
+        info = wait_for(robot.injected, timeout=10)
         assert info["fault"] == fault and info["target"] == f"node:{target}"
-        assert robot.fault_at - 0.5 < info["t"] < robot.fault_at + 5  # late only if start-up was slow
+        assert at - 0.1 < info["t"] < at + 3
         return robot, info, arrivals
     except BaseException:
         robot.stop()
         raise
 
 
-def test_crash_kills_the_target_process(observer):
-    robot, _info, _ = _run_fault(observer, "crash", "/lidar_driver")
-    try:
+def test_crash_at_a_time_given_at_start_kills_the_target_process():
+    robot = Robot(env=dict(os.environ), fault=FaultSpec("crash", "/lidar_driver", AT))
+    with robot:
+        info = wait_for(robot.injected, timeout=AT + 30)
+        assert info["fault"] == "crash" and info["target"] == "node:/lidar_driver"
+        assert robot.fault_at - 0.5 < info["t"]  # never early; late only if start-up took longer than AT
         proc = robot.procs["lidar"]
         wait_for(lambda: proc.poll() is not None, timeout=5)
         assert proc.returncode == -9
-        assert sum(robot.alive().values()) == len(DEMO.groups) - 1
-    finally:
-        robot.stop()
+        wait_for(lambda: sum(robot.alive().values()) == len(DEMO.groups) - 1, timeout=10)
+        with pytest.raises(DemoError, match="already"):
+            robot.inject(FaultSpec("hang", "/imu_driver", 0))
 
 
 @pytest.mark.parametrize(("fault", "target", "topic", "type_name"), [
@@ -194,7 +202,7 @@ def test_cpu_burns_in_the_target_process(observer):
         b0, c0 = cpu(burner), cpu(calm)
         time.sleep(3.0)
         burnt, idle = cpu(burner) - b0, cpu(calm) - c0
-        assert burnt > 0.6 and burnt > 4 * idle, (burnt, idle)
+        assert burnt > 4 * idle + 0.05, (burnt, idle)  # ~3 s on an idle machine; a fair share under load
     finally:
         robot.stop()
 
@@ -223,8 +231,8 @@ def test_errlog_reaches_rosout(observer):
 
 
 def test_diag_reports_error_for_the_target(observer):
-    diags = observer.watch("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")
-    robot, info, _ = _run_fault(observer, "diag", "/localization")
+    robot, info, diags = _run_fault(observer, "diag", "/localization",
+                                    ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"))
     try:
         def levels():
             out = {}

@@ -34,17 +34,18 @@ def _names(node) -> set[str]:
 
 def test_generated_20_nodes_run_and_end_clean(graph_node):
     topo = generate(20, seed=1, nodes_per_process=6)
-    robot = Robot(env=dict(os.environ), topology=topo, fault=FaultSpec("crash", topo.node_names()[0], 8.0))
+    robot = Robot(env=dict(os.environ), topology=topo)
     with robot:
         robot.wait_ready(60)
         expected = set(topo.node_names())
         wait_for(lambda: expected <= _names(graph_node), timeout=20)
-        topics = dict(graph_node.get_topic_names_and_types())
-        assert set(topo.topics()) <= set(topics)
-        served = {s for s, _ in graph_node.get_service_names_and_types()}
-        assert set(topo.services()) <= served
+        topics = lambda: {t for t, _ in graph_node.get_topic_names_and_types()}  # noqa: E731
+        wait_for(lambda: set(topo.topics()) <= topics(), timeout=10)
+        served = lambda: {s for s, _ in graph_node.get_service_names_and_types()}  # noqa: E731
+        wait_for(lambda: set(topo.services()) <= served(), timeout=10)
         assert set(robot.node_pids()) == expected
         # the same fault machinery works here: the first group's process kills itself
+        robot.inject(FaultSpec("crash", topo.node_names()[0], 0.0))
         wait_for(robot.injected, timeout=15)
         first = topo.groups[0].name
         wait_for(lambda: not robot.alive()[first], timeout=5)
