@@ -15,7 +15,8 @@ class TopicLatency(Plugin):
     """Alerts on latency / jitter rises and on message drops of watched topics.
 
     A rise counts when ``value - median ≥ max(k·σ, min_rise_ms)`` (σ = 1.4826·MAD of the topic's
-    own past after ``warmup_s``) for ``confirm`` samples in a row; drops when
+    own past after ``warmup_s``; for jitter also ≥ ``jitter_period_ratio`` × the period) for
+    ``confirm`` samples in a row; drops when
     ``drops_per_s ≥ max(drops_min_per_s, drops_ratio × rate)`` for ``confirm`` samples.
     """
 
@@ -29,7 +30,8 @@ class TopicLatency(Plugin):
         "k": 6.0,
         "latency_min_rise_ms": 20.0,
         "jitter_min_rise_ms": 20.0,
-        "confirm": 2,
+        "jitter_period_ratio": 0.5,
+        "confirm": 3,
         "drops_min_per_s": 1.0,
         "drops_ratio": 0.05,
     }
@@ -49,6 +51,12 @@ class TopicLatency(Plugin):
                 if base is None:
                     continue
                 med, sigma, _ = base
+                if attr == "jitter_ms":
+                    # Scheduling noise on a busy host scales with the period: a 20 Hz topic's
+                    # jitter must rise by half its 50 ms period before it counts.
+                    rate = ctx.value(topic, "rate_hz")
+                    if rate > 0:
+                        floor = max(floor, s["jitter_period_ratio"] * 1000.0 / rate)
                 high = value - med >= max(s["k"] * sigma, floor)
                 if streak(ctx.state, key, high) >= s["confirm"]:
                     alerting.add(key)

@@ -272,3 +272,21 @@ def test_inline_mode_gives_the_same_alerts(tmp_path):
     a = PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False)
     b = PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False, isolate=False)
     assert _run(a) == _run(b)
+
+
+def test_the_documented_example_plugin_works(tmp_path):
+    from pathlib import Path
+
+    from stream_viz.model.theta import make_theta
+
+    doc = (Path(__file__).parents[2] / "docs" / "plugins.md").read_text()
+    code = doc.split("```python\n", 1)[1].split("```", 1)[0]
+    _write(tmp_path / "my_plugins", "cpu_ceiling", code)
+    ps = PluginSet.load([tmp_path / "my_plugins"], entry_points=False, cwd_plugins=False,
+                        settings={"cpu_ceiling": {"ceiling": 50}})
+    G = new_graph()
+    add_member(G, "process:1", theta=make_theta("process", {"cpu_percent": 70.0}))
+    add_member(G, "process:2", theta=make_theta("process", {"cpu_percent": 10.0}))
+    alerts, problems = ps.run(3.0, G, G.nodes, History())
+    assert problems == []
+    assert alerts == [Alert("process:1", "cpu_ceiling", 3.0, "warn", "cpu 70%", {"cpu": 70.0})]

@@ -98,10 +98,15 @@ def test_topic_rate_only_watched():
 def test_topic_latency_quiet_then_rise_and_drops():
     healthy = [(float(t), model(latency=noisy(2.0, 0.3), jitter=noisy(1.0, 0.3)), []) for t in range(40)]
     assert drive("topic_latency", healthy) == []
-    sick = healthy[:30] + [(float(t), model(latency=150.0, jitter=1.0), []) for t in range(30, 33)]
-    assert drive("topic_latency", sick) == [(31.0, "topic:/img", "warn"), (32.0, "topic:/img", "warn")]
-    drops = [(float(t), model(drops=0.2 if t < 3 else 4.0), []) for t in range(6)]
-    assert drive("topic_latency", drops) == [(4.0, "topic:/img", "warn"), (5.0, "topic:/img", "warn")]
+    sick = healthy[:30] + [(float(t), model(latency=150.0, jitter=1.0), []) for t in range(30, 34)]
+    assert drive("topic_latency", sick) == [(32.0, "topic:/img", "warn"), (33.0, "topic:/img", "warn")]
+    # Jitter must rise by half the period (50 ms at 10 Hz), not just by 20 ms.
+    busy = healthy[:30] + [(float(t), model(jitter=40.0), []) for t in range(30, 34)]
+    assert drive("topic_latency", busy) == []
+    bursty = healthy[:30] + [(float(t), model(jitter=90.0), []) for t in range(30, 34)]
+    assert drive("topic_latency", bursty) == [(32.0, "topic:/img", "warn"), (33.0, "topic:/img", "warn")]
+    drops = [(float(t), model(drops=0.2 if t < 3 else 4.0), []) for t in range(7)]
+    assert drive("topic_latency", drops) == [(5.0, "topic:/img", "warn"), (6.0, "topic:/img", "warn")]
 
 
 # --------------------------------------------------------------------------- process_resources
