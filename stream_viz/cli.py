@@ -42,8 +42,10 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("demo", help="start a simulated robot, inject a fault, diagnose it, show it")
     d.add_argument("--fault", choices=FAULTS, default="crash")
     d.add_argument("--target", default="/lidar_driver", metavar="NODE", help="node to fault")
-    d.add_argument("--at", type=float, default=12.0, metavar="SECONDS", help="inject this long after start")
-    d.add_argument("--duration", type=float, default=30.0, metavar="SECONDS", help="length of the run")
+    d.add_argument("--at", type=float, default=12.0, metavar="SECONDS",
+                   help="inject this long after the robot is up")
+    d.add_argument("--duration", type=float, default=30.0, metavar="SECONDS",
+                   help="length of the run, from when the robot is up")
     d.add_argument("--domain", type=int, default=42, metavar="ID", help="ROS_DOMAIN_ID of the demo robot")
     _add_outputs(d)
     d.set_defaults(func=_demo)

@@ -37,21 +37,26 @@ def run_demo(args: argparse.Namespace) -> dict[str, Any]:
     stop = threading.Event()
     install_stop_handlers(stop)
     env = demo_env(args.domain)
-    robot = Robot(env=env, fault=fault)  # checks the target against the robot's nodes
+    robot = Robot(env=env)
+    fault.check(robot.topology.node_names())
     # The monitor checks its outputs before any robot process starts: a bad path costs nothing.
     mon = Monitor(config, db=args.db, save=save, report=args.report, viewer=viewer, domain_id=args.domain)
     try:
         mon.progress.say(f"demo robot on ROS_DOMAIN_ID={args.domain}: {len(robot.topology.node_names())} "
-                         f"nodes; {args.fault} of {fault.target} at +{args.at:g} s; {args.duration:g} s run")
+                         f"nodes; {args.fault} of {fault.target} {args.at:g} s after it is up; "
+                         f"{args.duration:g} s run")
         robot.start()
-        robot.wait_ready(timeout=30.0)
-        deadline = robot.started_at + args.duration
+        robot.wait_ready(timeout=60.0)
+        # The fault is armed once the robot is up, so the monitor always sees a healthy baseline
+        # first, however slow start-up is on a loaded machine.
+        robot.inject(fault)
+        end = time.monotonic() + args.duration
 
         def note_injection() -> None:
             if mon.injected is None:
                 mon.injected = robot.injected() or None
 
-        mon.run(max(0.0, deadline - time.time()), stop, on_tick=note_injection)
+        mon.run(max(0.0, end - time.monotonic()), stop, on_tick=note_injection)
         note_injection()
     finally:
         try:
