@@ -58,7 +58,7 @@ def build_model(
         info = pids.get(fqn, PidInfo(None, "unknown"))
         proc = processes.get(info.pid) if info.pid is not None else None
         attrs = {"name": nr.name, "namespace": nr.namespace, "pid": info.pid, "pid_status": info.status,
-                 "alive": proc.alive if proc is not None else True}
+                 "alive": proc.alive if proc is not None else True, "instances": nr.instances}
         if info.status == "ambiguous":
             attrs["pid_candidates"] = list(info.candidates)
         add_member(G, make_id("node", fqn), **attrs)

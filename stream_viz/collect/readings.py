@@ -27,6 +27,7 @@ class NodeReading:
     fqn: str
     name: str
     namespace: str
+    instances: int = 1  # how many nodes DDS lists under this name (two launches of one node)
     services: dict[str, list[str]] = field(default_factory=dict)
     clients: dict[str, list[str]] = field(default_factory=dict)
     action_servers: dict[str, list[str]] = field(default_factory=dict)

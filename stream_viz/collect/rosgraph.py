@@ -113,6 +113,9 @@ def read_graph(node: Node, *, own: str, include_hidden: bool = False,
         fqn = node_fqn(ns, name)
         if fqn == own or name == UNKNOWN_NODE or not _keep(fqn, include_hidden):
             continue
+        if fqn in r.nodes:  # one name, several nodes: one member, counted (graph_anomalies alerts)
+            r.nodes[fqn].instances += 1
+            continue
         r.nodes[fqn] = NodeReading(fqn, name, ns)
     def topic_ok(t: str) -> bool:
         return _keep(t, include_hidden) and (include_internal or t not in INFRA_TOPICS)
