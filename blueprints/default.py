@@ -72,6 +72,9 @@ def build_blueprint(
         rrb.Vertical(graph, bottom, row_shares=[3, 2]),
         rrb.TimePanel(timeline=timeline, play_state="paused" if paused else "following",
                       state="collapsed" if collapse_panels else None),
+        # The graph needs the width; the blueprint and selection panels are one click away.
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
         collapse_panels=collapse_panels,
     )
 

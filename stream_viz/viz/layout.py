@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import networkx as nx
 
 from stream_viz.model.graph import flow_edges
+from stream_viz.model.ids import make_id
 
 COL = 200.0  # horizontal distance between layers
 ROW = 70.0  # vertical distance between rows
@@ -88,6 +89,10 @@ def flow_dag(G: nx.MultiDiGraph) -> nx.DiGraph:
     return D
 
 
+def _as_id(kind: str, name: str) -> str:
+    return name if name.startswith(f"{kind}:") else make_id(kind, name)
+
+
 def service_servers(G: nx.MultiDiGraph) -> dict[str, list[str]]:
     """Return service -> its server nodes, sorted.
 
@@ -95,14 +100,17 @@ def service_servers(G: nx.MultiDiGraph) -> dict[str, list[str]]:
     edge's target serves them) and from a service member's ``servers`` attribute.
     """
     out: dict[str, set[str]] = {}
+    # The collector names services and servers by ROS name ("/map/get", "/map_server"); member
+    # ids ("service:/map/get") are accepted too.
     for _u, v, key, data in G.edges(keys=True, data=True):
         if key == 0 and data.get("kind") == "send":
-            for s in data.get("services", ()) or ():
-                out.setdefault(s, set()).add(v)
+            for label, kind in (("services", "service"), ("actions", "action")):
+                for s in data.get(label, ()) or ():
+                    out.setdefault(_as_id(kind, s), set()).add(v)
     for m, data in G.nodes(data=True):
         if data.get("kind") in SIDE_KINDS:
             for node in data.get("servers", ()) or ():
-                out.setdefault(m, set()).add(node)
+                out.setdefault(m, set()).add(_as_id("node", node))
     return {s: sorted(n for n in nodes if n in G) for s, nodes in out.items()}
 
 

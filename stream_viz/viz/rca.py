@@ -26,9 +26,12 @@ def _radius(member: str) -> float:
 
 def subgraph_arrays(iteration: Mapping[str, Any], layout: Layout) -> dict[str, list]:
     """Return the plain arrays of the ``/rca/subgraph`` overlay: G_j red, W_j-only yellow, the
-    alerted member dark red; members without a position (not in G_0) are left out."""
+    alerted member dark red; members without a position (not in G_0) are left out. A watchlist
+    covering most of the graph (the ``auto``/``all`` modes) is not drawn: it would carpet it."""
     sub = list(dict.fromkeys(iteration.get("subgraph", [])))
     watch = [m for m in dict.fromkeys(iteration.get("watchlist", [])) if m not in sub]
+    if len(watch) > 0.5 * len(layout.pos):
+        watch = []
     alert = iteration.get("alert")
     ids = [m for m in [*sub, *watch] if m in layout.pos]
     colors = [style.ALERT_COLOR if m == alert else

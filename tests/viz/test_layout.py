@@ -83,3 +83,25 @@ def test_tree_layout_parent_centred_over_children():
     assert pos["node:/a"] == (0.0, 200.0) and pos["node:/b"] == (10.0, 200.0)
     assert pos["process:1"] == (5.0, 100.0) and pos["process:2"] == (20.0, 100.0)
     assert pos[ROOT] == (12.5, 0.0)
+
+
+def test_watchlist_overlay_is_drawn_only_when_it_is_a_real_subset():
+    from stream_viz.viz.layout import Layout
+    from stream_viz.viz.rca import subgraph_arrays
+
+    pos = {f"node:/n{i}": (float(i), 0.0) for i in range(6)}
+    layout = Layout(layer={}, row={}, pos=pos, loose=set())
+    it = {"j": 1, "t": 0.0, "subgraph": ["node:/n0"], "edges": [], "alert": "node:/n0",
+          "watchlist": ["node:/n1", "node:/n2"]}
+    assert subgraph_arrays(it, layout)["ids"] == ["node:/n0", "node:/n1", "node:/n2"]
+    it["watchlist"] = sorted(pos)  # the auto mode watches everything: not drawn
+    assert subgraph_arrays(it, layout)["ids"] == ["node:/n0"]
+
+
+def test_services_named_as_the_collector_names_them_sit_beside_their_server():
+    G = new_graph()
+    for m in ("node:/planner", "node:/map_server", "service:/map_server/get_map"):
+        add_member(G, m)
+    G.nodes["service:/map_server/get_map"]["servers"] = ["/map_server"]
+    add_flow_edge(G, "node:/planner", "node:/map_server", "send", services=["/map_server/get_map"])
+    assert service_servers(G) == {"service:/map_server/get_map": ["node:/map_server"]}
