@@ -1,0 +1,134 @@
+"""Plots of the evaluation (run in the peer venv, which has matplotlib): summary.json → eval_*.png."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
+MAIN = [
+    "stream-viz (live)",
+    "ours both/trajectory",
+    "ours downstream/trajectory",
+    "ours upstream/trajectory",
+    "ours both/pagerank",
+    "ours both/hypothesis",
+    "ours both/count",
+    "rate monitor + first alert",
+    "BARO",
+    "n-sigma",
+    "ε-Diagnosis",
+    "PyRCA-HT",
+    "PyRCA-RW",
+]
+
+
+def mean(xs):
+    xs = list(xs)
+    return sum(xs) / len(xs) if xs else float("nan")
+
+
+def main(summary_path: str, out_dir: str) -> int:
+    s = json.loads(Path(summary_path).read_text())
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = s["rows"]
+    demo = [r for r in rows if r["system"] == "demo"]
+    methods = [m for m in MAIN if any(r["method"] == m for r in demo)]
+
+    # accuracy per method on the demo robot
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    w = 0.2
+    for i, (key, level) in enumerate(
+        [("AC@1", "strict"), ("AC@3", "strict"), ("AC@1", "process"), ("Avg@5", "strict")]
+    ):
+        vals = [mean(r[key] for r in demo if r["method"] == m and r["level"] == level) for m in methods]
+        ax.bar([j + (i - 1.5) * w for j in range(len(methods))], vals, w, label=f"{key} {level}")
+    ax.set_xticks(range(len(methods)), methods, rotation=35, ha="right", fontsize=8)
+    ax.set_ylim(0, 1.05)
+    ax.axhline(0.9, color="grey", lw=0.8, ls="--")
+    ax.set_title("Root-cause accuracy on the demo robot (same runs for every method)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "eval_accuracy.png", dpi=110)
+    plt.close(fig)
+
+    # AC@1 (strict) per fault kind
+    faults = sorted({r["fault"] for r in demo})
+    pick = [
+        m
+        for m in ["stream-viz (live)", "rate monitor + first alert", "BARO", "PyRCA-HT", "n-sigma"]
+        if m in methods
+    ]
+    fig, ax = plt.subplots(figsize=(10, 4))
+    w = 0.8 / max(1, len(pick))
+    for i, m in enumerate(pick):
+        vals = [
+            mean(r["AC@1"] for r in demo if r["method"] == m and r["fault"] == f and r["level"] == "strict")
+            for f in faults
+        ]
+        ax.bar([j + (i - (len(pick) - 1) / 2) * w for j in range(len(faults))], vals, w, label=m)
+    ax.set_xticks(range(len(faults)), faults)
+    ax.set_ylim(0, 1.05)
+    ax.set_title("AC@1 (strict) per fault kind, demo robot")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "eval_per_fault.png", dpi=110)
+    plt.close(fig)
+
+    # detection latency per fault kind
+    lat = [x for x in s["latency"] if x["system"] == "demo"]
+    faults = sorted({x["fault"] for x in lat})
+    fig, ax = plt.subplots(figsize=(10, 4))
+    series = [
+        ("first_alert", "first alert"),
+        ("top1_strict", "ours: target ranked first"),
+        ("top1_process", "ours: target's process first"),
+        ("baseline_first_flag", "rate monitor: first flag"),
+    ]
+    w = 0.2
+    for i, (key, label) in enumerate(series):
+        vals = [mean(x[key] for x in lat if x["fault"] == f and x[key] is not None) for f in faults]
+        ax.bar([j + (i - 1.5) * w for j in range(len(faults))], vals, w, label=label)
+    ax.set_xticks(range(len(faults)), faults)
+    ax.set_ylabel("s after injection (missing bar: never)")
+    ax.axhline(3, color="grey", lw=0.8, ls="--")
+    ax.set_title("Detection latency, demo robot")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "eval_latency.png", dpi=110)
+    plt.close(fig)
+
+    # accuracy against system size
+    systems = sorted(
+        {r["system"] for r in rows}, key=lambda x: (x != "demo", int(x[3:]) if x != "demo" else 0)
+    )
+    if len(systems) > 1:
+        fig, ax = plt.subplots(figsize=(7, 4))
+        for m in [m for m in MAIN if any(r["method"] == m for r in rows)][:1] + pick[1:]:
+            vals = [
+                mean(
+                    r["AC@1"]
+                    for r in rows
+                    if r["method"] == m and r["system"] == sy and r["level"] == "strict"
+                )
+                for sy in systems
+            ]
+            ax.plot(systems, vals, marker="o", label=m)
+        ax.set_ylim(0, 1.05)
+        ax.set_ylabel("AC@1 (strict)")
+        ax.set_title("Accuracy against system size")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(out / "eval_size.png", dpi=110)
+        plt.close(fig)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(*sys.argv[1:3]))

@@ -1,0 +1,190 @@
+"""One live evaluation run: a system, an optional fault, the in-process monitor, everything recorded.
+
+Run as ``python -m bench.eval.run_one --spec '<json>' --out DIR`` (one process per run, so CPU
+time and peak memory are this run's alone). Writes ``DIR/run.json`` (rankings of every policy ×
+method, the baseline, latencies, cost), ``DIR/metrics.csv`` and ``DIR/meta.json`` for the peers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import resource
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+
+from bench.eval.baseline import culprits, flag_times
+from bench.eval.export import SKIP_TOPICS, service_name, wide_table
+from bench.eval.systems import expand_map, system_topology, truth_sets
+
+
+def claim_domain() -> int:
+    """A ROS_DOMAIN_ID no test run or other benchmark holds (the tests' lock files)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
+    from rosenv import claim_domain as claim
+
+    return claim()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--spec", required=True, help="JSON: system, fault, target, warmup, post, seed")
+    ap.add_argument("--out", required=True, type=Path)
+    args = ap.parse_args(argv)
+    spec = json.loads(args.spec)
+    args.out.mkdir(parents=True, exist_ok=True)
+    record = run(spec, args.out)
+    (args.out / "run.json").write_text(json.dumps(record, indent=1))
+    return 0
+
+
+def run(spec: dict, out: Path) -> dict:
+    domain = claim_domain()
+    os.environ["ROS_DOMAIN_ID"] = str(domain)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+    from stream_viz.config import load_config
+    from stream_viz.demo.robot import FaultSpec, Robot
+    from stream_viz.model.theta import SCHEMAS
+    from stream_viz.monitor import Monitor
+    from stream_viz.rca.engine import analyze
+    from stream_viz.rca.settings import METHODS, POLICIES
+
+    topo = system_topology(spec["system"], spec.get("seed", 0))
+    warmup, post = float(spec.get("warmup", 20.0)), float(spec.get("post", 25.0))
+    fault = spec.get("fault")
+    config = load_config(None)
+    tmp = Path(tempfile.mkdtemp(prefix="stream_eval_"))
+    me = psutil.Process()
+    mon = Monitor(config, db=tmp / "alerts.sqlite", viewer="none", domain_id=domain)
+    robot = Robot(env=dict(os.environ), topology=topo, run_dir=tmp / "robot")
+    ticks: list[dict] = []
+    t_start = time.time()
+    try:
+        robot.start()
+        robot.wait_ready(timeout=120.0)
+        t_ready = time.time()
+        if fault:
+            robot.inject(FaultSpec(fault, spec["target"], warmup))
+
+        def on_tick() -> None:
+            if mon.injected is None and fault:
+                mon.injected = robot.injected() or None
+            top = mon.engine.result().root_causes
+            ticks.append(
+                {
+                    "t": time.time(),
+                    "top": [rc.member for rc in top[:3]],
+                    "alerts": len(mon.alerts),
+                    "rss": me.memory_info().rss,
+                }
+            )
+
+        cpu0, wall0 = me.cpu_times(), time.monotonic()
+        mon.run(warmup + post, threading.Event(), on_tick=on_tick)
+        cpu1, wall1 = me.cpu_times(), time.monotonic()
+        if fault and mon.injected is None:
+            mon.injected = robot.injected() or None
+        pids = {f"process:{pid}": g for g, pid in robot.pids().items()}
+        alive = robot.alive()
+    finally:
+        try:
+            report = mon.close()
+        finally:
+            robot.stop()
+    injected = dict(mon.injected or {})
+    t_inj = injected.get("t")
+    expand = expand_map(topo, pids)
+    strict, proc = truth_sets(topo, spec.get("target")) if fault else (set(), set())
+
+    # Our rankings: live (what the user saw) and offline re-ranks of the same alerts.
+    rankings = {"live": [rc["member"] for rc in report["root_causes"]]}
+    evidence = {m: 1.0 for m in getattr(mon, "_evidence", {})}
+    for policy in POLICIES:
+        for method in METHODS:
+            s = dataclasses.replace(config.rca, policy=policy, method=method, top_k=30)
+            t0 = time.perf_counter()
+            res = analyze(mon.seen, mon.alerts, s, set(mon.external_watch), evidence or None)
+            rankings[f"{policy}/{method}"] = [rc.member for rc in res.root_causes]
+            rankings.setdefault("_cost_ms", {})[f"{policy}/{method}"] = 1e3 * (time.perf_counter() - t0)
+
+    # Metric series the monitor saw → peers' table; rule-based baseline from topic rates.
+    hist = mon.history
+    members = [m for m in mon.seen.nodes if m in hist]
+    series = {m: (hist.times(m), hist.values(m)) for m in members}
+    times, columns, matrix, services = wide_table(series, SCHEMAS, pids)
+    _write_csv(out / "metrics.csv", times, columns, matrix)
+    rate_j = SCHEMAS["topic"].index("rate_hz")
+    rates = {
+        m: (t, v[:, rate_j])
+        for m, (t, v) in series.items()
+        if m.startswith("topic:") and m not in SKIP_TOPICS and len(t)
+    }
+    t_end = float(times[-1]) if len(times) else time.time()
+    flags = flag_times(rates, end=t_end)
+    publishers = {m: ns for m, ns in expand.items() if m.startswith("topic:")}
+    rankings["baseline"] = [list(x) for x in culprits(flags, publishers)]
+
+    svc_edges = sorted(
+        {(service_name(a, pids), service_name(b, pids)) for a, b, _ in topo.edges()}
+        | {(service_name(p, pids), service_name(n, pids)) for p, g in pids.items() for n in expand.get(p, ())}
+    )
+    meta = {"inject_time": t_inj, "services": services, "service_edges": svc_edges}
+    (out / "meta.json").write_text(json.dumps(meta))
+
+    alerts = [
+        {"member": a.member, "plugin": a.plugin, "t": a.t, "severity": a.severity, "message": a.message[:160]}
+        for a in mon.alerts
+    ]
+    after = [a for a in alerts if t_inj is not None and a["t"] >= t_inj]
+    cpu = (cpu1.user + cpu1.system) - (cpu0.user + cpu0.system)
+    return {
+        "spec": spec,
+        "domain": domain,
+        "nodes": len(topo.node_names()),
+        "t_start": t_start,
+        "t_ready": t_ready,
+        "ready_s": t_ready - t_start,
+        "injected": injected,
+        "truth_strict": sorted(strict),
+        "truth_process": sorted(proc),
+        "expand": expand,
+        "rankings": rankings,
+        "ticks": ticks,
+        "alerts": alerts,
+        "baseline_flags": flags,
+        "first_alert_s": (min(a["t"] for a in after) - t_inj) if after else None,
+        "baseline_first_flag_s": (
+            min((t for t in flags.values() if t >= t_inj), default=None) - t_inj
+            if t_inj is not None and any(t >= t_inj for t in flags.values())
+            else None
+        ),
+        "alerts_before_injection": sum(1 for a in alerts if t_inj is None or a["t"] < t_inj),
+        "cpu_s": cpu,
+        "wall_s": wall1 - wall0,
+        "cpu_share": cpu / (wall1 - wall0),
+        "samples": mon.samples,
+        "peak_rss_mb": max((x["rss"] for x in ticks), default=0) / 2**20,
+        "ru_maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "loadavg": os.getloadavg(),
+        "alive_at_end": alive,
+    }
+
+
+def _write_csv(path: Path, times: np.ndarray, columns: list[str], matrix: np.ndarray) -> None:
+    with open(path, "w") as f:
+        f.write(",".join(["time", *columns]) + "\n")
+        for i, t in enumerate(times):
+            f.write(",".join([f"{t:.3f}", *(f"{x:.6g}" for x in matrix[i])]) + "\n")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

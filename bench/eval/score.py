@@ -1,0 +1,128 @@
+"""Scores and tables from the recorded runs (pure: plain dicts in, rows and markdown out)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+
+from bench.eval.metrics import aggregate, hit_at, scores, to_blocks
+
+OURS_LIVE = "stream-viz (live)"
+BASELINE = "rate monitor + first alert"
+PEERS = ("BARO", "n-sigma", "ε-Diagnosis", "PyRCA-HT", "PyRCA-RW")
+
+
+def method_rankings(run: Mapping, peers: Mapping | None) -> dict[str, list]:
+    """Method name → ranking (members or tuples of tied members), ours, baseline and peers."""
+    r = run["rankings"]
+    out: dict[str, list] = {OURS_LIVE: r["live"]}
+    out |= {f"ours {k}": v for k, v in r.items() if "/" in k}
+    out[BASELINE] = [tuple(x) for x in r["baseline"]]
+    for name, res in (peers or {}).items():
+        if isinstance(res, dict) and "ranking" in res:
+            out[name] = res["ranking"]
+    return out
+
+
+def score_run(run: Mapping, peers: Mapping | None) -> list[dict]:
+    """One row per (method, level) for a faulty run; empty for a fault-free run."""
+    if not run["spec"].get("fault"):
+        return []
+    spec = run["spec"]
+    rows = []
+    for method, ranking in method_rankings(run, peers).items():
+        blocks = to_blocks(ranking, run["expand"])
+        for level in ("strict", "process"):
+            truth = set(run[f"truth_{level}"])
+            rows.append(
+                {
+                    "system": spec["system"],
+                    "fault": spec["fault"],
+                    "target": spec["target"],
+                    "rep": spec.get("rep", 0),
+                    "method": method,
+                    "level": level,
+                    **scores(blocks, truth),
+                }
+            )
+    return rows
+
+
+def failed_peers(peers_by_run: Iterable[Mapping]) -> dict[str, str]:
+    """Peer → the first error it gave (peers that failed on some run)."""
+    out: dict[str, str] = {}
+    for p in peers_by_run:
+        for name, res in (p or {}).items():
+            if isinstance(res, dict) and "error" in res:
+                out.setdefault(name, res["error"])
+    return out
+
+
+def latencies(run: Mapping) -> dict[str, float | None]:
+    """Seconds from injection to the first alert, and to the truth ranked first (live ticks)."""
+    t_inj = run["injected"].get("t")
+    out: dict[str, float | None] = {
+        "first_alert": run.get("first_alert_s"),
+        "baseline_first_flag": run.get("baseline_first_flag_s"),
+    }
+    for level in ("strict", "process"):
+        truth = set(run[f"truth_{level}"])
+        out[f"top1_{level}"] = None
+        if t_inj is None:
+            continue
+        for tick in run["ticks"]:
+            if tick["t"] >= t_inj and tick["top"]:
+                p = hit_at(to_blocks(tick["top"][:1], run["expand"]), truth, 1)
+                if (p == 1.0) if level == "strict" else (p > 0):
+                    out[f"top1_{level}"] = tick["t"] - t_inj
+                    break
+    return out
+
+
+def accuracy_table(rows: Sequence[Mapping], methods: Sequence[str], by: str | None = None) -> str:
+    """Markdown: per method (and per ``by`` value), AC@1 / AC@3 / Avg@5 strict and process-level."""
+    keys = sorted({r[by] for r in rows}) if by else [None]
+    head = (
+        ["method"]
+        + ([by] if by else [])
+        + ["n", "AC@1", "AC@3", "Avg@5", "AC@1 proc", "AC@3 proc", "Avg@5 proc"]
+    )
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for key in keys:
+        for m in methods:
+            sel = [r for r in rows if r["method"] == m and (by is None or r[by] == key)]
+            if not sel:
+                continue
+            s = aggregate(r for r in sel if r["level"] == "strict")
+            p = aggregate(r for r in sel if r["level"] == "process")
+            cells = (
+                [m]
+                + ([str(key)] if by else [])
+                + [str(s["n"])]
+                + [f"{x:.2f}" for x in (s["AC@1"], s["AC@3"], s["Avg@5"], p["AC@1"], p["AC@3"], p["Avg@5"])]
+            )
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def fault_matrix(
+    rows: Sequence[Mapping], methods: Sequence[str], level: str = "strict", key: str = "AC@1"
+) -> str:
+    """Markdown: methods × fault kinds, mean ``key`` at ``level``."""
+    faults = sorted({r["fault"] for r in rows})
+    lines = ["| method | " + " | ".join(faults) + " | all |", "|---|" + "---|" * (len(faults) + 1)]
+    for m in methods:
+        cells = []
+        for f in [*faults, None]:
+            sel = [
+                r[key]
+                for r in rows
+                if r["method"] == m and r["level"] == level and (f is None or r["fault"] == f)
+            ]
+            cells.append(f"{sum(sel) / len(sel):.2f}" if sel else "–")
+        lines.append(f"| {m} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def fmt(x: float | None, nd: int = 1) -> str:
+    """A number for a table; ``–`` when missing."""
+    return "–" if x is None else f"{x:.{nd}f}"

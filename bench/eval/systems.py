@@ -1,0 +1,56 @@
+"""The systems under test and their ground truth: which nodes a member stands for, true root causes."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from stream_viz.demo.topology import DEMO, Topology
+from stream_viz.model.ids import make_id
+
+
+def system_topology(name: str, seed: int = 0) -> Topology:
+    """``demo`` or ``gen<N>`` (a generated layered system of N nodes, seeded)."""
+    if name == "demo":
+        return DEMO
+    if name.startswith("gen"):
+        from stream_viz.demo.generated import generate
+
+        return generate(int(name[3:]), seed=seed)
+    raise ValueError(f"unknown system {name!r}: demo or gen<N>")
+
+
+def expand_map(topo: Topology, process_names: Mapping[str, str]) -> dict[str, list[str]]:
+    """Member → the nodes it stands for: a node itself, a topic its publishers, a process its nodes."""
+    out: dict[str, list[str]] = {make_id("node", n): [make_id("node", n)] for n in topo.node_names()}
+    for src, dst, kind in sorted(topo.edges()):
+        if kind == "pub":
+            out.setdefault(dst, []).append(src)
+    for proc, group in process_names.items():
+        out[proc] = [make_id("node", n.name) for n in topo.group(group).nodes]
+    return out
+
+
+def truth_sets(topo: Topology, target: str) -> tuple[set[str], set[str]]:
+    """(strict, process-level) truth: the target node; every node of the target's process."""
+    target = "/" + target.removeprefix("node:").lstrip("/")
+    group = topo.group(topo.group_of(target))
+    return {make_id("node", target)}, {make_id("node", n.name) for n in group.nodes}
+
+
+def pick_targets(topo: Topology, k: int) -> list[str]:
+    """``k`` nodes with the most downstream nodes (faults there propagate; the hard case)."""
+    succ: dict[str, set[str]] = {}
+    for src, dst, _ in topo.edges():
+        succ.setdefault(src, set()).add(dst)
+
+    def downstream(n: str) -> int:
+        seen, stack = {n}, [n]
+        while stack:
+            for x in succ.get(stack.pop(), ()):
+                if x not in seen:
+                    seen.add(x)
+                    stack.append(x)
+        return sum(1 for x in seen if x.startswith("node:")) - 1
+
+    nodes = [make_id("node", n) for n in topo.node_names() if n != topo.diag_monitor()]
+    return sorted(nodes, key=lambda n: (-downstream(n), n))[:k]
