@@ -40,7 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
     m.set_defaults(func=_monitor)
 
     d = sub.add_parser("demo", help="start a simulated robot, inject a fault, diagnose it, show it")
-    d.add_argument("--fault", choices=FAULTS, default="crash")
+    d.add_argument("--fault", choices=(*FAULTS, "none"), default="crash",
+                   help="what to inject ('none': a healthy run, to see what a calm robot looks like)")
     d.add_argument("--target", default="/lidar_driver", metavar="NODE", help="node to fault")
     d.add_argument("--at", type=float, default=12.0, metavar="SECONDS",
                    help="inject this long after the robot is up")

@@ -31,25 +31,27 @@ def demo_env(domain: int) -> dict[str, str]:
 def run_demo(args: argparse.Namespace) -> dict[str, Any]:
     """Start the robot, monitor it with a fault injected at ``--at`` s, print the diagnosis."""
     config = load_config(args.config)
-    fault = FaultSpec(args.fault, args.target, args.at)  # validates fault and target first
+    fault = None if args.fault == "none" else FaultSpec(args.fault, args.target, args.at)
     save = args.save or DEFAULT_RECORDING
     viewer = args.viewer or default_viewer()
     stop = threading.Event()
     install_stop_handlers(stop)
     env = demo_env(args.domain)
     robot = Robot(env=env)
-    fault.check(robot.topology.node_names())
+    if fault is not None:
+        fault.check(robot.topology.node_names())
     # The monitor checks its outputs before any robot process starts: a bad path costs nothing.
     mon = Monitor(config, db=args.db, save=save, report=args.report, viewer=viewer, domain_id=args.domain)
     try:
-        mon.progress.say(f"demo robot on ROS_DOMAIN_ID={args.domain}: {len(robot.topology.node_names())} "
-                         f"nodes; {args.fault} of {fault.target} {args.at:g} s after it is up; "
-                         f"{args.duration:g} s run")
+        what = f"{fault.fault} of {fault.target} {fault.at:g} s after it is up" if fault else "no fault"
+        mon.progress.say(f"demo robot on ROS_DOMAIN_ID={args.domain}: "
+                         f"{len(robot.topology.node_names())} nodes; {what}; {args.duration:g} s run")
         robot.start()
         robot.wait_ready(timeout=60.0)
         # The fault is armed once the robot is up, so the monitor always sees a healthy baseline
         # first, however slow start-up is on a loaded machine.
-        robot.inject(fault)
+        if fault is not None:
+            robot.inject(fault)
         end = time.monotonic() + args.duration
 
         def note_injection() -> None:
