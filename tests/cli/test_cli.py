@@ -179,3 +179,19 @@ def test_bad_arguments_give_one_error_line_and_leave_nothing_running(ros_domain,
     assert len(lines) == 1 and message in lines[0], out.stderr
     assert "Traceback" not in out.stderr
     assert leftovers(ros_domain) == []
+
+
+@pytest.mark.ros
+def test_snapshot_prints_the_model_as_json_and_text(children):
+    talker = children.python(TALKER, name="talker")
+    out = run_cli(["snapshot", "--json", "--settle", "3"], children.env, timeout=60)
+    assert out.returncode == 0, out.stderr
+    data = json.loads(out.stdout)
+    members = {m["id"]: m for m in data["members"]}
+    assert members["node:/talker"]["pid"] == talker.pid == members["node:/listener"]["pid"]
+    assert f"process:{talker.pid}" in members
+    edges = {(e["src"], e["dst"], e["kind"]) for e in data["edges"]}
+    assert {("node:/talker", "topic:/chatter", "pub"), ("topic:/chatter", "node:/listener", "sub"),
+            (f"process:{talker.pid}", "node:/talker", "tree")} <= edges
+    text = run_cli(["snapshot", "--settle", "3"], children.env, timeout=60)
+    assert text.returncode == 0 and "/talker" in text.stdout and "/chatter" in text.stdout
