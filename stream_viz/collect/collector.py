@@ -8,9 +8,13 @@ from __future__ import annotations
 
 import os
 import time
+from typing import Any
 
 import rclpy
 from rclpy.context import Context
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 
 from stream_viz.collect.build import build_model
 from stream_viz.collect.fastdds import decode_gid
@@ -25,7 +29,33 @@ from stream_viz.model.graph import new_graph
 from stream_viz.model.ids import make_id, node_fqn
 from stream_viz.records import Event, Sample
 
-__all__ = ["Collector", "build_model"]
+__all__ = ["Collector", "ObserverNode", "build_model"]
+
+
+class _NoPublisher:
+    """Stands in for rclpy's ``/parameter_events`` publisher: the events of our own parameters
+    (declared by rclpy itself at start-up) are dropped instead of published on the system's topic."""
+
+    def publish(self, msg: object) -> None:
+        pass
+
+
+class ObserverNode(Node):
+    """An rclpy node that can only subscribe and read the graph.
+
+    A plain rclpy Node always holds a ``/parameter_events`` publisher (and publishes on it while
+    it declares ``use_sim_time``) and serves ``~/get_type_description``; an observer must do
+    neither. No /rosout publisher, no parameter or logger services either.
+    """
+
+    def __init__(self, name: str, *, context: Context) -> None:
+        super().__init__(name, context=context, enable_rosout=False, start_parameter_services=False,
+                         parameter_overrides=[Parameter(START_TYPE_DESCRIPTION_SERVICE_PARAM, value=False)])
+
+    def create_publisher(self, msg_type: Any, topic: str, *args: Any, **kwargs: Any) -> Any:
+        if topic == "/parameter_events" and not hasattr(self, "_type_description_service"):
+            return _NoPublisher()  # rclpy's own, asked for while the node is being constructed
+        raise CollectError(f"the observer node never publishes (asked to publish on {topic})")
 
 
 class Collector:
@@ -76,8 +106,7 @@ class Collector:
         try:
             rclpy.init(args=[], context=ctx, domain_id=self.domain_id)
             self._ctx = ctx
-            self.node = rclpy.create_node(self.name, context=ctx, enable_rosout=False,
-                                          start_parameter_services=False)
+            self.node = ObserverNode(self.name, context=ctx)
         except Exception as e:  # rclpy raises RCLError/RuntimeError kinds we cannot name portably
             self.close()
             raise CollectError(f"cannot start the ROS 2 observer on domain {self.domain_id}: {e}") from e

@@ -77,12 +77,12 @@ def report(path: Path) -> dict[str, Any]:
 
 
 def sample_times(rrd: Path) -> list[int]:
-    """Distinct ``time`` stamps (ns) logged under ``/system`` of a recording: one per sample logged."""
+    """Distinct ``time`` stamps (ns) under ``/metrics`` of a recording: every sample is logged there."""
     from rerun.chunk import RrdReader
 
     stamps: set[int] = set()
     for chunk in RrdReader(str(rrd)).stream():
-        if not chunk.entity_path.startswith("/system"):
+        if not chunk.entity_path.startswith("/metrics"):
             continue
         rb = chunk.to_record_batch()
         if "time" in rb.schema.names:
