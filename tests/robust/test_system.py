@@ -1,0 +1,219 @@
+"""A sick, churning, odd system: the real monitor keeps sampling and exits cleanly.
+
+Assertions are on "the monitor keeps producing samples and exits 0 with its outputs", never on
+timings (figures for the docs come from ``bench/bench_load.py``).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import sys
+
+import psutil
+import pytest
+from rosenv import wait_for
+
+from robust.common import TALKER, db_rows, monitor_cmd, report, run, sample_times, snapshot_has
+from stream_viz.collect.processes import ProcessSampler
+
+pytestmark = pytest.mark.ros
+
+CHURN = """
+import subprocess, sys, time, rclpy
+rclpy.init()
+host = rclpy.create_node("churn_host")
+SHORT = "import rclpy, time; rclpy.init(); n = rclpy.create_node(sys.argv[1]); time.sleep(0.4)"
+k, kids, nodes = 0, [], []
+end = time.monotonic() + float(sys.argv[1])
+while time.monotonic() < end:
+    k += 1
+    # A node appears and another vanishes every 0.1 s (600 per minute) in this process...
+    nodes.append(rclpy.create_node(f"flicker_{k}"))
+    if len(nodes) > 3:
+        nodes.pop(0).destroy_node()
+    # ...and a short-lived process with a node starts every 0.5 s (120 per minute).
+    if k % 5 == 0:
+        kids.append(subprocess.Popen([sys.executable, "-c", "import sys\\n" + SHORT, f"blink_{k}"]))
+    kids = [p for p in kids if p.poll() is None]
+    time.sleep(0.1)
+print("made", k, "nodes", flush=True)
+"""
+
+
+def test_churning_nodes_and_processes(children, tmp_path):
+    children.python(TALKER, name="talker")
+    children.python(CHURN, "25", name="churn")
+    rrd, rep, db = tmp_path / "m.rrd", tmp_path / "r.json", tmp_path / "a.sqlite"
+    out = run(monitor_cmd("--duration", "20", "--save", str(rrd), "--report", str(rep), "--db", str(db)),
+              children.env)
+    assert out.returncode == 0, out.stderr
+    assert "Traceback" not in out.stderr
+    r = report(rep)
+    ids = {m["id"] for m in r["members"]}
+    assert "node:/talker" in ids
+    flickers = {i for i in ids if i.startswith("node:/flicker_") or i.startswith("node:/blink_")}
+    assert len(flickers) >= 10, sorted(ids)  # it saw the churn (seen members are remembered)
+    assert len(sample_times(rrd)) >= 8  # sampled all along (one per ~1 s period)
+    assert len(db_rows(db, "SELECT id FROM snapshots")) >= 5  # the structure changed and was kept
+
+
+def test_a_process_that_exits_between_listing_and_reading(children):
+    """psutil raises NoSuchProcess mid-read: reported as gone, never raised (real processes)."""
+    p = children.run([sys.executable, "-c", "import time; time.sleep(60)"], name="short")
+    s = ProcessSampler()
+    first = s.sample([p.pid])
+    assert p.pid in first.processes
+    children.end(p, signal.SIGKILL)
+    second = s.sample([p.pid])  # listed (as a node's pid) but gone when read
+    assert p.pid in second.exited and p.pid not in second.processes
+    assert "exited" in second.errors[p.pid]
+    q = children.run([sys.executable, "-c", "pass"], name="gone")
+    q.wait(10)
+    third = ProcessSampler().sample([q.pid, 2**22 + 7])  # never tracked: ended / never existed
+    assert set(third.errors) == {q.pid, 2**22 + 7} and third.processes == {}
+
+
+OTHER_USER_NODE = """
+import os, contextvars, numpy, rclpy, rclpy.executors, rclpy.qos, rclpy.node, rclpy.timer
+from std_msgs.msg import String
+# Everything imported as root (the interpreter lives under /root, closed to others), then become
+# another user; the kernel also marks us non-dumpable. An observer without privileges may not
+# read our /proc entries (fds, io, environ).
+os.environ["ROS_LOG_DIR"] = "/tmp"
+os.setgroups([]); os.setgid(65534); os.setuid(65534)
+rclpy.init()
+n = rclpy.create_node("stranger")
+pub = n.create_publisher(String, "/stranger_out", 10)
+n.create_timer(0.2, lambda: pub.publish(String(data="x")))
+try:
+    rclpy.spin(n)
+except (KeyboardInterrupt, Exception):
+    pass
+"""
+
+
+def test_a_process_of_another_user_we_may_not_read(children, tmp_path):
+    if os.geteuid() != 0 or shutil.which("setpriv") is None:
+        pytest.skip("needs root and setpriv to run a node as another user and a monitor without privileges")
+    # Fast DDS shared memory does not cross users, nor (as found here) does LOCALHOST discovery:
+    # UDP and subnet discovery, on this test run's own domain id.
+    env = dict(children.env, FASTDDS_BUILTIN_TRANSPORTS="UDPv4", ROS_AUTOMATIC_DISCOVERY_RANGE="SUBNET")
+    script = tmp_path / "stranger.py"
+    script.write_text(OTHER_USER_NODE)
+    node = children.run([sys.executable, str(script)], name="stranger", env=env)
+    wait_for(lambda: psutil.Process(node.pid).uids().real == 65534, timeout=20, period=0.2)
+    rep, db = tmp_path / "r.json", tmp_path / "a.sqlite"
+    # The monitor as root without any capability: it cannot read another user's process.
+    cmd = ["setpriv", "--inh-caps=-all", "--bounding-set=-all", "--",
+           *monitor_cmd("--duration", "12", "--report", str(rep), "--db", str(db))]
+    out = run(cmd, env)
+    assert out.returncode == 0, out.stderr
+    assert "Traceback" not in out.stderr
+    r = report(rep)
+    assert "node:/stranger" in {m["id"] for m in r["members"]}
+    assert {"src": "node:/stranger", "dst": "topic:/stranger_out", "kind": "pub"} in r["edges"]
+    # What could not be read is recorded, named, with why.
+    denied = db_rows(db, "SELECT place, message FROM problems WHERE kind = 'unreadable'")
+    assert any(place == f"process:{node.pid}" and "access denied" in msg for place, msg in denied), denied
+
+
+HIDE = """
+import sys
+class _Hide:
+    # This monitor runs as if the package were not installed.
+    def find_spec(self, name, path=None, target=None):
+        if name == "test_msgs" or name.startswith("test_msgs."):
+            raise ModuleNotFoundError(f"No module named {name!r}", name=name)
+        return None
+sys.meta_path.insert(0, _Hide())
+"""
+
+ODD_TYPE = """
+import rclpy
+from test_msgs.msg import BasicTypes
+rclpy.init()
+n = rclpy.create_node("odd_talker")
+pub = n.create_publisher(BasicTypes, "/odd", 10)
+n.create_timer(0.1, lambda: pub.publish(BasicTypes(int32_value=7)))
+try:
+    rclpy.spin(n)
+except (KeyboardInterrupt, Exception):
+    pass
+"""
+
+
+def test_a_topic_whose_type_package_is_not_installed(children, tmp_path):
+    pytest.importorskip("test_msgs.msg", reason="the publisher needs ros-jazzy-test-msgs")
+    site = tmp_path / "hide"
+    site.mkdir()
+    (site / "sitecustomize.py").write_text(HIDE)
+    children.python(ODD_TYPE, name="odd")
+    env = dict(children.env, PYTHONPATH=str(site))
+    check = run([sys.executable, "-c", "import test_msgs.msg"], env)
+    assert check.returncode != 0 and "test_msgs" in check.stderr  # hidden from the monitor indeed
+    rep, db = tmp_path / "r.json", tmp_path / "a.sqlite"
+    out = run(monitor_cmd("--duration", "8", "--report", str(rep), "--db", str(db)), env)
+    assert out.returncode == 0, out.stderr
+    r = report(rep)
+    assert {"src": "node:/odd_talker", "dst": "topic:/odd", "kind": "pub"} in r["edges"]
+    denied = dict(db_rows(db, "SELECT place, message FROM problems WHERE kind = 'unreadable'"))
+    assert "test_msgs/msg/BasicTypes is not installed" in denied.get("topic:/odd", ""), denied
+
+
+FAST = """
+import sys, time, rclpy
+from std_msgs.msg import UInt64
+rclpy.init()
+n = rclpy.create_node("fast_talker")
+pub = n.create_publisher(UInt64, "/fast", 100)
+count = [0]
+def tick():
+    count[0] += 1
+    pub.publish(UInt64(data=count[0]))
+n.create_timer(1e-4, tick)  # 10 kHz asked for
+t0 = time.monotonic()
+try:
+    while rclpy.ok():
+        rclpy.spin_once(n, timeout_sec=0.01)
+        if time.monotonic() - t0 >= 5:
+            print(f"rate {count[0] / (time.monotonic() - t0):.0f}", flush=True)
+            count[0], t0 = 0, time.monotonic()
+except (KeyboardInterrupt, Exception):
+    pass
+"""
+
+BIG = """
+import rclpy
+from sensor_msgs.msg import Image
+rclpy.init()
+n = rclpy.create_node("big_camera")
+pub = n.create_publisher(Image, "/big_image", 2)
+img = Image(height=1080, width=1920, encoding="rgb8", step=1920 * 3)
+img.data = bytes(1920 * 1080 * 3)  # 6.2 MB per message
+n.create_timer(0.2, lambda: pub.publish(img))
+try:
+    rclpy.spin(n)
+except (KeyboardInterrupt, Exception):
+    pass
+"""
+
+
+def test_a_very_fast_topic_and_very_large_messages(children, tmp_path):
+    fast = children.python(FAST, name="fast")
+    children.python(BIG, name="big")
+    rrd, rep, db = tmp_path / "m.rrd", tmp_path / "r.json", tmp_path / "a.sqlite"
+    cmd = monitor_cmd("--duration", "16", "--save", str(rrd), "--report", str(rep), "--db", str(db))
+    p = children.run(cmd, name="monitor")
+    wait_for(lambda: p.poll() is not None, timeout=120, period=0.5)
+    log = (tmp_path / "monitor_2.log").read_text()
+    assert p.returncode == 0, log
+    ids = {m["id"] for m in report(rep)["members"]}
+    assert {"topic:/fast", "topic:/big_image", "node:/fast_talker", "node:/big_camera"} <= ids
+    assert len(sample_times(rrd)) >= 8  # kept sampling under the load
+    assert snapshot_has(db, "topic:/big_image")
+    rates = [float(ln.split()[1]) for ln in (tmp_path / "fast_0.log").read_text().splitlines()
+             if ln.startswith("rate ")]
+    print(f"\\n/fast publisher reached {rates} Hz (10 kHz asked for)")
+    assert fast.poll() is None
