@@ -252,6 +252,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--post", type=float, default=25.0, help="s monitored after the injection")
     ap.add_argument("--sizes", default="20,100", help="generated system sizes for --full (e.g. 20,100,500)")
     ap.add_argument("--reps", type=int, default=3, help="repetitions of the demo runs in --full")
+    ap.add_argument("--only", help="run only these systems (comma list, e.g. demo or gen100)")
     ap.add_argument("--report-only", action="store_true", help="rescore what is in --out")
     ap.add_argument("--plots", type=Path, help="write eval_*.png here (peer venv matplotlib)")
     args = ap.parse_args(argv)
@@ -260,7 +261,10 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if not args.report_only:
         sizes = [int(x) for x in args.sizes.split(",") if x]
-        execute(plan(suite, args.warmup, args.post, sizes, args.reps), out)
+        specs = plan(suite, args.warmup, args.post, sizes, args.reps)
+        if args.only:
+            specs = [s for s in specs if s["system"] in args.only.split(",")]
+        execute(specs, out)
     print(report(out))
     if args.plots and PEER_PY.exists():
         subprocess.run(

@@ -12,6 +12,7 @@ import dataclasses
 import json
 import os
 import resource
+import shutil
 import sys
 import tempfile
 import threading
@@ -23,7 +24,7 @@ import psutil
 
 from bench.eval.baseline import culprits, flag_times
 from bench.eval.export import SKIP_TOPICS, service_name, wide_table
-from bench.eval.systems import expand_map, system_topology, truth_sets
+from bench.eval.systems import expand_map, sink_watchlist, system_topology, truth_sets
 
 
 def claim_domain() -> int:
@@ -67,6 +68,7 @@ def run(spec: dict, out: Path) -> dict:
     mon = Monitor(config, db=tmp / "alerts.sqlite", viewer="none", domain_id=domain)
     robot = Robot(env=dict(os.environ), topology=topo, run_dir=tmp / "robot")
     ticks: list[dict] = []
+    anomalous: set[str] = set()  # members process monitoring flagged at some tick
     t_start = time.time()
     try:
         robot.start()
@@ -78,6 +80,7 @@ def run(spec: dict, out: Path) -> dict:
         def on_tick() -> None:
             if mon.injected is None and fault:
                 mon.injected = robot.injected() or None
+            anomalous.update(getattr(mon, "_evidence", {}))
             top = mon.engine.result().root_causes
             ticks.append(
                 {
@@ -100,6 +103,10 @@ def run(spec: dict, out: Path) -> dict:
             report = mon.close()
         finally:
             robot.stop()
+    # Keep the alert database beside the results (`stream-viz analyze --db` reruns the RCA on it).
+    for f in tmp.glob("alerts.sqlite*"):
+        shutil.move(str(f), out / f.name)
+    shutil.rmtree(tmp, ignore_errors=True)
     injected = dict(mon.injected or {})
     t_inj = injected.get("t")
     expand = expand_map(topo, pids)
@@ -108,6 +115,7 @@ def run(spec: dict, out: Path) -> dict:
     # Our rankings: live (what the user saw) and offline re-ranks of the same alerts.
     rankings = {"live": [rc["member"] for rc in report["root_causes"]]}
     evidence = {m: 1.0 for m in getattr(mon, "_evidence", {})}
+    w0 = {m for m, k in mon.seen.nodes(data="kind") if k == "process"} | anomalous | sink_watchlist(topo)
     for policy in POLICIES:
         for method in METHODS:
             s = dataclasses.replace(config.rca, policy=policy, method=method, top_k=30)
@@ -115,6 +123,11 @@ def run(spec: dict, out: Path) -> dict:
             res = analyze(mon.seen, mon.alerts, s, set(mon.external_watch), evidence or None)
             rankings[f"{policy}/{method}"] = [rc.member for rc in res.root_causes]
             rankings.setdefault("_cost_ms", {})[f"{policy}/{method}"] = 1e3 * (time.perf_counter() - t0)
+            # W_0 as `auto` builds it above its member limit (processes, process anomalies, the
+            # configured members — here the system's outputs): on small systems `auto` watches
+            # everything and the policy cannot make a difference.
+            res = analyze(mon.seen, mon.alerts, s, w0, evidence or None)
+            rankings[f"{policy}/{method} W0=outputs"] = [rc.member for rc in res.root_causes]
 
     # Metric series the monitor saw → peers' table; rule-based baseline from topic rates.
     hist = mon.history

@@ -54,3 +54,18 @@ def pick_targets(topo: Topology, k: int) -> list[str]:
 
     nodes = [make_id("node", n) for n in topo.node_names() if n != topo.diag_monitor()]
     return sorted(nodes, key=lambda n: (-downstream(n), n))[:k]
+
+
+def sink_watchlist(topo: Topology) -> set[str]:
+    """What a user would name as important: the system's outputs (sink nodes, their inputs, unread topics)."""
+    edges = topo.edges()
+    read = {src for src, _, kind in edges if kind == "sub"}
+    out: set[str] = set()
+    for n in topo.nodes():
+        nid = make_id("node", n.name)
+        pubs = [make_id("topic", p.topic) for p in n.pubs]
+        if not any(t in read for t in pubs):
+            out.add(nid)
+            out.update(make_id("topic", sub.topic) for sub in n.subs)
+            out.update(pubs)
+    return out
