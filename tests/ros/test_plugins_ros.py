@@ -29,7 +29,7 @@ FAST = {
     "topic_rate": {"warmup_s": 4.0, "refresh_s": 2.0},
     "topic_latency": {"warmup_s": 4.0, "refresh_s": 2.0},
     "process_resources": {"warmup_s": 4.0, "refresh_s": 2.0, "min_samples": 6},
-    "graph_anomalies": {"grace_s": 2.0},
+    "graph_anomalies": {"grace_s": 5.0},  # discovery of a publisher can take seconds under load
 }
 
 TALKER = """
