@@ -11,7 +11,7 @@ from typing import Any
 
 from stream_viz.config import load_config
 from stream_viz.demo.robot import FaultSpec, Robot
-from stream_viz.monitor import Monitor, install_stop_handlers
+from stream_viz.monitor import Monitor, install_stop_handlers, linger
 
 DEFAULT_RECORDING = Path("stream_viz_demo.rrd")
 
@@ -62,10 +62,11 @@ def run_demo(args: argparse.Namespace) -> dict[str, Any]:
         note_injection()
     finally:
         try:
-            report = mon.close()
+            report = mon.close(keep_view=viewer == "serve")
         finally:
             robot.stop()
     _print_diagnosis(report, save, mon)
+    linger(mon, viewer)
     return report
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import signal
+import sys
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -151,26 +152,40 @@ class Monitor:
                 wait = 0
             stop.wait(wait)
 
-    def close(self) -> dict[str, Any]:
-        """Stop observing, write the report, flush the recording and the database; return the report."""
+    def close(self, keep_view: bool = False) -> dict[str, Any]:
+        """Stop observing, write the report, commit the database, flush the recording.
+
+        Every step runs even when an earlier one fails (the first error is raised after all of
+        them), so one broken output never costs the others. ``keep_view`` leaves the viewer
+        connection open (a served web viewer keeps showing the run); close it with ``view.close()``.
+        """
         ended_at = time.time()
-        self.collector.close()
-        self.progress.done()
-        report = build_report(
-            self.seen, self.alerts, self.engine.result().to_report(),
-            self.started_at, ended_at, self.injected,
-        )
-        try:
+        report: dict[str, Any] = {}
+
+        def write() -> None:
+            report.update(build_report(self.seen, self.alerts, self.engine.result().to_report(),
+                                       self.started_at, ended_at, self.injected))
             if self.report_path:
                 write_report(self.report_path, report)
-        finally:
+
+        def commit() -> None:
             self.store.set_meta("ended_at", ended_at)
             self.store.set_meta("watchlist", sorted(self.external_watch))
-            self.plugins.close()
             if self.injected:
                 self.store.set_meta("injected", dict(self.injected))
             self.store.close()
-            self.view.close()
+
+        steps = [self.collector.close, self.progress.done, write, commit, self.plugins.close]
+        if not keep_view:
+            steps.append(self.view.close)
+        first: BaseException | None = None
+        for step in steps:
+            try:
+                step()
+            except Exception as exc:  # the rest must still run
+                first = first or exc
+        if first is not None:
+            raise first
         return report
 
 
@@ -189,14 +204,28 @@ def run_monitor(args: argparse.Namespace) -> dict[str, Any]:
     config = load_config(args.config)
     stop = threading.Event()
     install_stop_handlers(stop)
-    mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=args.viewer or "none")
+    viewer = args.viewer or "none"
+    mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=viewer)
     mon.progress.say(f"alert database: {mon.db_path}")
     try:
         mon.run(args.duration, stop)
     finally:
-        report = mon.close()
+        report = mon.close(keep_view=viewer == "serve")
     _print_outputs(mon, args)
+    linger(mon, viewer)
     return report
+
+
+def linger(mon: Monitor, viewer: str) -> None:
+    """A served web viewer dies with this process: on a terminal, keep it up until Ctrl-C."""
+    try:
+        if viewer == "serve" and sys.stdin.isatty():
+            done = threading.Event()
+            install_stop_handlers(done)
+            mon.progress.say(f"the web viewer keeps serving at {mon.view.url} — Ctrl-C to exit")
+            done.wait()
+    finally:
+        mon.view.close()
 
 
 def _print_outputs(mon: Monitor, args: argparse.Namespace) -> None:
