@@ -37,7 +37,10 @@ OUT = Path(__file__).parent / "out" / "load"
 
 # --------------------------------------------------------------------------- duration
 
-def run_duration(nodes: int, minutes: float, domain: int, period: float, save: bool) -> None:
+def run_duration(nodes: int, minutes: float, domain: int, period: float, save: bool,
+                 history: int | None = None) -> None:
+    from dataclasses import replace
+
     from stream_viz.config import load_config
     from stream_viz.demo.generated import generate
     from stream_viz.demo.robot import Robot
@@ -49,9 +52,10 @@ def run_duration(nodes: int, minutes: float, domain: int, period: float, save: b
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     topo = generate(nodes)
     robot = Robot(env=env, topology=topo).start()
-    csv_path = OUT / f"duration_{nodes}n.csv"
-    db = OUT / f"duration_{nodes}n.sqlite"
-    rrd = OUT / f"duration_{nodes}n.rrd" if save else None
+    tag = f"{nodes}n" + (f"_h{history}" if history else "")
+    csv_path = OUT / f"duration_{tag}.csv"
+    db = OUT / f"duration_{tag}.sqlite"
+    rrd = OUT / f"duration_{tag}.rrd" if save else None
     for f in (db, rrd):
         if f is not None and f.exists():
             f.unlink()
@@ -60,6 +64,8 @@ def run_duration(nodes: int, minutes: float, domain: int, period: float, save: b
     try:
         robot.wait_ready(timeout=180)
         cfg = load_config(None)
+        cfg = replace(cfg, monitor=replace(cfg.monitor, period=period,
+                                           history=history or cfg.monitor.history))
         mon = Monitor(cfg, db=db, save=rrd, viewer="none", domain_id=domain,
                       progress=Progress(open(os.devnull, "w")))
         robot_procs = [psutil.Process(p.pid) for p in robot.procs.values()]
@@ -96,6 +102,7 @@ def run_duration(nodes: int, minutes: float, domain: int, period: float, save: b
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
+    print(f"[monitor] history = {cfg.monitor.history} samples per member")
     _summary_duration(rows, nodes, minutes, period, csv_path, db, rrd)
 
 
@@ -220,13 +227,14 @@ def main() -> None:
     d.add_argument("--domain", type=int, default=63)
     d.add_argument("--period", type=float, default=1.0)
     d.add_argument("--save", action="store_true", help="also write the .rrd (as `monitor --save`)")
+    d.add_argument("--history", type=int, help="[monitor] history (samples kept per member)")
     s = sub.add_parser("storm")
     s.add_argument("--rate", type=int, default=10_000)
     s.add_argument("--seconds", type=int, default=60)
     s.add_argument("--members", type=int, default=100, help="nodes of the synthetic graph")
     args = ap.parse_args()
     if args.what == "duration":
-        run_duration(args.nodes, args.minutes, args.domain, args.period, args.save)
+        run_duration(args.nodes, args.minutes, args.domain, args.period, args.save, args.history)
     else:
         run_storm(args.rate, args.seconds, args.members)
 
