@@ -21,6 +21,7 @@ from bench.eval.score import (
     OURS_LIVE,
     PEERS,
     accuracy_table,
+    alerts_before,
     failed_peers,
     fault_matrix,
     fmt,
@@ -199,7 +200,7 @@ def report(out: Path) -> str:
             f"{len(run['alerts'])} | "
             f"{', '.join(members) or '–'} | {len(run['baseline_flags'])} |"
         )
-    pre = [(run, run["alerts_before_injection"]) for run in faulty if run["alerts_before_injection"]]
+    pre = [(run, len(alerts_before(run))) for run in faulty if alerts_before(run)]
     md += [
         "",
         f"Faulty runs with alerts before the injection: {len(pre)} of {len(faulty)}"

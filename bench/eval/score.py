@@ -57,11 +57,23 @@ def failed_peers(peers_by_run: Iterable[Mapping]) -> dict[str, str]:
     return out
 
 
+# An alert stamped up to one sample period before the injection time belongs to it: the sample
+# time is taken when a sample starts, the injection time when the fault fires during it.
+TOLERANCE = 1.0
+
+
+def alerts_before(run: Mapping, tol: float = TOLERANCE) -> list[Mapping]:
+    """Alerts clearly before the injection (all alerts of a fault-free run)."""
+    t_inj = run["injected"].get("t") if run.get("injected") else None
+    return [a for a in run["alerts"] if t_inj is None or a["t"] < t_inj - tol]
+
+
 def latencies(run: Mapping) -> dict[str, float | None]:
     """Seconds from injection to the first alert, and to the truth ranked first (live ticks)."""
     t_inj = run["injected"].get("t")
+    after = [a["t"] for a in run["alerts"] if t_inj is not None and a["t"] >= t_inj - TOLERANCE]
     out: dict[str, float | None] = {
-        "first_alert": run.get("first_alert_s"),
+        "first_alert": max(0.0, min(after) - t_inj) if after else None,
         "baseline_first_flag": run.get("baseline_first_flag_s"),
     }
     for level in ("strict", "process"):
@@ -73,7 +85,7 @@ def latencies(run: Mapping) -> dict[str, float | None]:
             if tick["t"] >= t_inj and tick["top"]:
                 p = hit_at(to_blocks(tick["top"][:1], run["expand"]), truth, 1)
                 if (p == 1.0) if level == "strict" else (p > 0):
-                    out[f"top1_{level}"] = tick["t"] - t_inj
+                    out[f"top1_{level}"] = max(0.0, tick["t"] - t_inj)
                     break
     return out
 

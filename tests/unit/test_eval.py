@@ -112,7 +112,7 @@ def _run(fault="crash"):
         "truth_strict": ["node:/b"],
         "truth_process": ["node:/b", "node:/c"],
         "injected": {"t": 100.0},
-        "first_alert_s": 1.0,
+        "alerts": [{"t": 101.0, "member": "node:/b"}],
         "baseline_first_flag_s": None,
         "ticks": [
             {"t": 99.0, "top": ["node:/b"]},
@@ -137,3 +137,12 @@ def test_score_run_latencies_and_tables():
     table = accuracy_table(rows, ["stream-viz (live)", "BARO"])
     assert "| stream-viz (live) | 1 | 1.00 |" in table
     assert "| BARO | 0.00 | 0.00 |" in fault_matrix(rows, ["BARO"])
+
+
+def test_an_alert_stamped_within_a_sample_of_the_injection_counts_as_after():
+    run = _run()
+    run["alerts"] = [{"t": 99.96, "member": "node:/b"}, {"t": 50.0, "member": "node:/a"}]
+    from bench.eval.score import alerts_before
+
+    assert [a["t"] for a in alerts_before(run)] == [50.0]
+    assert latencies(run)["first_alert"] == 0.0
