@@ -240,6 +240,11 @@ def report(out: Path) -> str:
         ],
     }
     (out / "summary.json").write_text(json.dumps(summary))
+    with open(out / "runs.jsonl", "w") as f:  # one line per run, without the per-tick trace
+        for run, peers in runs:
+            slim = {k: v for k, v in run.items() if k not in ("ticks", "expand")}
+            f.write(json.dumps({**slim, "latency": latencies(run) if run["spec"].get("fault") else None,
+                                "peers": peers}) + "\n")
     return text
 
 
