@@ -15,7 +15,8 @@ def method_rankings(run: Mapping, peers: Mapping | None) -> dict[str, list]:
     """Method name → ranking (members or tuples of tied members), ours, baseline and peers."""
     r = run["rankings"]
     out: dict[str, list] = {OURS_LIVE: r["live"]}
-    out |= {f"ours {k}": v for k, v in r.items() if "/" in k}
+    # ("W0=processes" was an intermediate variant of W0=outputs in a few early runs: not scored)
+    out |= {f"ours {k}": v for k, v in r.items() if "/" in k and "W0=processes" not in k}
     out[BASELINE] = [tuple(x) for x in r["baseline"]]
     for name, res in (peers or {}).items():
         if isinstance(res, dict) and "ranking" in res:
