@@ -49,10 +49,27 @@ class Diagnostics(Plugin):
             sev = s["stale_severity"] if level == "stale" else level
             sev = sev if sev in RANK else "warn"
             name = e.data.get("name", "")
-            prev_sev, texts = worst.get(e.member, ("info", []))
+            member = _named_node(ctx, e) or e.member
+            prev_sev, texts = worst.get(member, ("info", []))
             texts.append(f"{name}: {level.upper()} {e.text}".strip())
-            worst[e.member] = (sev if RANK[sev] > RANK[prev_sev] else prev_sev, texts)
+            worst[member] = (sev if RANK[sev] > RANK[prev_sev] else prev_sev, texts)
         for member, (sev, texts) in sorted(worst.items()):
             yield ctx.alert(member, sev, "diagnostics " + "; ".join(texts[:3])
                             + (f" (+{len(texts) - 3} more)" if len(texts) > 3 else ""),
                             symptom="diagnostics", statuses=len(texts))
+
+
+def _named_node(ctx: PluginContext, e) -> str | None:
+    """The node a status is about when its hardware_id or name is a node of the graph.
+
+    An aggregator or monitor node often publishes the statuses of others: the fault is in the
+    node the status names, not in the publisher.
+    """
+    for key in ("hardware_id", "name"):
+        value = str(e.data.get(key, "") or "").strip()
+        if not value:
+            continue
+        member = "node:" + (value if value.startswith("/") else "/" + value)
+        if member in ctx.graph and ctx.graph.nodes[member].get("kind") == "node":
+            return member
+    return None

@@ -26,7 +26,6 @@ from stream_viz.model.history import History
 from stream_viz.model.seen import remember
 from stream_viz.progress import Progress
 from stream_viz.rca.engine import RcaEngine
-from stream_viz.records import Alert
 from stream_viz.report import build_report, check_writable, write_report
 
 
@@ -65,7 +64,7 @@ class Monitor:
         self.external_watch: set[str] = set()
         self._unreadable: dict[str, str] = {}
         self._evidence: dict[str, float] = {}
-        self.alerts: list[Alert] = []
+        self.n_alerts = 0  # the alerts themselves live in the database, not in memory
         self.samples = 0
         self.injected: Mapping[str, Any] | None = None
         self.collector = Collector(domain_id, topic_metrics=config.monitor.topic_metrics)
@@ -104,7 +103,7 @@ class Monitor:
             self.store.add_problems(problems, t=t)
             for p in problems:
                 self.progress.say(f"plugin problem: {p}")
-        self.alerts.extend(alerts)
+        self.n_alerts += len(alerts)
         # Process-metric anomalies count as evidence too, not only as watchlist entries.
         # Passed only when it changed: an unchanged sample with no alerts costs no rerank.
         evidence = {m: 1.0 for m in anomalous}
@@ -127,7 +126,7 @@ class Monitor:
         top_txt = f"top root cause: {top.member} ({top.score:.2f})" if top else "no root cause yet"
         return (
             f"[{t - self.started_at:6.1f}s] {kinds.get('node', 0)} nodes, {kinds.get('topic', 0)} topics, "
-            f"{kinds.get('process', 0)} processes | {len(self.alerts)} alerts | {top_txt}"
+            f"{kinds.get('process', 0)} processes | {self.n_alerts} alerts | {top_txt}"
         )
 
     # -- the whole run ----------------------------------------------------------------------
@@ -163,7 +162,7 @@ class Monitor:
         report: dict[str, Any] = {}
 
         def write() -> None:
-            report.update(build_report(self.seen, self.alerts, self.engine.result().to_report(),
+            report.update(build_report(self.seen, self.store.alerts(), self.engine.result().to_report(),
                                        self.started_at, ended_at, self.injected))
             if self.report_path:
                 write_report(self.report_path, report)

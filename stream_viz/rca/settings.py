@@ -75,7 +75,7 @@ class RcaSettings:
     severity: dict[str, float] = field(default_factory=_default_severity)
     direct_plugins: tuple[str, ...] = DIRECT_PLUGINS
     charge: float = 0.8
-    window: float = 0.0
+    window: float = 600.0
     tolerance: float = 2.0
     max_offset: float = 10.0
     icp_iterations: int = 20
