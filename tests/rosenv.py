@@ -90,3 +90,23 @@ def shm_clean() -> None:
     exe = Path(sys.executable).with_name("fastdds")
     if exe.exists():
         subprocess.run([str(exe), "shm", "clean"], capture_output=True, timeout=60, check=False)
+
+
+EXE = str(Path(sys.executable).with_name("stream-viz"))
+
+# A talker and a listener in one process (the system the monitor is pointed at).
+TALKER = """
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from std_msgs.msg import String
+rclpy.init()
+a = rclpy.create_node("talker"); b = rclpy.create_node("listener")
+pub = a.create_publisher(String, "/chatter", 10)
+b.create_subscription(String, "/chatter", lambda m: None, 10)
+a.create_timer(0.1, lambda: pub.publish(String(data="hi")))
+ex = SingleThreadedExecutor(); ex.add_node(a); ex.add_node(b)
+try:
+    ex.spin()
+except (KeyboardInterrupt, Exception):
+    pass
+"""

@@ -7,32 +7,12 @@ import os
 import signal
 import sqlite3
 import subprocess
-import sys
 import time
-from pathlib import Path
 
 import psutil
 import pytest
 from rerun.chunk import RrdReader
-from rosenv import wait_for
-
-EXE = str(Path(sys.executable).with_name("stream-viz"))
-
-TALKER = """
-import sys, rclpy
-from rclpy.executors import SingleThreadedExecutor
-from std_msgs.msg import String
-rclpy.init()
-a = rclpy.create_node("talker"); b = rclpy.create_node("listener")
-pub = a.create_publisher(String, "/chatter", 10)
-b.create_subscription(String, "/chatter", lambda m: None, 10)
-a.create_timer(0.1, lambda: pub.publish(String(data="hi")))
-ex = SingleThreadedExecutor(); ex.add_node(a); ex.add_node(b)
-try:
-    ex.spin()
-except (KeyboardInterrupt, Exception):
-    pass
-"""
+from rosenv import EXE, TALKER, wait_for
 
 
 def run_cli(args: list[str], env: dict[str, str], timeout: float = 180) -> subprocess.CompletedProcess:

@@ -5,28 +5,10 @@ from __future__ import annotations
 import json
 import sqlite3
 import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
-EXE = str(Path(sys.executable).with_name("stream-viz"))
-
-# A talker and a listener in one process (the system the monitor is pointed at).
-TALKER = """
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
-from std_msgs.msg import String
-rclpy.init()
-a = rclpy.create_node("talker"); b = rclpy.create_node("listener")
-pub = a.create_publisher(String, "/chatter", 10)
-b.create_subscription(String, "/chatter", lambda m: None, 10)
-a.create_timer(0.1, lambda: pub.publish(String(data="hi")))
-ex = SingleThreadedExecutor(); ex.add_node(a); ex.add_node(b)
-try:
-    ex.spin()
-except (KeyboardInterrupt, Exception):
-    pass
-"""
+from rosenv import EXE, TALKER  # noqa: F401 - shared with tests/cli
 
 # A node that logs an ERROR on /rosout every 0.5 s (the rosout plugin alerts on it).
 ERROR_LOGGER = """
