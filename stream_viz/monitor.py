@@ -7,6 +7,7 @@ recording streamed), so ending the run any way loses nothing already collected.
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import threading
@@ -64,6 +65,7 @@ class Monitor:
         self.external_watch: set[str] = set()
         self._unreadable: dict[str, str] = {}
         self._evidence: dict[str, float] = {}
+        self.own_process = f"process:{os.getpid()}"
         self.n_alerts = 0  # the alerts themselves live in the database, not in memory
         self.samples = 0
         self.injected: Mapping[str, Any] | None = None
@@ -88,6 +90,7 @@ class Monitor:
             self.store.add_unreadable(t, fresh)
         self._unreadable = dict(sample.unreadable)
         anomalous = process_anomalies(sample.graph, self.history) if self.samples > 1 else set()
+        anomalous.discard(self.own_process)
         added = self._watch_additions(sample.graph, anomalous) - self.external_watch
         if added:
             self.external_watch |= added
@@ -98,7 +101,8 @@ class Monitor:
         )
         # The store rate-limits an ongoing symptom (episodes); the RCA sees what the database
         # keeps, so `analyze` on the file reproduces the live diagnosis.
-        alerts = self.store.add(fired)
+        # The monitor is an ancestor of what it starts (the demo): its own footprint is no symptom.
+        alerts = self.store.add([a for a in fired if a.member != self.own_process])
         if problems:
             self.store.add_problems(problems, t=t)
             for p in problems:
