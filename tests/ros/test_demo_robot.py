@@ -87,20 +87,31 @@ def test_graph_matches_topology_and_stop_leaves_nothing(observer):
         expected = set(DEMO.node_names())
         wait_for(lambda: expected <= observer.node_names(), timeout=15)
         assert len(expected) >= 10 and len(set(robot.pids().values())) >= 5
-        topics = dict(observer.node.get_topic_names_and_types())
-        for topic, type_name in DEMO.topics().items():
-            assert type_name in topics.get(topic, []), topic
-        for spec in DEMO.nodes():
-            ns, _, name = spec.name.rpartition("/")
-            ns = ns or "/"
-            pubs = {t for t, _ in observer.node.get_publisher_names_and_types_by_node(name, ns)}
-            subs = {t for t, _ in observer.node.get_subscriber_names_and_types_by_node(name, ns)}
-            srvs = {t for t, _ in observer.node.get_service_names_and_types_by_node(name, ns)}
-            clis = {t for t, _ in observer.node.get_client_names_and_types_by_node(name, ns)}
-            assert {p.topic for p in spec.pubs} <= pubs, spec.name
-            assert {s.topic for s in spec.subs} <= subs, spec.name
-            assert {s.name for s in spec.services} <= srvs, spec.name
-            assert {c.name for c in spec.clients} <= clis, spec.name
+        def missing() -> list[str]:
+            """What the graph does not show yet (endpoints arrive after node names)."""
+            out = []
+            topics = dict(observer.node.get_topic_names_and_types())
+            out += [t for t, ty in DEMO.topics().items() if ty not in topics.get(t, [])]
+            for spec in DEMO.nodes():
+                ns, _, name = spec.name.rpartition("/")
+                ns = ns or "/"
+                try:
+                    pubs = {t for t, _ in observer.node.get_publisher_names_and_types_by_node(name, ns)}
+                    subs = {t for t, _ in observer.node.get_subscriber_names_and_types_by_node(name, ns)}
+                    srvs = {t for t, _ in observer.node.get_service_names_and_types_by_node(name, ns)}
+                    clis = {t for t, _ in observer.node.get_client_names_and_types_by_node(name, ns)}
+                except Exception:  # the node is not (yet) known to this participant
+                    out.append(spec.name)
+                    continue
+                want = ({p.topic for p in spec.pubs} - pubs) | ({s.topic for s in spec.subs} - subs)
+                want |= ({s.name for s in spec.services} - srvs) | ({c.name for c in spec.clients} - clis)
+                out += [f"{spec.name}: {w}" for w in sorted(want)]
+            return out
+
+        try:
+            wait_for(lambda: not missing(), timeout=20)
+        except TimeoutError:
+            raise AssertionError(f"not in the graph: {missing()}") from None
         wait_for(lambda: expected <= set(observer.rosout_pids()), timeout=10)
         low = observer.rosout_pids()
         node_pids = robot.node_pids()
