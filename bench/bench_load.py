@@ -88,7 +88,7 @@ def run_duration(nodes: int, minutes: float, domain: int, period: float, save: b
                 "cpu_pct": 100 * (cpu1 - cpu0) / max(now - wall0, 1e-9),
                 "robot_cpu_pct": 100 * (rcpu1 - rcpu0) / max(now - wall0, 1e-9),
                 "nodes": kinds.get("node", 0), "topics": kinds.get("topic", 0), "members": len(mon.seen),
-                "alerts": len(mon.alerts), "rca_alerts": mon.engine.result().alerts,
+                "alerts": mon.n_alerts, "rca_alerts": mon.engine.result().alerts,
             })
             cpu0, rcpu0, wall0 = cpu1, rcpu1, now
             next_t += period

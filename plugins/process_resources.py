@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from collections.abc import Iterator
 from typing import Any, ClassVar
@@ -11,7 +10,7 @@ import numpy as np
 from stream_viz_plugins.member_gone import hosted_nodes
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import cached_baseline, slope, streak
+from stream_viz.detect.baseline import rise, slope
 from stream_viz.model.ids import make_id
 from stream_viz.records import Alert
 
@@ -24,7 +23,8 @@ class ProcessResources(Plugin):
       floors (``cpu_min_rise`` percentage points, ``rss_min_rise_mb``) keep idle noise quiet.
     * growth: the least-squares slope of RSS over a recent window (``trend_s``/6, /2, whole) is
       at least ``growth_mb_per_s``, RSS grew at least ``growth_min_mb`` in it and rose in at
-      least ``growth_steady`` of the steps (a leak, not one big allocation).
+      least ``growth_steady`` of the steps (a leak, not one big allocation), over at least
+      ``growth_min_samples`` samples.
 
     Alerts go to the nodes the process hosts (``alert_on = "nodes"``; the process itself when
     it hosts none), to the process (``"process"``) or both (``"both"``). A process is checked
@@ -45,6 +45,7 @@ class ProcessResources(Plugin):
         "growth_min_mb": 20.0,
         "trend_s": 60.0,
         "growth_steady": 0.7,
+        "growth_min_samples": 4,
         "confirm": 2,
         "alert_on": "nodes",
     }
@@ -67,23 +68,12 @@ class ProcessResources(Plugin):
             found = []
             for attr, floor, what in (("cpu_percent", s["cpu_min_rise"], "cpu"),
                                       ("rss_mb", s["rss_min_rise_mb"], "memory")):
-                value = ctx.value(proc, attr)
-                if math.isnan(value):
-                    continue
-                key = (proc, attr)
-                base = cached_baseline(ctx, proc, attr, warmup_s=s["warmup_s"], min_samples=s["min_samples"],
-                                       refresh_s=s["refresh_s"], window=s["window"], frozen=key in alerting)
-                if base is None:
-                    continue
-                med, sigma, _ = base
-                high = value - med >= max(s["k"] * sigma, floor)
-                if streak(ctx.state, key, high) >= s["confirm"]:
-                    alerting.add(key)
+                risen = rise(ctx, proc, attr, floor, alerting)
+                if risen is not None:
+                    value, med = risen
                     unit = "%" if what == "cpu" else " MB"
                     found.append((what, f"{what} {value:.0f}{unit}, normally {med:.0f}{unit}",
                                   {"value": value, "baseline": med}))
-                else:
-                    alerting.discard(key)
             growth = self._growth(ctx, proc)
             if growth is not None:
                 found.append(("memory_growth", f"memory growing {growth:.1f} MB/s", {"mb_per_s": growth}))
@@ -120,7 +110,7 @@ class ProcessResources(Plugin):
         q.append((ctx.t, ctx.value(proc, "rss_mb")))
         while q and q[0][0] < ctx.t - s["trend_s"]:
             q.popleft()
-        if ctx.t - ctx.state["first"][proc] < s["warmup_s"] or len(q) < 5:
+        if ctx.t - ctx.state["first"][proc] < s["warmup_s"] or len(q) < s["growth_min_samples"]:
             return None
         rss = [v for _, v in q if v == v]
         if not rss or rss[-1] - min(rss) < s["growth_min_mb"]:
@@ -132,7 +122,7 @@ class ProcessResources(Plugin):
             t, v = t_all[recent], v_all[recent]
             ok = np.isfinite(v)
             t, v = t[ok], v[ok]
-            if len(v) < 5:
+            if len(v) < s["growth_min_samples"]:
                 continue
             rate = slope(t, v)
             steady = np.mean(np.diff(v) > 0.01)

@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import cached_baseline, streak
+from stream_viz.detect.baseline import rise, streak
 from stream_viz.records import Alert
 
 
@@ -42,29 +42,18 @@ class TopicLatency(Plugin):
         for topic in ctx.watched("topic"):
             floors = (("latency_ms", s["latency_min_rise_ms"]), ("jitter_ms", s["jitter_min_rise_ms"]))
             for attr, floor in floors:
-                value = ctx.value(topic, attr)
-                if math.isnan(value):
-                    continue
-                key = (topic, attr)
-                base = cached_baseline(ctx, topic, attr, warmup_s=s["warmup_s"], min_samples=s["min_samples"],
-                                       refresh_s=s["refresh_s"], window=s["window"], frozen=key in alerting)
-                if base is None:
-                    continue
-                med, sigma, _ = base
                 if attr == "jitter_ms":
                     # Scheduling noise on a busy host scales with the period: a 20 Hz topic's
                     # jitter must rise by half its 50 ms period before it counts.
                     rate = ctx.value(topic, "rate_hz")
                     if rate > 0:
                         floor = max(floor, s["jitter_period_ratio"] * 1000.0 / rate)
-                high = value - med >= max(s["k"] * sigma, floor)
-                if streak(ctx.state, key, high) >= s["confirm"]:
-                    alerting.add(key)
+                risen = rise(ctx, topic, attr, floor, alerting)
+                if risen is not None:
+                    value, med = risen
                     what = attr.removesuffix("_ms")
                     yield ctx.alert(topic, "warn", f"{what} {value:.1f} ms, normally {med:.1f} ms",
                                     symptom=f"{what}_rise", value_ms=value, baseline_ms=med)
-                else:
-                    alerting.discard(key)
             drops = ctx.value(topic, "drops_per_s")
             if not math.isnan(drops):
                 rate = ctx.value(topic, "rate_hz")

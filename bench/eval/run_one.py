@@ -86,7 +86,7 @@ def run(spec: dict, out: Path) -> dict:
                 {
                     "t": time.time(),
                     "top": [rc.member for rc in top[:3]],
-                    "alerts": len(mon.alerts),
+                    "alerts": mon.n_alerts,
                     "rss": me.memory_info().rss,
                 }
             )
@@ -97,6 +97,7 @@ def run(spec: dict, out: Path) -> dict:
         if fault and mon.injected is None:
             mon.injected = robot.injected() or None
         pids = {f"process:{pid}": g for g, pid in robot.pids().items()}
+        stored = mon.store.alerts()  # the monitor keeps its alerts in the database only
         alive = robot.alive()
     finally:
         try:
@@ -120,13 +121,13 @@ def run(spec: dict, out: Path) -> dict:
         for method in METHODS:
             s = dataclasses.replace(config.rca, policy=policy, method=method, top_k=30)
             t0 = time.perf_counter()
-            res = analyze(mon.seen, mon.alerts, s, set(mon.external_watch), evidence or None)
+            res = analyze(mon.seen, stored, s, set(mon.external_watch), evidence or None)
             rankings[f"{policy}/{method}"] = [rc.member for rc in res.root_causes]
             rankings.setdefault("_cost_ms", {})[f"{policy}/{method}"] = 1e3 * (time.perf_counter() - t0)
             # W_0 as `auto` builds it above its member limit (processes, process anomalies, the
             # configured members — here the system's outputs): on small systems `auto` watches
             # everything and the policy cannot make a difference.
-            res = analyze(mon.seen, mon.alerts, s, w0, evidence or None)
+            res = analyze(mon.seen, stored, s, w0, evidence or None)
             rankings[f"{policy}/{method} W0=outputs"] = [rc.member for rc in res.root_causes]
 
     # Metric series the monitor saw → peers' table; rule-based baseline from topic rates.
@@ -155,7 +156,7 @@ def run(spec: dict, out: Path) -> dict:
 
     alerts = [
         {"member": a.member, "plugin": a.plugin, "t": a.t, "severity": a.severity, "message": a.message[:160]}
-        for a in mon.alerts
+        for a in stored
     ]
     after = [a for a in alerts if t_inj is not None and a["t"] >= t_inj]
     cpu = (cpu1.user + cpu1.system) - (cpu0.user + cpu0.system)

@@ -90,3 +90,28 @@ def streak(state: dict[str, Any], key: Any, condition: bool) -> int:
         return counts[key]
     counts.pop(key, None)
     return 0
+
+
+def rise(ctx: Any, member: str, attr: str, floor: float, alerting: set) -> tuple[float, float] | None:
+    """Return ``(value, median)`` while ``member``'s ``attr`` stays risen above its own baseline.
+
+    Risen means ``value - median ≥ max(k·σ, floor)`` for ``confirm`` samples in a row; the
+    baseline (`cached_baseline`, from ``ctx.settings``' ``warmup_s``, ``min_samples``,
+    ``refresh_s``, ``window``) is frozen while ``(member, attr)`` is in ``alerting``, which this
+    keeps up to date. None while warming up, when the value is missing or when not risen.
+    """
+    s = ctx.settings
+    value = ctx.value(member, attr)
+    if value != value:  # NaN: not measured this sample
+        return None
+    key = (member, attr)
+    base = cached_baseline(ctx, member, attr, warmup_s=s["warmup_s"], min_samples=s["min_samples"],
+                           refresh_s=s["refresh_s"], window=s["window"], frozen=key in alerting)
+    if base is None:
+        return None
+    med, sigma, _ = base
+    if streak(ctx.state, key, value - med >= max(s["k"] * sigma, floor)) >= s["confirm"]:
+        alerting.add(key)
+        return value, med
+    alerting.discard(key)
+    return None

@@ -148,9 +148,12 @@ def node_views(
     tol = settings.tolerance
     for n, v in views.items():
         v.anomaly = max(v.direct, v.charged, v.evidence)
-        v.upstream = _upstream(G, n, v, s, views, ev_topic, tol)
+        v.upstream = _upstream(G, n, v, s, views, ev_topic, tol, settings.max_trajectory)
         v.ht = v.anomaly * (1.0 - v.upstream)
     return views
+
+
+SILENT_DECAY = 0.75  # an excuse found behind a silent node counts this much less per such node
 
 
 def _upstream(
@@ -161,32 +164,62 @@ def _upstream(
     views: dict[str, NodeView],
     ev_topic: dict[str, float],
     tol: float,
+    max_hops: int = 12,
 ) -> float:
-    """How anomalous ``n``'s causal parents were when (or before) ``n``'s symptoms began.
+    """How anomalous ``n``'s causes were when (or before) ``n``'s symptoms began.
 
     A parent topic counts with its own symptom, and with the direct evidence of its other
-    publishers (a crashed sensor whose topic nobody watches still excuses its subscriber).
+    publishers (a crashed sensor whose topic nobody watches still excuses its subscriber). A
+    parent with no symptom at all does not end the search: a fault crosses a node that raised
+    nothing (its output merely went on late), so the walk goes on upstream through silent
+    members, up to ``max_hops``, each silent node passed weakening what is found behind it by
+    `SILENT_DECAY`.
     """
     before = v.onset + tol
     mine = set(outputs(G, n))
     worst = 0.0
-    for p in causes(G, n):
-        if p in mine:
-            continue  # a node reading its own topic is not excused by it
-        if is_node(G, p):  # a server it calls
-            pv = views.get(p)
-            if pv is not None and pv.onset <= before:
-                worst = max(worst, pv.anomaly)
-            elif pv is not None and pv.onset == INF:
-                worst = max(worst, pv.evidence)
-            continue
-        if p in s.anomaly and s.onset[p] <= before:
-            worst = max(worst, s.anomaly[p])
-        worst = max(worst, ev_topic.get(p, 0.0))
-        for q in publishers(G, p):
-            qv = views.get(q)
-            if q == n or qv is None:
+    seen = {n}
+    frontier: list[tuple[str, float]] = [(p, 1.0) for p in causes(G, n) if p not in mine]
+    for _ in range(max_hops):
+        nxt: list[tuple[str, float]] = []
+        for p, w in frontier:
+            if p in seen:
                 continue
-            own = max(qv.direct, qv.evidence) if qv.onset <= before else qv.evidence
-            worst = max(worst, own)
+            seen.add(p)
+            found = _excuse(G, p, n, s, views, ev_topic, before)
+            worst = max(worst, w * found)
+            if found > 0 or w * SILENT_DECAY <= worst:
+                continue  # an alerting member ends its path: the earlier ones are its own causes
+            decay = w * SILENT_DECAY if is_node(G, p) else w
+            nxt += [(q, decay) for q in causes(G, p) if q not in seen]
+        if not nxt:
+            break
+        frontier = nxt
     return _clip(worst)
+
+
+def _excuse(
+    G: nx.MultiDiGraph,
+    p: str,
+    n: str,
+    s: Symptoms,
+    views: dict[str, NodeView],
+    ev_topic: dict[str, float],
+    before: float,
+) -> float:
+    """How much the cause ``p`` of ``n`` was anomalous no later than ``before``."""
+    if is_node(G, p):  # a server it calls, or a node further upstream
+        pv = views.get(p)
+        if pv is None:
+            return 0.0
+        if pv.onset <= before:
+            return pv.anomaly
+        return pv.evidence if pv.onset == INF else 0.0
+    worst = s.anomaly[p] if p in s.anomaly and s.onset[p] <= before else 0.0
+    worst = max(worst, ev_topic.get(p, 0.0))
+    for q in publishers(G, p):
+        qv = views.get(q)
+        if q == n or qv is None:
+            continue
+        worst = max(worst, max(qv.direct, qv.evidence) if qv.onset <= before else qv.evidence)
+    return worst

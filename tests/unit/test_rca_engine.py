@@ -110,6 +110,21 @@ def test_process_alerts_and_metric_evidence_are_charged_to_hosted_nodes(G):
     assert top(r).evidence["metric"] == 0.9
 
 
+def test_a_degraded_source_behind_a_silent_node_excuses_the_victim(G):
+    # /scan slows (warn), perception passes it on without a symptom of its own, then the
+    # planner's /cmd jitters: the planner is excused by /scan behind the silent perception
+    # (one silent node: 0.75 of /scan's anomaly), so the sensor is ranked first.
+    alerts = [al(SCAN, "topic_rate", 10, "warn"), al(CMD, "topic_latency", 13, "warn"),
+              al(SCAN, "topic_rate", 15, "warn"), al(CMD, "topic_latency", 18, "warn")]
+    r = analyze(G, alerts, RcaSettings(), None)
+    assert top(r).member == SENSOR
+    planner = next(rc for rc in r.root_causes if rc.member == PLAN)
+    s = RcaSettings()
+    warn = s.severity["warn"] * s.charge  # a topic symptom charged to its publisher
+    assert planner.evidence["upstream"] == pytest.approx(0.75 * s.severity["warn"])
+    assert planner.evidence["hypothesis"] == pytest.approx(warn * (1 - 0.75 * s.severity["warn"]))
+
+
 def test_a_service_server_is_upstream_of_its_client(G):
     alerts = [al(MAP, "diagnostics", 10), al(PLANTOPIC, "topic_rate", 11), al(CMD, "topic_rate", 11)]
     r = analyze(G, alerts, RcaSettings(), None)
