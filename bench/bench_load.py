@@ -14,9 +14,10 @@ Counts what each stage passes on and sheds; "keeps up" means one second of alert
 less than one second of wall time.
 
 Run: ``.venv/bin/python bench/bench_load.py duration --nodes 100 --minutes 8``
+     ``.venv/bin/python bench/bench_load.py duration --nodes 0 --minutes 10 --save`` (healthy demo)
      ``.venv/bin/python bench/bench_load.py storm --rate 10000 --seconds 60``
-The issue's full figure: ``duration --nodes 500 --minutes 30`` (needs a machine that can run a
-500-node system; this 2-core one cannot, see docs/robustness.md).
+The issue's figure: ``duration --nodes 500 --minutes 30 --rate 0.5 1 --per-process 25 --save``
+(at the demo's default 2-5 Hz and 8 nodes per process a 500-node system does not fit on 2 cores).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import csv
 import os
 import platform
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -38,21 +40,24 @@ OUT = Path(__file__).parent / "out" / "load"
 # --------------------------------------------------------------------------- duration
 
 def run_duration(nodes: int, minutes: float, domain: int, period: float, save: bool,
-                 history: int | None = None) -> None:
+                 history: int | None = None, rate: tuple[float, float] = (2.0, 5.0),
+                 per_process: int = 8) -> None:
     from dataclasses import replace
 
     from stream_viz.config import load_config
     from stream_viz.demo.generated import generate
     from stream_viz.demo.robot import Robot
+    from stream_viz.demo.topology import DEMO
     from stream_viz.monitor import Monitor
     from stream_viz.progress import Progress
 
     OUT.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    topo = generate(nodes)
+    # nodes = 0: the demo robot, fault-free (the healthy-run figures: false alerts, .rrd per hour)
+    topo = generate(nodes, rate=rate, nodes_per_process=per_process) if nodes else DEMO
     robot = Robot(env=env, topology=topo).start()
-    tag = f"{nodes}n" + (f"_h{history}" if history else "")
+    tag = (f"{nodes}n" if nodes else "demo") + (f"_h{history}" if history else "")
     csv_path = OUT / f"duration_{tag}.csv"
     db = OUT / f"duration_{tag}.sqlite"
     rrd = OUT / f"duration_{tag}.rrd" if save else None
@@ -62,7 +67,7 @@ def run_duration(nodes: int, minutes: float, domain: int, period: float, save: b
     me = psutil.Process()
     rows: list[dict[str, float]] = []
     try:
-        robot.wait_ready(timeout=180)
+        robot.wait_ready(timeout=600)
         cfg = load_config(None)
         cfg = replace(cfg, monitor=replace(cfg.monitor, period=period,
                                            history=history or cfg.monitor.history))
@@ -103,7 +108,9 @@ def run_duration(nodes: int, minutes: float, domain: int, period: float, save: b
         w.writeheader()
         w.writerows(rows)
     print(f"[monitor] history = {cfg.monitor.history} samples per member")
-    _summary_duration(rows, nodes, minutes, period, csv_path, db, rrd)
+    what = f"{nodes}-node generated system (rates {rate[0]}-{rate[1]} Hz, {per_process} nodes per process)" \
+        if nodes else "demo robot, fault-free"
+    _summary_duration(rows, what, minutes, period, csv_path, db, rrd)
 
 
 def _cpu(procs: list[psutil.Process]) -> float:
@@ -118,8 +125,8 @@ def _cpu(procs: list[psutil.Process]) -> float:
     return total
 
 
-def _summary_duration(rows, nodes, minutes, period, csv_path, db, rrd) -> None:
-    print(f"\nduration: {nodes}-node generated system, {minutes} min, period {period} s, "
+def _summary_duration(rows, what, minutes, period, csv_path, db, rrd) -> None:
+    print(f"\nduration: {what}, {minutes} min, period {period} s, "
           f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores")
     print(f"samples: {len(rows)}; model: {rows[-1]['nodes']} nodes, {rows[-1]['topics']} topics, "
           f"{rows[-1]['members']} members; alerts stored {rows[-1]['alerts']}")
@@ -140,9 +147,12 @@ def _summary_duration(rows, nodes, minutes, period, csv_path, db, rrd) -> None:
               f"{statistics.mean(r['cpu_pct'] for r in part):6.1f} "
               f"{statistics.mean(r['robot_cpu_pct'] for r in part):11.1f} {late:5d}")
     rss = [r["rss_mb"] for r in rows]
+    hours = rows[-1]["elapsed_s"] / 3600
     sizes = f"db {db.stat().st_size / 2**20:.2f} MB"
     if rrd:
-        sizes += f", rrd {rrd.stat().st_size / 2**20:.1f} MB"
+        mb = rrd.stat().st_size / 2**20
+        sizes += f", rrd {mb:.1f} MB ({mb / hours:.1f} MB/h)"
+    print(f"alerts stored: {rows[-1]['alerts']} ({rows[-1]['alerts'] / hours:.1f}/h)")
     print(f"RSS: start {rss[0]:.1f} MB, max {max(rss):.1f} MB, end {rss[-1]:.1f} MB; {sizes}")
     print(f"CSV: {csv_path}")
 
@@ -222,9 +232,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="what", required=True)
     d = sub.add_parser("duration")
-    d.add_argument("--nodes", type=int, default=100)
+    d.add_argument("--nodes", type=int, default=100,
+                   help="generated system size; 0 = the demo robot, fault-free")
+    d.add_argument("--rate", type=float, nargs=2, default=(2.0, 5.0), metavar=("LO", "HI"),
+                   help="source timer rates of the generated system, Hz")
+    d.add_argument("--per-process", type=int, default=8, help="nodes per process of the generated system")
     d.add_argument("--minutes", type=float, default=8.0)
-    d.add_argument("--domain", type=int, default=63)
+    d.add_argument("--domain", type=int, help="ROS_DOMAIN_ID (default: one no test run holds)")
     d.add_argument("--period", type=float, default=1.0)
     d.add_argument("--save", action="store_true", help="also write the .rrd (as `monitor --save`)")
     d.add_argument("--history", type=int, help="[monitor] history (samples kept per member)")
@@ -234,7 +248,13 @@ def main() -> None:
     s.add_argument("--members", type=int, default=100, help="nodes of the synthetic graph")
     args = ap.parse_args()
     if args.what == "duration":
-        run_duration(args.nodes, args.minutes, args.domain, args.period, args.save, args.history)
+        if args.domain is None:
+            sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+            from rosenv import claim_domain
+
+            args.domain = claim_domain()
+        run_duration(args.nodes, args.minutes, args.domain, args.period, args.save, args.history,
+                     tuple(args.rate), args.per_process)
     else:
         run_storm(args.rate, args.seconds, args.members)
 
