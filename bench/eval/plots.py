@@ -43,12 +43,13 @@ def main(summary_path: str, out_dir: str) -> int:
 
     # accuracy per method on the demo robot
     fig, ax = plt.subplots(figsize=(10, 4.5))
-    w = 0.2
+    w = 0.16
     for i, (key, level) in enumerate(
-        [("AC@1", "strict"), ("AC@3", "strict"), ("AC@1", "process"), ("Avg@5", "strict")]
+        [("AC@1", "strict"), ("AC@1", "injected"), ("AC@1", "process"), ("AC@3", "strict"),
+         ("Avg@5", "strict")]
     ):
         vals = [mean(r[key] for r in demo if r["method"] == m and r["level"] == level) for m in methods]
-        ax.bar([j + (i - 1.5) * w for j in range(len(methods))], vals, w, label=f"{key} {level}")
+        ax.bar([j + (i - 2) * w for j in range(len(methods))], vals, w, label=f"{key} {level}")
     ax.set_xticks(range(len(methods)), methods, rotation=35, ha="right", fontsize=8)
     ax.set_ylim(0, 1.05)
     ax.axhline(0.9, color="grey", lw=0.8, ls="--")

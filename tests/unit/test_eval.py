@@ -131,11 +131,16 @@ def test_score_run_latencies_and_tables():
     assert by[("rate monitor + first alert", "strict")]["AC@5"] == 0.0
     assert by[("BARO", "strict")]["AC@1"] == 0.0 and by[("BARO", "process")]["AC@1"] == 1.0
     assert not any(r["method"] == "HT" for r in rows)
+    # a crash is injected into the whole process: judged there; a hang into the node: judged there
+    assert by[("ours both/trajectory", "injected")]["AC@1"] == 1.0
+    hang = {(r["method"], r["level"]): r for r in score_run(_run("hang"), None)}
+    assert hang[("ours both/trajectory", "injected")]["AC@1"] == 0.5
     assert score_run(_run(None), None) == []
     la = latencies(_run())
     assert la["top1_strict"] == 2.0 and la["top1_process"] == 1.0 and la["baseline_first_flag"] is None
     table = accuracy_table(rows, ["stream-viz (live)", "BARO"])
     assert "| stream-viz (live) | 1 | 1.00 |" in table
+    assert table.splitlines()[0].endswith("| AC@1 inj | AC@3 inj |")
     assert "| BARO | 0.00 | 0.00 |" in fault_matrix(rows, ["BARO"])
 
 
