@@ -82,17 +82,22 @@ class PluginContext:
             return float("nan")
         return float(theta[i])
 
-    def past(self, member: str, attr: str) -> tuple[np.ndarray, np.ndarray]:
-        """Return ``(times, values)`` of θ[attr] of ``member`` strictly before ``t``."""
+    def past(self, member: str, attr: str, last: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Return ``(times, values)`` of θ[attr] of ``member`` strictly before ``t``.
+
+        ``last``: read only the newest samples (about this many), which keeps a call cheap when
+        the history is long.
+        """
         from stream_viz.model.ids import kind_of
 
-        times = self.history.times(member)
+        n = None if last is None else last + 1  # the present sample may be in the history
+        times = self.history.times(member, n)
         if len(times) == 0:
             return times, times
         schema = SCHEMAS.get(kind_of(member), ())
         if attr not in schema:
             return np.zeros(0), np.zeros(0)
-        values = self.history.values(member)[:, schema.index(attr)]
+        values = self.history.values(member, n)[:, schema.index(attr)]
         keep = times < self.t
         return times[keep], values[keep]
 

@@ -69,7 +69,7 @@ def cached_baseline(
     hit = cache.get(key)  # (next refresh time, baseline or None)
     if hit is not None and (ctx.t < hit[0] or (frozen and hit[1] is not None)):
         return hit[1]
-    times, values = ctx.past(member, attr)
+    times, values = ctx.past(member, attr, last=window)
     if len(times) == 0 or ctx.t - times[0] < warmup_s:
         # Warming up: look again when the warm-up can be over, not on every call.
         ready = times[0] + warmup_s if len(times) else ctx.t

@@ -90,7 +90,7 @@ def process_anomaly(
 
 
 def process_anomalies(G: nx.MultiDiGraph, history: History, now: float | None = None,
-                      **kw: Any) -> set[str]:
+                      window: int = 120, **kw: Any) -> set[str]:
     """Return processes whose metrics are anomalous vs their own past, and the nodes they host.
 
     Parameters
@@ -101,6 +101,9 @@ def process_anomalies(G: nx.MultiDiGraph, history: History, now: float | None = 
         θ history; the last sample of each process is the present.
     now : float, optional
         The present (default: each process's last sample).
+    window : int
+        Samples per process compared (the present and its past): bounds the cost per call
+        whatever the history length.
     **kw
         Thresholds of `process_anomaly`.
     """
@@ -108,8 +111,8 @@ def process_anomalies(G: nx.MultiDiGraph, history: History, now: float | None = 
     for m, kind in G.nodes(data="kind"):
         if kind != "process" or m not in history:
             continue
-        times = history.times(m)
-        if process_anomaly(times, history.values(m), times[-1] if now is None else now, **kw):
+        times = history.times(m, window)
+        if process_anomaly(times, history.values(m, window), times[-1] if now is None else now, **kw):
             out.add(m)
             out.update(c for _, c, key in G.out_edges(m, keys=True)
                        if key == 1 and G.nodes[c].get("kind") == "node")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
+from itertools import islice
 
 import numpy as np
 
@@ -22,13 +23,20 @@ class History:
             q = self._series[member] = deque(maxlen=self.maxlen)
         q.append((t, theta))
 
-    def times(self, member: str) -> np.ndarray:
-        """Sample times of ``member`` (oldest first); empty when never seen."""
-        return np.array([t for t, _ in self._series.get(member, ())], dtype=float)
+    def _last(self, member: str, last: int | None) -> list[tuple[float, np.ndarray]]:
+        q = self._series.get(member, ())
+        if last is None or last >= len(q):
+            return list(q)
+        # from the right end: cost grows with ``last``, not with the whole history
+        return list(islice(reversed(q), last))[::-1]
 
-    def values(self, member: str) -> np.ndarray:
-        """Samples of ``member`` as a (n, dim) array; (0, 0) when never seen."""
-        q = self._series.get(member)
+    def times(self, member: str, last: int | None = None) -> np.ndarray:
+        """Sample times of ``member`` (oldest first; only the ``last`` ones when given)."""
+        return np.array([t for t, _ in self._last(member, last)], dtype=float)
+
+    def values(self, member: str, last: int | None = None) -> np.ndarray:
+        """Samples of ``member`` as a (n, dim) array (the ``last`` ones when given); (0, 0) if never seen."""
+        q = self._last(member, last)
         if not q:
             return np.zeros((0, 0))
         return np.vstack([v for _, v in q])

@@ -50,6 +50,19 @@ def test_process_anomalies_flag_the_process_and_its_nodes():
     G = _graph()
     assert process_anomalies(G, _history(6.0)) == set()
     assert process_anomalies(G, _history(90.0)) == {"process:2", "node:/planner"}
+    # compared with the last `window` samples only: 5 are too few to judge (warm-up 10)
+    assert process_anomalies(G, _history(90.0), window=5) == set()
+
+
+def test_history_keeps_maxlen_and_reads_the_last_samples():
+    h = _history(6.0)
+    assert list(h.times("process:1", 3)) == [17.0, 18.0, 19.0]
+    assert h.values("process:2", 2).shape == (2, len(make_theta("process", {})))
+    assert len(h.times("process:1", 100)) == 20 and len(h.times("nothing", 3)) == 0
+    short = History(maxlen=4)
+    for t in range(10):
+        short.add("m", float(t), np.array([t]))
+    assert list(short.times("m")) == [6.0, 7.0, 8.0, 9.0]
 
 
 def test_initial_watchlist_modes():
