@@ -82,3 +82,25 @@ def test_robust_and_slope():
     assert np.isclose(sigma, 1.4826 * 1.0)
     assert slope(np.array([0.0, 1.0, 2.0]), np.array([1.0, 3.0, 5.0])) == 2.0
     assert np.isnan(slope(np.array([1.0]), np.array([1.0])))
+
+
+def test_history_ring_matches_a_plain_bounded_queue():
+    # the ring grows 16 → 32 → … → maxlen and then overwrites: same answers as a deque
+    from collections import deque
+
+    rng = np.random.default_rng(0)
+    for maxlen in (1, 5, 16, 17, 40, 100):
+        h, ref = History(maxlen=maxlen), deque(maxlen=maxlen)
+        for i in range(3 * maxlen + 7):
+            theta = rng.random(3)
+            h.add("m", float(i), theta)
+            ref.append((float(i), theta))
+            for last in (None, 1, 7, 1000):
+                want = list(ref)[-last:] if last else list(ref)
+                assert list(h.times("m", last)) == [t for t, _ in want]
+                assert np.array_equal(h.values("m", last), np.vstack([v for _, v in want]))
+    h = History(maxlen=4)
+    h.add("m", 0.0, np.zeros(3))
+    out = h.values("m")
+    h.add("m", 1.0, np.ones(3))
+    assert out.tolist() == [[0.0, 0.0, 0.0]]  # what was read is a copy, not a view of the ring
