@@ -56,7 +56,7 @@ FULL_TARGETS = {
 
 def plan(suite: str, warmup: float, post: float, sizes: list[int], reps: int) -> list[dict]:
     """The run specs of a suite (``short`` or ``full``)."""
-    from bench.eval.systems import pick_targets, system_topology
+    from bench.eval.systems import LARGE, pick_targets, system_topology
 
     base = {"warmup": warmup, "post": post}
     runs: list[dict] = []
@@ -77,7 +77,7 @@ def plan(suite: str, warmup: float, post: float, sizes: list[int], reps: int) ->
         runs.append({"system": "demo", "fault": None, "target": None, "rep": r, **base})
     for n in sizes:
         topo = system_topology(f"gen{n}", 1)
-        targets = pick_targets(topo, 2)
+        targets = pick_targets(topo, 1 if n >= LARGE else 2)  # a 500-node run takes ~2 min
         runs += [
             {"system": f"gen{n}", "seed": 1, "fault": f, "target": t, **base} for f in FAULTS for t in targets
         ]

@@ -72,7 +72,7 @@ def run(spec: dict, out: Path) -> dict:
     t_start = time.time()
     try:
         robot.start()
-        robot.wait_ready(timeout=120.0)
+        robot.wait_ready(timeout=120.0 + 0.5 * len(topo.node_names()))
         t_ready = time.time()
         if fault:
             robot.inject(FaultSpec(fault, spec["target"], warmup))

@@ -7,6 +7,10 @@ from collections.abc import Mapping
 from stream_viz.demo.topology import DEMO, Topology
 from stream_viz.model.ids import make_id
 
+# From this size on, generated systems run at 0.5-1 Hz with 25 nodes per process: at the demo's
+# 2-5 Hz and 8 per process a 500-node system alone saturates 2 cores (docs/demo.md).
+LARGE = 300
+
 
 def system_topology(name: str, seed: int = 0) -> Topology:
     """``demo`` or ``gen<N>`` (a generated layered system of N nodes, seeded)."""
@@ -15,7 +19,10 @@ def system_topology(name: str, seed: int = 0) -> Topology:
     if name.startswith("gen"):
         from stream_viz.demo.generated import generate
 
-        return generate(int(name[3:]), seed=seed)
+        n = int(name[3:])
+        if n >= LARGE:
+            return generate(n, seed=seed, rate=(0.5, 1.0), nodes_per_process=25)
+        return generate(n, seed=seed)
     raise ValueError(f"unknown system {name!r}: demo or gen<N>")
 
 
