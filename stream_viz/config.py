@@ -22,11 +22,13 @@ WATCH_MODES = ("auto", "all", "config")
 
 @dataclass(frozen=True)
 class MonitorConfig:
-    """``[monitor]``: sampling period (s), whether to measure topics, history length (samples)."""
+    """``[monitor]``: sampling period (s), whether to measure topics, history length (samples),
+    how long a vanished member stays in the model (s; 0 = the whole run)."""
 
     period: float = 1.0
     topic_metrics: bool = True
     history: int = 600
+    forget_gone_s: float = 600.0
 
 
 @dataclass(frozen=True)
@@ -64,7 +66,7 @@ class Config:
         return {t: v["expected_rate_hz"] for t, v in self.topics.items() if "expected_rate_hz" in v}
 
 
-_MONITOR = {"period": 1.0, "topic_metrics": True, "history": 600}
+_MONITOR = {"period": 1.0, "topic_metrics": True, "history": 600, "forget_gone_s": 600.0}
 _WATCHLIST = {"mode": "auto", "members": [""]}
 _PLUGINS = {"enable": [""], "disable": [""], "paths": [""]}
 _TOPIC = {"expected_rate_hz": 1.0}

@@ -24,7 +24,7 @@ from stream_viz.detect.watchlist import initial_watchlist, process_anomalies
 from stream_viz.live_view import LiveView
 from stream_viz.model.graph import new_graph
 from stream_viz.model.history import History
-from stream_viz.model.seen import remember
+from stream_viz.model.seen import drop_gone, remember
 from stream_viz.progress import Progress
 from stream_viz.rca.engine import RcaEngine
 from stream_viz.report import build_report, check_writable, write_report
@@ -79,6 +79,7 @@ class Monitor:
         t = sample.t
         self.samples += 1
         self.seen = remember(self.seen, sample.graph, t)
+        self._forget(t)
         for m, theta in sample.graph.nodes(data="theta"):
             if theta is not None:
                 self.history.add(m, t, theta)
@@ -116,6 +117,15 @@ class Monitor:
         result = self.engine.update(self.seen, alerts, evidence if changed else None)
         self.view.update(t, sample, self.seen, alerts, result)
         self.progress.update(self._status(t, result))
+
+    def _forget(self, t: float) -> None:
+        # Long after a member vanished (longer than the RCA window by default) it can no longer
+        # be a cause: drop it and its history, so a churning system does not grow the run.
+        # The database keeps it (snapshots, alerts) for `analyze`.
+        gone = drop_gone(self.seen, t, self.config.monitor.forget_gone_s)
+        if gone:
+            self.history.forget(set(self.seen))
+            self.external_watch.difference_update(gone)
 
     def _watch_additions(self, G, anomalous: set[str]) -> set[str]:
         # W_0 as the paper says: configured members and process monitoring; "auto"/"all" modes

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -81,3 +82,7 @@ class History:
 
     def __contains__(self, member: str) -> bool:
         return member in self._series
+
+    def __iter__(self) -> Iterator[str]:
+        """The members with a history."""
+        return iter(self._series)

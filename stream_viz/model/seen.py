@@ -39,3 +39,30 @@ def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float) -> nx.MultiDiG
             out.edges[u, v, k].pop("gone_at", None)
         out.add_edge(u, v, key=k, **attrs)
     return out
+
+
+def drop_gone(seen: nx.MultiDiGraph, t: float, keep_s: float) -> list[str]:
+    """Remove from ``seen``, in place, the members gone for more than ``keep_s`` at ``t``.
+
+    Bounds a long run on a churning system (restarted nodes come back under new process ids):
+    without it the union grows with every member ever seen. Their edges go with them.
+
+    Parameters
+    ----------
+    seen : MultiDiGraph
+        The union from `remember` (modified).
+    t : float
+        Now.
+    keep_s : float
+        How long a vanished member stays (<= 0: for ever).
+
+    Returns
+    -------
+    list of str
+        The members removed, sorted.
+    """
+    if keep_s <= 0:
+        return []
+    old = sorted(m for m, a in seen.nodes(data=True) if a.get("gone") and t - a.get("gone_at", t) > keep_s)
+    seen.remove_nodes_from(old)
+    return old

@@ -10,6 +10,7 @@ import os
 import shutil
 import signal
 import sys
+import time
 
 import psutil
 import pytest
@@ -57,6 +58,39 @@ def test_churning_nodes_and_processes(children, tmp_path):
     assert len(flickers) >= 10, sorted(ids)  # it saw the churn (seen members are remembered)
     assert len(sample_times(rrd)) >= 8  # sampled all along (one per ~1 s period)
     assert len(db_rows(db, "SELECT id FROM snapshots")) >= 5  # the structure changed and was kept
+
+
+def test_a_long_run_on_a_churning_system_forgets_what_vanished_long_ago(children, tmp_path):
+    """The real monitor pipeline in this process: vanished members leave the model and its
+    history after ``forget_gone_s``, so the run does not grow with every member ever seen."""
+    from dataclasses import replace
+
+    from stream_viz.config import load_config
+    from stream_viz.monitor import Monitor
+    from stream_viz.progress import Progress
+
+    children.python(TALKER, name="talker")
+    children.python(CHURN, "12", name="churn")
+    cfg = load_config(None)
+    cfg = replace(cfg, monitor=replace(cfg.monitor, forget_gone_s=3.0))
+    mon = Monitor(cfg, db=tmp_path / "a.sqlite", viewer="none", domain_id=int(children.env["ROS_DOMAIN_ID"]),
+                  progress=Progress(open(os.devnull, "w")))
+    ever: set[str] = set()
+    try:
+        for _ in range(16):
+            mon.step()
+            ever |= set(mon.seen)
+            now = time.time()  # sample times are wall-clock times
+            old = [m for m, a in mon.seen.nodes(data=True) if a.get("gone") and now - a["gone_at"] > 5.0]
+            assert old == [], old  # nothing stays much longer than the retention (a period of slack)
+            assert set(mon.history) <= set(mon.seen), "history of forgotten members"
+            time.sleep(1.0)
+        assert "node:/talker" in mon.seen and not mon.seen.nodes["node:/talker"].get("gone")
+        flickers = {m for m in ever if m.startswith(("node:/flicker_", "node:/blink_"))}
+        assert len(flickers) >= 20  # it did see the churn ...
+        assert len(flickers & set(mon.seen)) < len(flickers) / 2  # ... and forgot most of it
+    finally:
+        mon.close()
 
 
 def test_a_process_that_exits_between_listing_and_reading(children):

@@ -160,3 +160,16 @@ def test_remember_keeps_vanished_members_marked_gone():
     seen = remember(seen, robot(), 4.0)  # it came back
     assert "gone" not in seen.nodes["node:/camera"]
     assert "gone" not in seen.edges["node:/camera", "topic:/image", 0]
+
+
+def test_drop_gone_forgets_members_vanished_longer_than_the_retention():
+    from stream_viz.model.seen import drop_gone, remember
+
+    b = robot()
+    b.remove_node("node:/camera")
+    seen = remember(remember(new_graph(), robot(), 1.0), b, 2.0)  # camera gone at 2.0
+    assert drop_gone(seen, 500.0, 600.0) == [] and "node:/camera" in seen
+    assert drop_gone(seen, 700.0, 0.0) == []  # 0: kept for the whole run
+    assert drop_gone(seen, 700.0, 600.0) == ["node:/camera"]
+    assert "node:/camera" not in seen and not seen.has_edge("node:/camera", "topic:/image")
+    assert set(seen.nodes) == set(b.nodes)
