@@ -21,7 +21,7 @@ class ProcessResources(Plugin):
     * CPU / memory: ``value - median ≥ max(k·σ, min_rise)`` (σ = 1.4826·MAD of the process's own
       past after ``warmup_s``, frozen while alerting) for ``confirm`` samples; the absolute
       floors (``cpu_min_rise`` percentage points, ``rss_min_rise_mb``) keep idle noise quiet.
-    * growth: the least-squares slope of RSS over a recent window (``trend_s``/6, /2, whole) is
+    * growth: the least-squares slope of RSS over a recent window (``trend_s``/12, /6, /2, whole) is
       at least ``growth_mb_per_s``, RSS grew at least ``growth_min_mb`` in it and rose in at
       least ``growth_steady`` of the steps (a leak, not one big allocation), over at least
       ``growth_min_samples`` samples.
@@ -95,7 +95,7 @@ class ProcessResources(Plugin):
     def _growth(ctx: PluginContext, proc: str) -> float | None:
         """Return the RSS growth rate (MB/s) when memory grows steadily, else None.
 
-        Checked over the last ``trend_s``/6, /2 and whole (a fast leak shows in the short window,
+        Checked over the last ``trend_s``/12, /6, /2 and whole (a fast leak shows in the short window,
         a slow one in the long); steady means at least ``growth_steady`` of the increments are
         positive, so one big allocation (a step) does not count as a leak.
         """
@@ -117,7 +117,7 @@ class ProcessResources(Plugin):
             return None  # the common, healthy case: no numpy needed
         t_all = np.array([t for t, _ in q])
         v_all = np.array([v for _, v in q])
-        for span in (s["trend_s"] / 6, s["trend_s"] / 2, s["trend_s"]):
+        for span in (s["trend_s"] / 12, s["trend_s"] / 6, s["trend_s"] / 2, s["trend_s"]):
             recent = t_all >= ctx.t - span
             t, v = t_all[recent], v_all[recent]
             ok = np.isfinite(v)
