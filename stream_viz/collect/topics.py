@@ -124,21 +124,22 @@ class TopicMonitor:
         with self._lock:
             for topic, w in self._watches.items():
                 raw = not w.deserialize
-                while True:
-                    try:
-                        with w.sub.handle:
-                            got = w.sub.handle.take_message(w.sub.msg_type, raw)
-                    except Exception:  # a destroyed handle or a bad message: skip this topic this round
-                        break
-                    if got is None:
-                        break
-                    msg, info = got
-                    self.taken += 1
-                    size = len(msg) if raw else 0
-                    w.buf.append((info["received_timestamp"], info["source_timestamp"], size,
-                                  info.get("publication_sequence_number")))
-                    if not raw:
-                        self._messages.append((topic, msg, info))
+                handle, append, taken = w.sub.handle, w.buf.append, 0
+                try:
+                    # The handle is held once per topic, not per message: the per-message cost
+                    # is what topic metrics cost on a busy system.
+                    with handle:
+                        take, msg_type = handle.take_message, w.sub.msg_type
+                        while (got := take(msg_type, raw)) is not None:
+                            msg, info = got
+                            taken += 1
+                            append((info["received_timestamp"], info["source_timestamp"],
+                                    len(msg) if raw else 0, info.get("publication_sequence_number")))
+                            if not raw:
+                                self._messages.append((topic, msg, info))
+                except Exception:  # a destroyed handle or a bad message: skip this topic this round
+                    pass
+                self.taken += taken
 
     def take_messages(self) -> list[tuple[str, Any, dict]]:
         """Return and forget the deserialised /rosout and /diagnostics messages taken so far."""
