@@ -74,17 +74,20 @@ def process_anomaly(
         return []
     past, cur = values[:-1], values[-1]
     out = []
-    med, sigma, _ = robust(past[:, _CPU])
-    if np.isfinite(cur[_CPU]) and np.isfinite(med) and cur[_CPU] - med >= max(k * sigma, cpu_min_rise):
-        out.append("cpu")
-    med, sigma, _ = robust(past[:, _RSS])
-    if np.isfinite(cur[_RSS]) and np.isfinite(med) and cur[_RSS] - med >= max(k * sigma, rss_min_rise_mb):
-        out.append("memory")
+    for col, floor, what in ((_CPU, cpu_min_rise, "cpu"), (_RSS, rss_min_rise_mb, "memory")):
+        # The median is at least the minimum: a value not `floor` above the minimum cannot be
+        # `floor` above the median, so the healthy case needs no median (called every sample).
+        if not np.isfinite(cur[col]) or not cur[col] - np.nanmin(past[:, col], initial=np.inf) >= floor:
+            continue
+        med, sigma, _ = robust(past[:, col])
+        if np.isfinite(med) and cur[col] - med >= max(k * sigma, floor):
+            out.append(what)
     recent = times >= now - trend_s
-    if recent.sum() >= 5:
-        s = slope(times[recent], values[recent, _RSS])
-        span = values[recent, _RSS]
-        if np.isfinite(s) and s >= growth_mb_per_s and np.nanmax(span) - np.nanmin(span) >= growth_min_mb:
+    span = values[recent, _RSS]
+    grew = np.nanmax(span, initial=-np.inf) - np.nanmin(span, initial=np.inf)
+    if recent.sum() >= 5 and grew >= growth_min_mb:
+        s = slope(times[recent], span)
+        if np.isfinite(s) and s >= growth_mb_per_s:
             out.append("memory_growth")
     return out
 

@@ -104,3 +104,55 @@ def test_history_ring_matches_a_plain_bounded_queue():
     out = h.values("m")
     h.add("m", 1.0, np.ones(3))
     assert out.tolist() == [[0.0, 0.0, 0.0]]  # what was read is a copy, not a view of the ring
+
+
+def _process_anomaly_by_definition(times, values, now, k=5.0, cpu_min_rise=25.0, rss_min_rise_mb=100.0,
+                                   growth_mb_per_s=1.0, growth_min_mb=20.0, trend_s=30.0, warmup=10):
+    """The definition, with no shortcut: medians always computed."""
+    from stream_viz.detect.watchlist import _CPU, _RSS
+
+    keep = times <= now
+    times, values = times[keep], values[keep]
+    if len(times) < warmup + 1:
+        return []
+    out = []
+    for col, floor, what in ((_CPU, cpu_min_rise, "cpu"), (_RSS, rss_min_rise_mb, "memory")):
+        med, sigma, _ = robust(values[:-1, col])
+        cur = values[-1, col]
+        if np.isfinite(cur) and np.isfinite(med) and cur - med >= max(k * sigma, floor):
+            out.append(what)
+    recent = times >= now - trend_s
+    if recent.sum() >= 5:
+        s, span = slope(times[recent], values[recent, _RSS]), values[recent, _RSS]
+        if np.isfinite(s) and s >= growth_mb_per_s and np.nanmax(span) - np.nanmin(span) >= growth_min_mb:
+            out.append("memory_growth")
+    return out
+
+
+def test_process_anomaly_shortcut_agrees_with_the_definition():
+    # The healthy-case shortcut (no median unless the value clears the floor above the minimum)
+    # must never change the answer: random healthy, spiking, leaking and gappy series.
+    from stream_viz.detect.watchlist import _CPU, _RSS, process_anomaly
+
+    rng = np.random.default_rng(7)
+    dim = len(make_theta("process", {}))
+    kinds = {"cpu": 0, "memory": 0, "memory_growth": 0, "none": 0}
+    for _ in range(3000):
+        n = int(rng.integers(5, 60))
+        times = np.arange(n, dtype=float)
+        values = np.full((n, dim), np.nan)
+        values[:, _CPU] = rng.normal(rng.uniform(0, 50), rng.uniform(0, 15), n)
+        values[:, _RSS] = rng.uniform(20, 300) + rng.normal(0, rng.uniform(0, 30), n)
+        if rng.random() < 0.3:
+            values[-1, _CPU] += rng.uniform(0, 120)
+        if rng.random() < 0.3:
+            values[-1, _RSS] += rng.uniform(0, 300)
+        if rng.random() < 0.3:
+            values[:, _RSS] += rng.uniform(0, 4) * times
+        if rng.random() < 0.2:
+            values[rng.random(n) < 0.3, int(rng.choice([_CPU, _RSS]))] = np.nan
+        got = process_anomaly(times, values, times[-1])
+        assert got == _process_anomaly_by_definition(times, values, times[-1])
+        for what in got or ["none"]:
+            kinds[what] += 1
+    assert min(kinds.values()) > 50, kinds  # every outcome was exercised
