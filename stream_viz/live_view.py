@@ -30,7 +30,7 @@ class LiveView:
         self.metrics_every = metrics_every
         self._batch: list[tuple[float, nx.MultiDiGraph]] = []
         self._iterations = 0
-        self._causes: list[Any] = []
+        self._causes: list[Any] = []  # the root causes last logged
 
     @property
     def url(self) -> str | None:
@@ -39,7 +39,9 @@ class LiveView:
     def update(
         self, t: float, sample: Sample, seen: nx.MultiDiGraph, alerts: list[Alert], result: Any
     ) -> None:
-        """Log one monitor tick."""
+        """Log one monitor tick (nothing when there is no viewer and no file to log to)."""
+        if not self.rec.enabled:
+            return
         self.rec.set_time(t)
         if alerts:
             self.rec.alerts(alerts)  # before the graph, so alerted members are coloured now
@@ -47,15 +49,18 @@ class LiveView:
         self._batch.append((t, sample.graph))
         if t - self._batch[0][0] >= self.metrics_every:
             self._flush_metrics()
+        # The report form of the result costs O(iterations × members): build it only on change.
+        if len(result.iterations) == self._iterations and result.root_causes == self._causes:
+            return
         report = result.to_report()
         causes = report["root_causes"]
         new = report["iterations"][self._iterations:]
         for it in new:
             self.rec.rca(seen, it, causes)
         self._iterations = len(report["iterations"])
-        if not new and causes != self._causes and report["iterations"]:
+        if not new and report["iterations"]:
             self.rec.report(report_markdown(causes, report["iterations"][-1]), t)
-        self._causes = causes
+        self._causes = result.root_causes
 
     def _flush_metrics(self) -> None:
         if self._batch:

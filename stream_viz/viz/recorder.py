@@ -140,9 +140,9 @@ class Recorder:
         self._system_sig: Any = None
         self._tree_sig: Any = None
         self._closed = False
-        enabled = viewer != "none" or self.save is not None
+        self.enabled = viewer != "none" or self.save is not None
         # Nothing to send to: disabled, so the stream does not buffer the whole run in memory.
-        self.rec = rr.RecordingStream(app_id, default_enabled=enabled)
+        self.rec = rr.RecordingStream(app_id, default_enabled=self.enabled)
         self.rec.set_log_time_enabled(False)  # our own `time` timeline is the clock
         sinks: list[Any] = []
         try:
