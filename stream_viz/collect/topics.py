@@ -57,12 +57,20 @@ class TopicMonitor:
     metrics : bool
         Subscribe to every topic for metrics; False keeps only /rosout and /diagnostics.
     period_s : float
-        How often the thread drains.
+        Longest time between two drains of the thread. It drains more often when a topic is fast
+        enough to fill a quarter of the queue (``OBSERVE_QOS.depth``) in that time; `stats` drains
+        first, so the metrics are up to date whatever the period. Draining costs a wake-up per
+        call: a calm system is drained rarely.
+    min_period_s : float
+        Shortest time between two drains (a very fast topic).
     """
 
     def __init__(self, node: Node, window_s: float = 3.0, metrics: bool = True,
-                 period_s: float = 0.1) -> None:
-        self.node, self.window_ns, self.metrics, self.period_s = node, int(window_s * 1e9), metrics, period_s
+                 period_s: float = 0.25, min_period_s: float = 0.02) -> None:
+        self.node, self.window_ns, self.metrics = node, int(window_s * 1e9), metrics
+        self.max_period_s, self.min_period_s = period_s, min_period_s
+        self.period_s = period_s  # the current one, adapted to the fastest topic
+        self._last_drain = time.monotonic()
         self._lock = threading.Lock()
         self._watches: dict[str, _Watch] = {}
         self._failed: dict[str, str] = {}  # topic -> why it is not measured
@@ -120,8 +128,11 @@ class TopicMonitor:
             self.drain()
 
     def drain(self) -> None:
-        """Take every waiting message of every watched topic now."""
+        """Take every waiting message of every watched topic now; adapt the drain period."""
+        peak = 0
         with self._lock:
+            now = time.monotonic()
+            elapsed, self._last_drain = now - self._last_drain, now
             for topic, w in self._watches.items():
                 raw = not w.deserialize
                 handle, append, taken = w.sub.handle, w.buf.append, 0
@@ -140,6 +151,8 @@ class TopicMonitor:
                 except Exception:  # a destroyed handle or a bad message: skip this topic this round
                     pass
                 self.taken += taken
+                peak = max(peak, taken)
+        self.period_s = drain_period(peak, elapsed, OBSERVE_QOS.depth, self.min_period_s, self.max_period_s)
 
     def take_messages(self) -> list[tuple[str, Any, dict]]:
         """Return and forget the deserialised /rosout and /diagnostics messages taken so far."""
@@ -149,6 +162,7 @@ class TopicMonitor:
 
     def stats(self, publishers: dict[str, int]) -> dict[str, TopicStats]:
         """Return metrics per topic over the window; ``publishers`` (topic → count) gates drop counting."""
+        self.drain()  # the thread drains rarely on a calm system: be up to date now
         now = time.time_ns()
         out: dict[str, TopicStats] = {t: TopicStats(False, why) for t, why in self._failed.items()}
         with self._lock:
@@ -168,6 +182,17 @@ class TopicMonitor:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
+
+
+def drain_period(peak: int, elapsed_s: float, depth: int, shortest: float, longest: float) -> float:
+    """Return the time until the next drain: the fastest topic may fill a quarter of its queue.
+
+    ``peak`` messages of one topic were taken after ``elapsed_s``; at that rate a quarter of
+    ``depth`` arrives in the returned time, clipped to ``[shortest, longest]``.
+    """
+    if peak <= 0 or elapsed_s <= 0:
+        return longest
+    return min(longest, max(shortest, 0.25 * depth * elapsed_s / peak))
 
 
 def window_metrics(buf: list[tuple], now_ns: int, created_ns: int, window_ns: int,

@@ -174,3 +174,13 @@ def test_diag_events_member_and_levels():
     assert evs[0].data == {"name": "cam: driver", "hardware_id": "usb1", "level": 2, "values": {"fps": "0"}}
     only = diag_events(msg, 1.0, ["/agg"], nodes)  # the only publisher gets them all
     assert {e.member for e in only} == {"node:/agg"}
+
+
+def test_drain_period_lets_the_fastest_topic_fill_a_quarter_of_its_queue():
+    from stream_viz.collect.topics import drain_period
+
+    assert drain_period(0, 0.25, 1000, 0.02, 0.25) == 0.25  # nothing arrived: drain rarely
+    assert drain_period(10, 0.25, 1000, 0.02, 0.25) == 0.25  # 40 Hz: 250 messages take 6 s
+    assert drain_period(1000, 0.1, 1000, 0.02, 0.25) == 0.025  # 10 kHz: 250 messages in 25 ms
+    assert drain_period(5000, 0.1, 1000, 0.02, 0.25) == 0.02  # faster still: the shortest
+    assert drain_period(5, 0.0, 1000, 0.02, 0.25) == 0.25
