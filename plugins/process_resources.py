@@ -10,7 +10,7 @@ import numpy as np
 from stream_viz_plugins.member_gone import hosted_nodes
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import rise, slope
+from stream_viz.detect.baseline import BASELINE_SETTINGS, rise, slope
 from stream_viz.model.ids import make_id
 from stream_viz.records import Alert
 
@@ -34,10 +34,8 @@ class ProcessResources(Plugin):
     name = "process_resources"
     kinds = ("process", "node")
     settings: ClassVar[dict[str, Any]] = {
-        "warmup_s": 10.0,
+        **BASELINE_SETTINGS,
         "min_samples": 8,
-        "refresh_s": 10.0,
-        "window": 120,
         "k": 5.0,
         "cpu_min_rise": 25.0,
         "rss_min_rise_mb": 100.0,

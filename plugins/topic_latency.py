@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import rise, streak
+from stream_viz.detect.baseline import BASELINE_SETTINGS, rise, streak
 from stream_viz.records import Alert
 
 
@@ -23,10 +23,7 @@ class TopicLatency(Plugin):
     name = "topic_latency"
     kinds = ("topic",)
     settings: ClassVar[dict[str, Any]] = {
-        "warmup_s": 10.0,
-        "min_samples": 5,
-        "refresh_s": 10.0,
-        "window": 120,
+        **BASELINE_SETTINGS,
         "k": 6.0,
         "latency_min_rise_ms": 20.0,
         "jitter_min_rise_ms": 20.0,

@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import cached_baseline, streak
+from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, streak
 from stream_viz.records import Alert
 
 
@@ -25,10 +25,7 @@ class TopicRate(Plugin):
     name = "topic_rate"
     kinds = ("topic",)
     settings: ClassVar[dict[str, Any]] = {
-        "warmup_s": 10.0,
-        "min_samples": 5,
-        "refresh_s": 10.0,
-        "window": 120,
+        **BASELINE_SETTINGS,
         "drop_ratio": 0.5,
         "min_baseline_hz": 0.5,
         "confirm": 2,

@@ -14,6 +14,13 @@ import numpy as np
 MAD_TO_SIGMA = 1.4826
 
 
+# The settings every plugin that uses `cached_baseline` / `rise` takes (its own defaults
+# override these): how long to learn, how many samples, how often to refresh, over how many.
+BASELINE_SETTINGS: dict[str, float | int] = {
+    "warmup_s": 10.0, "min_samples": 5, "refresh_s": 10.0, "window": 120,
+}
+
+
 def robust(values: np.ndarray) -> tuple[float, float, int]:
     """Return ``(median, sigma, n)`` of the finite values; sigma = 1.4826·MAD. NaNs when empty."""
     v = np.asarray(values, dtype=float)
