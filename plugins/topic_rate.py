@@ -15,9 +15,12 @@ class TopicRate(Plugin):
     """Alerts when a watched topic's rate drops or it goes silent.
 
     * silence (error): no message for ``max(silence_periods / rate, silence_min_s)`` after
-      having had messages (a zero rate means none for the collector's ``rate_window_s``, 3 s);
+      having had messages, from the age of the newest message (``age_s``); without one, a zero
+      rate means none for the collector's ``rate_window_s``, 3 s;
     * drop (warn): ``rate < drop_ratio × baseline`` for ``confirm`` samples, the baseline being
-      the median of the topic's own rate after ``warmup_s`` (frozen while alerting);
+      the median of the topic's own rate after ``warmup_s`` (frozen while alerting); the rate
+      compared is the recent one (``rate_recent_hz``, the last few intervals) where measured, so
+      a slowed topic shows before the collector's window has turned over;
     * below expectation (warn): ``rate < (1 - expected_tolerance) × expected_rate_hz`` from the
       config, for ``confirm`` samples.
     """
@@ -30,7 +33,7 @@ class TopicRate(Plugin):
         "min_baseline_hz": 0.5,
         "confirm": 2,
         "silence_periods": 3.0,
-        "silence_min_s": 1.0,
+        "silence_min_s": 1.5,
         "expected_tolerance": 0.3,
         "rate_window_s": 3.0,
     }
@@ -49,21 +52,26 @@ class TopicRate(Plugin):
             fired = False
             if rate > 0:
                 last_msg[topic] = (ctx.t, rate)
-            elif topic in last_msg:
+            if topic in last_msg:
                 t_last, rate_last = last_msg[topic]
                 ref = base[0] if base and base[0] > 0 else rate_last
-                # A zero rate already means no message in the collector's whole rate window.
-                quiet = max(ctx.t - t_last, s["rate_window_s"])
+                age = ctx.value(topic, "age_s")
+                if age == age:  # measured: seconds since the newest message in the window
+                    quiet = age
+                else:  # none in the window: a zero rate means none for the whole rate window
+                    quiet = max(ctx.t - t_last, s["rate_window_s"]) if rate == 0 else 0.0
                 if quiet >= max(s["silence_periods"] / ref, s["silence_min_s"]):
                     fired = True
                     yield ctx.alert(topic, "error", f"silent for {quiet:.1f} s (was {ref:.3g} Hz)",
                                     symptom="silence", silent_s=quiet, baseline_hz=ref)
+            recent = ctx.value(topic, "rate_recent_hz")
+            now_rate = recent if recent == recent else rate
             if not fired and base is not None and base[0] >= s["min_baseline_hz"]:
-                low = rate < s["drop_ratio"] * base[0]
+                low = now_rate < s["drop_ratio"] * base[0]
                 if streak(ctx.state, (topic, "drop"), low) >= s["confirm"]:
                     fired = True
-                    yield ctx.alert(topic, "warn", f"rate {rate:.3g} Hz, down from {base[0]:.3g} Hz",
-                                    symptom="rate_drop", rate_hz=rate, baseline_hz=base[0])
+                    yield ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {base[0]:.3g} Hz",
+                                    symptom="rate_drop", rate_hz=now_rate, baseline_hz=base[0])
             expected = ctx.expected_rates.get(topic)
             if expected:
                 low = rate < (1.0 - s["expected_tolerance"]) * expected

@@ -27,6 +27,7 @@ from stream_viz.records import Event
 OBSERVE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
 NO_RAW = frozenset({"/rosout", "/parameter_events"})  # busy infrastructure topics: no metrics
+RECENT = 5  # intervals behind `rate_recent_hz`
 WARMUP_S = 1.0  # a fresh subscription has seen too little to call a rate (0 would read as silence)
 
 
@@ -202,6 +203,11 @@ def window_metrics(buf: list[tuple], now_ns: int, created_ns: int, window_ns: in
     Pure: ``span`` is the window, or less while the subscription is younger than the window; a
     subscription younger than `WARMUP_S` gives no rate (NaN). Drops count sequence-number gaps and
     only with one publisher (interleaved publishers' numbers cannot be told apart).
+
+    Two fast signals beside the window's: ``age_s``, the time since the newest message (a topic
+    that stops shows at once, not when the window has emptied), and ``rate_recent_hz``, the rate
+    over the last ``RECENT`` intervals up to now (at least 3; the open interval since the newest
+    message counts, so a slowed topic shows before the window has turned over).
     """
     span_ns = min(window_ns, now_ns - created_ns)
     m: dict[str, float] = {}
@@ -218,6 +224,12 @@ def window_metrics(buf: list[tuple], now_ns: int, created_ns: int, window_ns: in
             m["bandwidth_kBps"] = sum(b[2] for b in buf) / span / 1000.0
         if n >= 3:
             m["jitter_ms"] = float(np.std(np.diff(recv))) / 1e6
+        newest = int(recv.max())
+        m["age_s"] = max(0, now_ns - newest) / 1e9
+        if n >= 4:
+            k = min(RECENT, n - 1)
+            first = int(np.partition(recv, n - 1 - k)[n - 1 - k])  # the (k+1)-th newest arrival
+            m["rate_recent_hz"] = k / max((now_ns - first) / 1e9, 1e-9)
     if n_publishers == 1:
         seqs = [b[3] for b in buf if b[3] is not None]
         if len(seqs) == n:

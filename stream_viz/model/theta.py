@@ -16,7 +16,7 @@ SCHEMAS: dict[str, tuple[str, ...]] = {
     ),
     "topic": (
         "rate_hz", "jitter_ms", "latency_ms", "bandwidth_kBps", "drops_per_s",
-        "publishers", "subscribers",
+        "publishers", "subscribers", "rate_recent_hz", "age_s",
     ),
     "node": ("publishers", "subscriptions", "services", "clients"),
     "service": ("servers", "clients"),

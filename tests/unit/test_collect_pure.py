@@ -146,6 +146,22 @@ def test_window_metrics_literal():
     assert window_metrics(buf, 3 * s, int(2.5 * s), 3 * s, 1) == {}
     # Silence after warm-up is a rate of 0, not unknown.
     assert window_metrics([], 3 * s, 0, 3 * s, 1)["rate_hz"] == 0.0
+    # The fast signals: the newest came 0.5 s ago; the last 4 intervals (of 5 messages) up to now: 2.5 s.
+    assert m["age_s"] == pytest.approx(0.5)
+    assert m["rate_recent_hz"] == pytest.approx(4 / 2.5)
+    assert "rate_recent_hz" not in window_metrics(buf[:3], 3 * s, 0, 3 * s, 1)  # 2 intervals: too few
+    assert "age_s" not in window_metrics([], 3 * s, 0, 3 * s, 1)
+
+
+def test_window_metrics_recent_rate_sees_a_slowdown_the_window_hides():
+    s = 1_000_000_000
+    # 10 Hz for 2.5 s, then one message 0.4 s later: the window still says 9 Hz, recent 5.6 Hz.
+    recv = [i * s // 10 for i in range(26)] + [29 * s // 10]
+    buf = [(r, r, 10, None) for r in recv]
+    m = window_metrics(buf, now_ns=3 * s, created_ns=0, window_ns=3 * s, n_publishers=1)
+    assert m["rate_hz"] == pytest.approx(27 / 3)
+    assert m["rate_recent_hz"] == pytest.approx(5 / 0.9)
+    assert m["age_s"] == pytest.approx(0.1)
 
 
 def test_log_events():

@@ -16,8 +16,9 @@ from stream_viz.records import Event
 RNG = np.random.default_rng(7)
 
 
-def model(rate=10.0, latency=2.0, jitter=1.0, drops=0.0, cpu=5.0, rss=80.0, alive=True):
-    """camera (pid 100) -> /img -> detector (pid 200)."""
+def model(rate=10.0, latency=2.0, jitter=1.0, drops=0.0, cpu=5.0, rss=80.0, alive=True, recent=None,
+          age=None):
+    """camera (pid 100) -> /img -> detector (pid 200); ``recent``/``age``: the fast rate signals."""
     G = new_graph()
     add_member(G, "process:100", pid=100, alive=alive,
                theta=make_theta("process", {"cpu_percent": cpu, "rss_mb": rss, "threads": 4}))
@@ -27,7 +28,8 @@ def model(rate=10.0, latency=2.0, jitter=1.0, drops=0.0, cpu=5.0, rss=80.0, aliv
     add_member(G, "node:/detector", pid=200, alive=True)
     add_member(G, "topic:/img", theta=make_theta("topic", {
         "rate_hz": rate, "latency_ms": latency, "jitter_ms": jitter, "drops_per_s": drops,
-        "publishers": 1, "subscribers": 1}))
+        "publishers": 1, "subscribers": 1,
+        **({} if recent is None else {"rate_recent_hz": recent}), **({} if age is None else {"age_s": age})}))
     add_flow_edge(G, "node:/camera", "topic:/img", "pub")
     add_flow_edge(G, "topic:/img", "node:/detector", "sub")
     add_tree_edge(G, "process:100", "node:/camera")
@@ -71,6 +73,23 @@ def test_topic_rate_silence_and_recovery():
     rates = [10.0] * 20 + [0.0] * 3 + [10.0] * 3
     frames = [(float(t), model(rate=r), []) for t, r in enumerate(rates)]
     assert drive("topic_rate", frames) == [(t, "topic:/img", "error") for t in (20.0, 21.0, 22.0)]
+
+
+def test_topic_rate_silence_from_the_age_of_the_newest_message():
+    # 10 Hz, then no message: the window's rate stays up for 3 s, the age says it at once.
+    ages = [0.05] * 20 + [0.6, 1.6, 2.6]
+    frames = [(float(t), model(rate=10.0, age=a), []) for t, a in enumerate(ages)]
+    assert drive("topic_rate", frames) == [(t, "topic:/img", "error") for t in (21.0, 22.0)]
+    # A healthy topic whose newest message is always a little old never counts as silent.
+    frames = [(float(t), model(rate=noisy(10.0), age=RNG.uniform(0, 0.3)), []) for t in range(60)]
+    assert drive("topic_rate", frames) == []
+
+
+def test_topic_rate_drop_from_the_recent_rate():
+    # Slowed to a quarter: the recent rate shows it while the window's rate is still above half.
+    frames = [(float(t), model(rate=noisy(10.0), recent=noisy(10.0)), []) for t in range(30)]
+    frames += [(30.0, model(rate=8.0, recent=3.0), []), (31.0, model(rate=5.5, recent=2.5), [])]
+    assert drive("topic_rate", frames) == [(31.0, "topic:/img", "warn")]
 
 
 def test_topic_rate_slow_topic_needs_three_periods():
