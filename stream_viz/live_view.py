@@ -8,6 +8,7 @@ from typing import Any
 import networkx as nx
 
 from stream_viz.records import Alert, Sample
+from stream_viz.viz.metrics import MetricBatch
 from stream_viz.viz.rca import report_markdown
 from stream_viz.viz.recorder import Recorder
 
@@ -22,13 +23,18 @@ class LiveView:
     save : Path, optional
         Also write the recording here.
     metrics_every : float
-        Seconds of metric samples sent in one ``send_columns`` batch.
+        Seconds of metric samples sent in one ``send_columns`` batch (at least).
+    max_chunks_per_s : float
+        Upper bound on metric chunks per second: a batch is one chunk per member, and Rerun keeps
+        an index entry for every chunk written to an ``.rrd`` (its footer) in memory until the file
+        is closed, so a large system batches longer (`metrics_batch_s`).
     """
 
-    def __init__(self, viewer: str = "none", save: Path | None = None, metrics_every: float = 5.0) -> None:
+    def __init__(self, viewer: str = "none", save: Path | None = None, metrics_every: float = 5.0,
+                 max_chunks_per_s: float = 20.0) -> None:
         self.rec = Recorder(viewer=viewer, save=save)
-        self.metrics_every = metrics_every
-        self._batch: list[tuple[float, nx.MultiDiGraph]] = []
+        self.metrics_every, self.max_chunks_per_s = metrics_every, max_chunks_per_s
+        self._batch = MetricBatch()
         self._iterations = 0
         self._causes: list[Any] = []  # the root causes last logged
 
@@ -46,8 +52,9 @@ class LiveView:
         if alerts:
             self.rec.alerts(alerts)  # before the graph, so alerted members are coloured now
         self.rec.system(seen, t)
-        self._batch.append((t, sample.graph))
-        if t - self._batch[0][0] >= self.metrics_every:
+        self._batch.add(t, sample.graph)
+        every = metrics_batch_s(len(self._batch), self.metrics_every, self.max_chunks_per_s)
+        if t - self._batch.first_t >= every:
             self._flush_metrics()
         # The report form of the result costs O(iterations × members): build it only on change.
         if len(result.iterations) == self._iterations and result.root_causes == self._causes:
@@ -65,7 +72,7 @@ class LiveView:
     def _flush_metrics(self) -> None:
         if self._batch:
             self.rec.metrics(self._batch)
-            self._batch = []
+            self._batch.clear()
 
     def close(self) -> None:
         """Send what is pending and close the recording (the ``.rrd`` gets its footer)."""
@@ -73,6 +80,12 @@ class LiveView:
             self._flush_metrics()
         finally:
             self.rec.close()
+
+
+def metrics_batch_s(members: int, shortest: float, max_chunks_per_s: float) -> float:
+    """Return how many seconds of metrics to send at once: ``members`` chunks per batch stay
+    within ``max_chunks_per_s``, and a batch covers at least ``shortest`` seconds."""
+    return max(shortest, members / max_chunks_per_s) if max_chunks_per_s > 0 else shortest
 
 
 def save_diagnosis(path: Path, G: nx.MultiDiGraph, alerts: list[Alert], result: Any) -> None:

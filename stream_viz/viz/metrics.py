@@ -89,18 +89,55 @@ def style_series(rec: rr.RecordingStream, G: nx.MultiDiGraph | None, member: str
     )
 
 
-def log_metrics(rec: rr.RecordingStream, batch: Iterable[Any], kinds: Iterable[str] = METRIC_KINDS) -> int:
+class MetricBatch:
+    """θ rows of processes and topics gathered sample by sample until they are sent.
+
+    Only the rows are kept (not the samples' graphs), so a long batch of a large system is cheap.
+    """
+
+    def __init__(self, kinds: Iterable[str] = METRIC_KINDS) -> None:
+        self.kinds = tuple(kinds)
+        self.rows: dict[str, tuple[list[float], list[np.ndarray]]] = {}
+        self.first_t: float | None = None
+        self.G: nx.MultiDiGraph | None = None  # the latest graph, for the members' labels
+
+    def add(self, t: float, G: nx.MultiDiGraph) -> None:
+        """Take the θ rows of one sample."""
+        for m, (ts, xs) in metric_columns([(t, G)], self.kinds).items():
+            rt, rx = self.rows.setdefault(m, ([], []))
+            rt.append(float(ts[0]))
+            rx.append(xs[0])
+        self.first_t = t if self.first_t is None else self.first_t
+        self.G = G
+
+    def columns(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """``member -> (times (T,), values (T, len(schema)))``, as `metric_columns` returns."""
+        return {m: (np.asarray(ts), np.vstack(xs)) for m, (ts, xs) in self.rows.items()}
+
+    def clear(self) -> None:
+        self.rows, self.first_t = {}, None
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+
+def log_metrics(rec: rr.RecordingStream, batch: Iterable[Any] | MetricBatch,
+                kinds: Iterable[str] = METRIC_KINDS) -> int:
     """Send θ of the batch's processes and topics, one ``send_columns`` per member; return #rows.
 
-    New members are styled once (static ``SeriesLines`` with readable names).
+    ``batch`` is a `MetricBatch` or ``(t, G)`` pairs / samples. New members are styled once
+    (static ``SeriesLines`` with readable names).
     """
-    batch = list(batch)
-    if not batch:
-        return 0
-    last_G = _t_graph(batch[-1])[1]
+    if isinstance(batch, MetricBatch):
+        columns, last_G = batch.columns(), batch.G
+    else:
+        batch = list(batch)
+        if not batch:
+            return 0
+        columns, last_G = metric_columns(batch, kinds), _t_graph(batch[-1])[1]
     styled = _styled.setdefault(rec, set())
     n = 0
-    for member, (ts, xs) in sorted(metric_columns(batch, kinds).items()):
+    for member, (ts, xs) in sorted(columns.items()):
         path = paths.metrics_path(member, paths.THETA)
         if path not in styled:
             style_series(rec, last_G, member)

@@ -105,3 +105,22 @@ def test_services_named_as_the_collector_names_them_sit_beside_their_server():
     G.nodes["service:/map_server/get_map"]["servers"] = ["/map_server"]
     add_flow_edge(G, "node:/planner", "node:/map_server", "send", services=["/map_server/get_map"])
     assert service_servers(G) == {"service:/map_server/get_map": ["node:/map_server"]}
+
+
+def test_metrics_batch_grows_with_the_members_to_bound_chunks_per_second():
+    from stream_viz.live_view import metrics_batch_s
+    from stream_viz.viz.metrics import MetricBatch
+
+    assert metrics_batch_s(25, 5.0, 20.0) == 5.0  # the demo: every 5 s
+    assert metrics_batch_s(500, 5.0, 20.0) == 25.0  # 500 series: 20 chunks/s at most
+    assert metrics_batch_s(500, 5.0, 0.0) == 5.0  # no bound
+    # A batch keeps θ rows only: one row per process and topic per sample, no graph.
+    G, batch = demo_graph(), MetricBatch()
+    batch.add(10.0, G)
+    batch.add(11.0, G)
+    assert len(batch) == sum(1 for _, k in G.nodes(data="kind") if k in ("process", "topic")) == 25
+    assert batch.first_t == 10.0
+    ts, xs = batch.columns()["topic:/scan"]
+    assert ts.tolist() == [10.0, 11.0] and xs.shape == (2, 9)
+    batch.clear()
+    assert len(batch) == 0 and batch.first_t is None
