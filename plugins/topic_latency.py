@@ -17,7 +17,10 @@ class TopicLatency(Plugin):
     A rise counts when ``value - median ≥ max(k·σ, min_rise_ms)`` (σ = 1.4826·MAD of the topic's
     own past after ``warmup_s``; for jitter also ≥ ``jitter_period_ratio`` × the period) for
     ``confirm`` samples in a row; drops when
-    ``drops_per_s ≥ max(drops_min_per_s, drops_ratio × rate)`` for ``confirm`` samples.
+    ``drops_per_s ≥ max(drops_min_per_s, drops_ratio × rate)`` for ``confirm`` samples. Only
+    samples with a message newer than the previous sample count (``age_s``): a topic slower than
+    the sampling keeps one late message in its window for several samples, which is one
+    observation, not ``confirm``.
     """
 
     name = "topic_latency"
@@ -36,7 +39,11 @@ class TopicLatency(Plugin):
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         s = ctx.settings
         alerting = ctx.state.setdefault("alerting", set())
+        since = ctx.t - ctx.state.get("t_prev", -math.inf)
+        ctx.state["t_prev"] = ctx.t
         for topic in ctx.watched("topic"):
+            age = ctx.value(topic, "age_s")
+            fresh = age != age or age < since  # a message since the last sample (age unknown: yes)
             floors = (("latency_ms", s["latency_min_rise_ms"]), ("jitter_ms", s["jitter_min_rise_ms"]))
             for attr, floor in floors:
                 if attr == "jitter_ms":
@@ -45,7 +52,7 @@ class TopicLatency(Plugin):
                     rate = ctx.value(topic, "rate_hz")
                     if rate > 0:
                         floor = max(floor, s["jitter_period_ratio"] * 1000.0 / rate)
-                risen = rise(ctx, topic, attr, floor, alerting)
+                risen = rise(ctx, topic, attr, floor, alerting, fresh)
                 if risen is not None:
                     value, med = risen
                     what = attr.removesuffix("_ms")
@@ -55,6 +62,6 @@ class TopicLatency(Plugin):
             if not math.isnan(drops):
                 rate = ctx.value(topic, "rate_hz")
                 limit = max(s["drops_min_per_s"], s["drops_ratio"] * (0.0 if math.isnan(rate) else rate))
-                if streak(ctx.state, (topic, "drops"), drops >= limit) >= s["confirm"]:
+                if streak(ctx.state, (topic, "drops"), drops >= limit, fresh) >= s["confirm"]:
                     yield ctx.alert(topic, "warn", f"{drops:.3g} messages/s dropped",
                                     symptom="drops", drops_per_s=drops)

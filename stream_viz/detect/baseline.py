@@ -89,9 +89,14 @@ def cached_baseline(
     cache[key] = (ctx.t + refresh_s, (med, sigma, n))
     return med, sigma, n
 
-def streak(state: dict[str, Any], key: Any, condition: bool) -> int:
-    """Count consecutive calls with ``condition`` true for ``key`` (0 once it is false)."""
+def streak(state: dict[str, Any], key: Any, condition: bool, fresh: bool = True) -> int:
+    """Count consecutive calls with ``condition`` true for ``key`` (0 once it is false).
+
+    A call that is not ``fresh`` (no new data since the last one) returns the count unchanged.
+    """
     counts = state.setdefault("_streaks", {})
+    if not fresh:
+        return counts.get(key, 0)
     if condition:
         counts[key] = counts.get(key, 0) + 1
         return counts[key]
@@ -99,10 +104,13 @@ def streak(state: dict[str, Any], key: Any, condition: bool) -> int:
     return 0
 
 
-def rise(ctx: Any, member: str, attr: str, floor: float, alerting: set) -> tuple[float, float] | None:
+def rise(ctx: Any, member: str, attr: str, floor: float, alerting: set,
+         fresh: bool = True) -> tuple[float, float] | None:
     """Return ``(value, median)`` while ``member``'s ``attr`` stays risen above its own baseline.
 
-    Risen means ``value - median ≥ max(k·σ, floor)`` for ``confirm`` samples in a row; the
+    Risen means ``value - median ≥ max(k·σ, floor)`` for ``confirm`` fresh samples in a row; a
+    sample that is not ``fresh`` (computed from the same data as the one before, e.g. a slow
+    topic's window holding the same message) neither counts nor breaks the streak. The
     baseline (`cached_baseline`, from ``ctx.settings``' ``warmup_s``, ``min_samples``,
     ``refresh_s``, ``window``) is frozen while ``(member, attr)`` is in ``alerting``, which this
     keeps up to date. None while warming up, when the value is missing or when not risen.
@@ -117,7 +125,7 @@ def rise(ctx: Any, member: str, attr: str, floor: float, alerting: set) -> tuple
     if base is None:
         return None
     med, sigma, _ = base
-    if streak(ctx.state, key, value - med >= max(s["k"] * sigma, floor)) >= s["confirm"]:
+    if streak(ctx.state, key, value - med >= max(s["k"] * sigma, floor), fresh) >= s["confirm"]:
         alerting.add(key)
         return value, med
     alerting.discard(key)

@@ -259,3 +259,16 @@ def test_graph_anomalies_duplicate_names():
     G = model()
     G.nodes["node:/camera"]["instances"] = 2
     assert drive("graph_anomalies", [(1.0, G, [])]) == [(1.0, "node:/camera", "error")]
+
+
+def test_topic_latency_counts_one_late_message_once():
+    # A topic slower than the sampling: one late message stays in the 3 s window for 3 samples
+    # (ages 0.2, 1.2, 2.2 s). That is one observation, not three: no alert. Three late
+    # messages (each newer than the sample before) are.
+    frames = [(float(t), model(latency=noisy(2.0), age=0.1), []) for t in range(30)]
+    stale = [(0.2, 200.0), (1.2, 200.0), (2.2, 200.0)]
+    frames += [(30.0 + i, model(latency=lat, age=age), []) for i, (age, lat) in enumerate(stale)]
+    assert drive("topic_latency", frames) == []
+    more = [(0.3, 210.0), (1.3, 210.0), (0.2, 190.0)]
+    frames += [(33.0 + i, model(latency=lat, age=age), []) for i, (age, lat) in enumerate(more)]
+    assert drive("topic_latency", frames) == [(35.0, "topic:/img", "warn")]
