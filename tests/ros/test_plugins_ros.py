@@ -197,6 +197,8 @@ def test_topic_rate_silence(children, tmp_path, run_of):
     wait_for(lambda: (run.step(), run.G.nodes["topic:/chatter"]["measured"])[1], timeout=20, period=PERIOD)
     a = _sick_after_healthy(run, flag, "topic_rate", "topic:/chatter", healthy_s=6.0, symptom="silence")
     assert a.severity == "error"
+    # Told by the age of the newest message (1.5 s at 20 Hz), not when the 3 s rate window empties.
+    assert 1.5 <= a.data["silent_s"] < 3.0, a
 
 
 def test_topic_latency_jitter_when_bursty(children, tmp_path, run_of):
