@@ -153,7 +153,9 @@ class TopicMonitor:
                     pass
                 self.taken += taken
                 peak = max(peak, taken)
-        self.period_s = drain_period(peak, elapsed, OBSERVE_QOS.depth, self.min_period_s, self.max_period_s)
+        if elapsed >= self.min_period_s:  # a drain right after another (`stats`) says nothing of rates
+            self.period_s = drain_period(peak, elapsed, OBSERVE_QOS.depth, self.min_period_s,
+                                         self.max_period_s)
 
     def take_messages(self) -> list[tuple[str, Any, dict]]:
         """Return and forget the deserialised /rosout and /diagnostics messages taken so far."""
