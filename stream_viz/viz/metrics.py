@@ -46,21 +46,10 @@ def metric_columns(
     kinds : iterable of str
         Member kinds whose θ is sent.
     """
-    kinds = set(kinds)
-    rows: dict[str, tuple[list[float], list[np.ndarray]]] = {}
+    acc = MetricBatch(kinds)
     for sample in batch:
-        t, G = _t_graph(sample)
-        for m, data in G.nodes(data=True):
-            kind, theta = data.get("kind"), data.get("theta")
-            if kind not in kinds or theta is None or data.get("gone"):
-                continue
-            theta = np.asarray(theta, dtype=float)
-            if theta.shape != (len(SCHEMAS[kind]),) or not np.isfinite(theta).any():
-                continue
-            ts, xs = rows.setdefault(m, ([], []))
-            ts.append(t)
-            xs.append(theta)
-    return {m: (np.asarray(ts), np.vstack(xs)) for m, (ts, xs) in rows.items()}
+        acc.add(*_t_graph(sample))
+    return acc.columns()
 
 
 def member_label(G: nx.MultiDiGraph | None, member: str) -> str:
@@ -96,17 +85,23 @@ class MetricBatch:
     """
 
     def __init__(self, kinds: Iterable[str] = METRIC_KINDS) -> None:
-        self.kinds = tuple(kinds)
+        self.kinds = frozenset(kinds)
         self.rows: dict[str, tuple[list[float], list[np.ndarray]]] = {}
         self.first_t: float | None = None
         self.G: nx.MultiDiGraph | None = None  # the latest graph, for the members' labels
 
     def add(self, t: float, G: nx.MultiDiGraph) -> None:
-        """Take the θ rows of one sample."""
-        for m, (ts, xs) in metric_columns([(t, G)], self.kinds).items():
+        """Take the θ rows of one sample (members of ``kinds`` with a θ of their schema, not all NaN)."""
+        for m, data in G.nodes(data=True):
+            kind, theta = data.get("kind"), data.get("theta")
+            if kind not in self.kinds or theta is None or data.get("gone"):
+                continue
+            theta = np.asarray(theta, dtype=float)
+            if theta.shape != (len(SCHEMAS[kind]),) or not np.isfinite(theta).any():
+                continue
             rt, rx = self.rows.setdefault(m, ([], []))
-            rt.append(float(ts[0]))
-            rx.append(xs[0])
+            rt.append(float(t))
+            rx.append(theta)
         self.first_t = t if self.first_t is None else self.first_t
         self.G = G
 
