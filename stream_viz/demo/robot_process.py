@@ -151,6 +151,10 @@ def main(argv: list[str] | None = None) -> int:
 
     while not STOP.wait(0.5):  # a timeout keeps the main thread responsive to signals
         pass
+    # A clean shutdown can hang (an executor busy in a callback, DDS teardown): end regardless.
+    watchdog = threading.Timer(5.0, os._exit, args=(0,))
+    watchdog.daemon = True
+    watchdog.start()
     for ex in executors:
         ex.shutdown(timeout_sec=1.0)
     for t in spinners:  # a node still in use by a spinning executor would not really be destroyed
