@@ -1,4 +1,5 @@
-"""Memory of the monitor's recording side over a long run: fixed 5 s metric batches vs bounded chunks/s.
+"""Memory of the monitor's recording side over a long run: fixed 5 s metric batches, bounded chunks/s,
+and bounded chunks/s saved in 10-minute file parts.
 
 Rerun keeps an index entry for every chunk written to an ``.rrd`` (the file's footer) in memory
 until the file is closed, and every metric batch is one chunk per member: on a large system the
@@ -8,7 +9,9 @@ topic each, 50 processes) for ``--minutes`` simulated minutes at 1 Hz, θ changi
 once per policy, each in its own process so RSS is its own, side by side in one run:
 
 - ``fixed``: a batch every 5 s whatever the size (``max_chunks_per_s = 0``, the old behaviour);
-- ``bounded``: at most 20 metric chunks per second (`stream_viz.live_view.metrics_batch_s`).
+- ``bounded``: at most 20 metric chunks per second (`stream_viz.live_view.metrics_batch_s`);
+- ``parts``: bounded, and a new file part every 10 minutes (the default
+  ``[monitor] recording_part_minutes``), which frees the index of the closed part.
 
     .venv/bin/python bench/bench_viz_memory.py --nodes 500 --minutes 30
 """
@@ -23,10 +26,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-POLICIES = {"fixed": 0.0, "bounded": 20.0}
+POLICIES = {"fixed": (0.0, 0.0), "bounded": (20.0, 0.0), "parts": (20.0, 600.0)}  # (chunks/s, part s)
 
 
-def one(nodes: int, minutes: float, max_chunks_per_s: float, rrd: Path) -> dict:
+def one(nodes: int, minutes: float, policy: tuple[float, float], rrd: Path) -> dict:
     import gc
 
     import numpy as np
@@ -41,7 +44,7 @@ def one(nodes: int, minutes: float, max_chunks_per_s: float, rrd: Path) -> dict:
     me = psutil.Process()
     G = chain_graph(nodes)
     rng = np.random.default_rng(0)
-    view = LiveView(save=rrd, max_chunks_per_s=max_chunks_per_s)
+    view = LiveView(save=rrd, max_chunks_per_s=policy[0], part_s=policy[1])
     result = RcaEngine(RcaSettings(), watchlist=None).update(G, [])
     curve = []
     ticks = int(minutes * 60)
@@ -53,7 +56,8 @@ def one(nodes: int, minutes: float, max_chunks_per_s: float, rrd: Path) -> dict:
             gc.collect()
             curve.append((i / 60, me.memory_info().rss / 2**20))
     view.close()
-    return {"curve": curve, "rrd_mb": rrd.stat().st_size / 2**20}
+    parts = view.rec.parts
+    return {"curve": curve, "rrd_mb": sum(p.stat().st_size for p in parts) / 2**20, "parts": len(parts)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -76,16 +80,26 @@ def main(argv: list[str] | None = None) -> int:
             out[name] = json.loads(res.stdout.strip().splitlines()[-1])
     print(f"recording memory: {args.nodes}-node synthetic system, {args.minutes:g} simulated min at 1 Hz, "
           f".rrd written, {os.cpu_count()} cores")
-    print(f"{'policy':8s} {'RSS start MB':>12s} {'at 5 min':>9s} {'end':>7s} {'MB/min after 5':>15s} "
-          f"{'.rrd MB':>8s}")
+    print(f"{'policy':8s} {'RSS start MB':>12s} {'at 5 min':>9s} {'end':>7s} {'peak':>7s} "
+          f"{'MB/min after 5':>15s} {'.rrd MB':>8s} {'files':>5s}")
     for name, r in out.items():
         c = r["curve"]
         at5 = next((mb for m, mb in c if m >= 5), c[-1][1])
         slope = (c[-1][1] - at5) / max(c[-1][0] - 5, 1e-9)
-        print(f"{name:8s} {c[0][1]:12.1f} {at5:9.1f} {c[-1][1]:7.1f} {slope:15.2f} {r['rrd_mb']:8.1f}")
-    f, b = out["fixed"]["curve"], out["bounded"]["curve"]
-    print(f"growth bounded/fixed: {(b[-1][1] - b[0][1]) / max(f[-1][1] - f[0][1], 1e-9):.2f}; "
-          f".rrd bounded/fixed: {out['bounded']['rrd_mb'] / out['fixed']['rrd_mb']:.2f}")
+        peak = max(mb for _, mb in c)
+        print(f"{name:8s} {c[0][1]:12.1f} {at5:9.1f} {c[-1][1]:7.1f} {peak:7.1f} {slope:15.2f} "
+              f"{r['rrd_mb']:8.1f} {r['parts']:5d}")
+    f = out["fixed"]["curve"]
+
+    def growth(name: str) -> float:
+        c = out[name]["curve"]
+        return (c[-1][1] - c[0][1]) / max(f[-1][1] - f[0][1], 1e-9)
+
+    print(f"growth vs fixed: bounded {growth('bounded'):.2f}, parts {growth('parts'):.2f}; "
+          f".rrd vs fixed: bounded {out['bounded']['rrd_mb'] / out['fixed']['rrd_mb']:.2f}, "
+          f"parts {out['parts']['rrd_mb'] / out['fixed']['rrd_mb']:.2f}")
+    print("curves (minute, RSS MB): " + json.dumps({k: [(round(m, 1), round(mb, 1)) for m, mb in v["curve"]]
+                                                  for k, v in out.items()}))
     return 0
 
 

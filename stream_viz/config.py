@@ -23,12 +23,14 @@ WATCH_MODES = ("auto", "all", "config")
 @dataclass(frozen=True)
 class MonitorConfig:
     """``[monitor]``: sampling period (s), whether to measure topics, history length (samples),
-    how long a vanished member stays in the model (s; 0 = the whole run)."""
+    how long a vanished member stays in the model (s; 0 = the whole run), minutes per file part
+    of a saved recording (0 = one file)."""
 
     period: float = 1.0
     topic_metrics: bool = True
     history: int = 600
     forget_gone_s: float = 600.0
+    recording_part_minutes: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -66,7 +68,8 @@ class Config:
         return {t: v["expected_rate_hz"] for t, v in self.topics.items() if "expected_rate_hz" in v}
 
 
-_MONITOR = {"period": 1.0, "topic_metrics": True, "history": 600, "forget_gone_s": 600.0}
+_MONITOR = {"period": 1.0, "topic_metrics": True, "history": 600, "forget_gone_s": 600.0,
+            "recording_part_minutes": 10.0}
 _WATCHLIST = {"mode": "auto", "members": [""]}
 _PLUGINS = {"enable": [""], "disable": [""], "paths": [""]}
 _TOPIC = {"expected_rate_hz": 1.0}
@@ -139,6 +142,10 @@ def load_config(path: str | Path | None) -> Config:
         raise ConfigError(f"{where}: [monitor] period must be > 0, not {monitor['period']}")
     if monitor.get("history", 600) < 2:
         raise ConfigError(f"{where}: [monitor] history must be >= 2 samples, not {monitor['history']}")
+
+    if monitor.get("recording_part_minutes", 10.0) < 0:
+        raise ConfigError(f"{where}: [monitor] recording_part_minutes must be >= 0 (0: one file), "
+                          f"not {monitor['recording_part_minutes']}")
 
     watch = _check(where, "watchlist", _table(where, "watchlist", data.get("watchlist", {})), _WATCHLIST)
     if watch.get("mode", "auto") not in WATCH_MODES:

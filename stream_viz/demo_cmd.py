@@ -11,7 +11,7 @@ from typing import Any
 
 from stream_viz.config import load_config
 from stream_viz.demo.robot import FaultSpec, Robot
-from stream_viz.monitor import Monitor, install_stop_handlers, linger
+from stream_viz.monitor import Monitor, install_stop_handlers, linger, say_recording
 
 DEFAULT_RECORDING = Path("stream_viz_demo.rrd")
 
@@ -65,12 +65,12 @@ def run_demo(args: argparse.Namespace) -> dict[str, Any]:
             report = mon.close(keep_view=viewer == "serve")
         finally:
             robot.stop()
-    _print_diagnosis(report, save, mon)
+    _print_diagnosis(report, mon)
     linger(mon, viewer)
     return report
 
 
-def _print_diagnosis(report: dict[str, Any], save: Path, mon: Monitor) -> None:
+def _print_diagnosis(report: dict[str, Any], mon: Monitor) -> None:
     say = mon.progress.say
     inj = report.get("injected")
     if inj:
@@ -81,4 +81,4 @@ def _print_diagnosis(report: dict[str, Any], save: Path, mon: Monitor) -> None:
     for rank, rc in enumerate(causes[:5], 1):
         say(f"{rank}. {rc['member']}  score {rc['score']:.2f}  trajectory: {' <- '.join(rc['trajectory'])}")
     say(f"{len(report['alerts'])} alerts; alert database: {mon.db_path}")
-    say(f"recording: {save}  (open with: rerun {save})")
+    say_recording(mon)

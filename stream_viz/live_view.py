@@ -28,11 +28,13 @@ class LiveView:
         Upper bound on metric chunks per second: a batch is one chunk per member, and Rerun keeps
         an index entry for every chunk written to an ``.rrd`` (its footer) in memory until the file
         is closed, so a large system batches longer (`metrics_batch_s`).
+    part_s : float
+        Seconds per file part of the recording (0: one file); parts bound that index.
     """
 
     def __init__(self, viewer: str = "none", save: Path | None = None, metrics_every: float = 5.0,
-                 max_chunks_per_s: float = 20.0) -> None:
-        self.rec = Recorder(viewer=viewer, save=save)
+                 max_chunks_per_s: float = 20.0, part_s: float = 0.0) -> None:
+        self.rec = Recorder(viewer=viewer, save=save, part_s=part_s)
         self.metrics_every, self.max_chunks_per_s = metrics_every, max_chunks_per_s
         self._batch = MetricBatch()
         self._iterations = 0
@@ -48,6 +50,9 @@ class LiveView:
         """Log one monitor tick (nothing when there is no viewer and no file to log to)."""
         if not self.rec.enabled:
             return
+        if self.rec.part_due(t):
+            self._flush_metrics()  # the samples of a part end in that part
+            self.rec.next_part(t, seen)
         self.rec.set_time(t)
         if alerts:
             self.rec.alerts(alerts)  # before the graph, so alerted members are coloured now

@@ -58,7 +58,7 @@ class Monitor:
         for problem in self.plugins.load_problems:
             self.progress.say(f"plugin problem: {problem}")
         self.store.add_problems(self.plugins.load_problems, t=self.started_at)
-        self.view = LiveView(viewer=viewer, save=save)
+        self.view = LiveView(viewer=viewer, save=save, part_s=60.0 * config.monitor.recording_part_minutes)
         self.history = History(maxlen=config.monitor.history)
         self.engine = RcaEngine(config.rca, watchlist=set())
         self.seen = new_graph()
@@ -241,8 +241,16 @@ def linger(mon: Monitor, viewer: str) -> None:
         mon.view.close()
 
 
+def say_recording(mon: Monitor) -> None:
+    """Tell where the recording went (all its file parts) and how to open it."""
+    parts = mon.view.rec.parts
+    files = " ".join(str(p) for p in parts)
+    more = f" in {len(parts)} parts" if len(parts) > 1 else ""
+    mon.progress.say(f"recording{more}: {files}  (open with: rerun {files})")
+
+
 def _print_outputs(mon: Monitor, args: argparse.Namespace) -> None:
     if args.save:
-        mon.progress.say(f"recording: {args.save}  (open with: rerun {args.save})")
+        say_recording(mon)
     if args.report:
         mon.progress.say(f"report: {args.report}")

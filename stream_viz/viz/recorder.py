@@ -3,6 +3,9 @@
 Viewer modes: ``spawn`` (native viewer, needs a display), ``serve`` (gRPC server + web viewer on
 localhost), ``none``, or the gRPC URL of a running viewer (``rerun+http://host:port/proxy``). With
 ``save`` the same stream is also written to a file (sinks are teed), default blueprint included.
+A long run is saved in parts (``run.rrd``, ``run_1.rrd``, …; one recording id, so the viewer
+merges them): Rerun keeps an index entry for every chunk written to a file until it is closed,
+so one file per run would grow the monitor's memory for as long as it runs.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ import networkx as nx
 import rerun as rr
 import rerun.blueprint as rrb
 
-from stream_viz.errors import ConfigError, OutputError
+from stream_viz.errors import ConfigError, OutputError, StreamVizError
 from stream_viz.model.graph import flow_edges
 from stream_viz.records import Alert
 from stream_viz.viz import paths, style
@@ -71,6 +74,11 @@ def check_writable(path: str | Path) -> Path:
     return path
 
 
+def part_path(path: Path, n: int) -> Path:
+    """Return the path of part ``n`` of a recording saved at ``path`` (part 0 is ``path`` itself)."""
+    return path if n == 0 else path.with_name(f"{path.stem}_{n}{path.suffix}")
+
+
 def has_display() -> bool:
     """Return True if a native window can be opened (X11/Wayland on Linux; always elsewhere)."""
     if not sys.platform.startswith("linux"):
@@ -101,6 +109,9 @@ class Recorder:
         Default layout; `stream_viz_blueprints.default.build_blueprint()` if not given.
     telemetry : bool, optional
         Allow Rerun's usage analytics (default off; see `disable_rerun_telemetry`).
+    part_s : float
+        Start a new file part every this many seconds of the ``time`` timeline (0: one file).
+        Not with ``serve``: its server would restart and drop what the web viewer was shown.
     announce : callable
         Where to tell the user the viewer URL (default: stderr).
     """
@@ -115,6 +126,7 @@ class Recorder:
         grpc_port: int | None = None,
         blueprint: rrb.Blueprint | None = None,
         telemetry: bool | None = None,
+        part_s: float = 0.0,
         announce: Callable[[str], None] = _stderr,
     ) -> None:
         # Every check before anything is opened (and before monitoring starts).
@@ -135,6 +147,12 @@ class Recorder:
 
             blueprint = build_blueprint()
         self.viewer, self.app_id, self.url = viewer, app_id, None
+        self.blueprint = blueprint
+        self.parts: list[Path] = [self.save] if self.save is not None else []
+        self.part_s = part_s if self.save is not None and viewer != "serve" else 0.0
+        self._part_t0: float | None = None
+        self._last_rca: tuple[Any, ...] | None = None  # shown again at the top of a new part
+        self._last_report: tuple[str, float | None] | None = None
         self.layout: Layout | None = None
         self.status: dict[str, str] = {}
         self._system_sig: Any = None
@@ -179,6 +197,44 @@ class Recorder:
         """Set the ``time`` timeline (wall clock seconds) for what is logged next."""
         self.rec.set_time(paths.TIME, timestamp=float(t))
 
+    # -- file parts -----------------------------------------------------------------------------
+    def part_due(self, t: float) -> bool:
+        """Return True if the current file part spans ``part_s`` seconds at time ``t``."""
+        if not self.part_s:
+            return False
+        if self._part_t0 is None:
+            self._part_t0 = t
+        return t - self._part_t0 >= self.part_s
+
+    def next_part(self, t: float, G: nx.MultiDiGraph | None = None) -> Path | None:
+        """Close the current file part and go on in the next one; return its path.
+
+        The new part gets the default blueprint, the system graph ``G`` and the last diagnosis
+        again, so it opens on its own too. A part that cannot be opened is reported and the
+        current file goes on (nothing is lost, only the memory bound): returns None.
+        """
+        if self.save is None:
+            return None
+        path = part_path(self.save, len(self.parts))
+        self.flush()
+        try:
+            sinks: list[Any] = [rr.GrpcSink(self.url)] if self.url and self.viewer != "serve" else []
+            sinks.append(rr.FileSink(str(check_writable(path))))
+            self.rec.set_sinks(*sinks, default_blueprint=self.blueprint)
+        except (StreamVizError, RuntimeError, OSError, ValueError) as e:
+            _stderr(f"stream-viz: recording goes on in {self.parts[-1]}; cannot start part {path}: {e}")
+            self.part_s = 0.0
+            return None
+        self.parts.append(path)
+        self._part_t0 = t
+        if G is not None:
+            self.system(G, t, force=True)
+        if self._last_rca is not None:
+            self.rca(*self._last_rca)
+        if self._last_report is not None:
+            self.report(*self._last_report)
+        return path
+
     # -- entities -------------------------------------------------------------------------------
     def system(self, G: nx.MultiDiGraph, t: float | None = None, gone: Collection[str] = (),
                force: bool = False) -> bool:
@@ -215,12 +271,14 @@ class Recorder:
     def rca(self, G: nx.MultiDiGraph, iteration: Mapping[str, Any],
             root_causes: Sequence[Mapping[str, Any]] = (), gone: Collection[str] = ()) -> None:
         """Log one RCA iteration (overlays + report) on both timelines."""
+        self._last_rca, self._last_report = (G, iteration, root_causes, gone), None
         gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
         self.layout = log_rca(self.rec, G, self.layout, iteration, root_causes,
                               gone=sorted(gone_all), status=self.status)
 
     def report(self, markdown: str, t: float | None = None) -> None:
         """Log a markdown report at ``/rca/report``."""
+        self._last_report = (markdown, t)
         if t is not None:
             self.set_time(t)
         log_report(self.rec, markdown)

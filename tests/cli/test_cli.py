@@ -103,6 +103,26 @@ def test_monitor_ends_on_duration_and_writes_everything(children, tmp_path):
 
 
 @pytest.mark.ros
+def test_a_long_monitor_run_saves_its_recording_in_parts(children, tmp_path):
+    children.python(TALKER, name="talker")
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[monitor]\nrecording_part_minutes = 0.05\n")  # a part every 3 s
+    rrd = tmp_path / "m.rrd"
+    out = run_cli(["monitor", "--duration", "8", "--config", str(cfg), "--db", str(tmp_path / "a.sqlite"),
+                   "--save", str(rrd)], children.env)
+    assert out.returncode == 0, out.stderr
+    parts = sorted(tmp_path.glob("m*.rrd"))
+    assert [p.name for p in parts][:2] == ["m.rrd", "m_1.rrd"] and len(parts) >= 2
+    assert f"in {len(parts)} parts" in out.stderr and str(tmp_path / "m_1.rrd") in out.stderr
+    recordings = set()
+    for p in parts:  # each part is a closed file with the system graph, all one recording
+        reader = RrdReader(str(p))
+        assert "/system" in reader.store().schema().entity_paths(), p
+        recordings |= {e.recording_id for e in reader.recordings()}
+    assert len(recordings) == 1
+
+
+@pytest.mark.ros
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_monitor_ends_on_a_signal_and_writes_the_report(children, tmp_path, sig):
     children.python(TALKER, name="talker")

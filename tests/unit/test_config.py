@@ -94,6 +94,7 @@ def test_plugin_settings_checked_against_the_plugin(tmp_path):
     ("[monitor]\nperiod = 'fast'\n", "[monitor] period must be float, not str"),
     ("[monitor]\nperiod = -1\n", "[monitor] period must be > 0"),
     ("[monitor]\nhistory = 1.5\n", "[monitor] history must be int, not float"),
+    ("[monitor]\nrecording_part_minutes = -1\n", "[monitor] recording_part_minutes must be >= 0"),
     ("[monitor]\ntopic_metrics = 1\n", "[monitor] topic_metrics must be bool, not int"),
     ("[watchlist]\nmode = 'some'\n", "[watchlist] mode must be one of auto, all, config"),
     ("[watchlist]\nmembers = 'node:/a'\n", "[watchlist] members must be list"),

@@ -165,3 +165,54 @@ def test_nan_theta_rows_are_left_out(tmp_path):
     with Recorder(save=rrd) as r:
         assert r.metrics([(T0, G)]) == 1  # only process:10 has θ
     assert "/metrics/topic/image/theta" not in rows(rrd)
+
+
+def test_a_long_recording_is_saved_in_parts_that_each_open_alone(tmp_path):
+    from stream_viz.live_view import LiveView
+    from stream_viz.rca.engine import RcaEngine
+    from stream_viz.rca.settings import RcaSettings
+    from stream_viz.records import Sample
+
+    rrd = tmp_path / "long.rrd"
+    G = robot()
+    result = RcaEngine(RcaSettings(), watchlist=None).update(G, [])
+    view = LiveView(save=rrd, metrics_every=1.0, part_s=10.0)
+    for i in range(25):
+        view.update(T0 + i, Sample(T0 + i, G.copy()), G, [], result)
+    view.close()
+    parts = [rrd, tmp_path / "long_1.rrd", tmp_path / "long_2.rrd"]
+    assert view.rec.parts == parts
+    times = []
+    for p in parts:
+        data = rows(p)
+        # Each part has the graph (and the diagnosis of the moment, on the rca_iteration timeline).
+        assert [row["time"] for row in data[paths.SYSTEM] if row.get("rca_iteration") is None] == [
+            int((T0 + 10 * len(times)) * 1e9)]
+        assert paths.PROCESS_TREE in data and paths.RCA_REPORT in data
+        (bp,) = RrdReader(str(p)).blueprints()
+        assert bp.application_id == "stream_viz"
+        ts = sorted(row["time"] // 10**9 - int(T0)
+                    for row in data["/metrics/topic/image/theta"] if "Scalars:scalars" in row)
+        times.append(ts)
+    # Every sample is in exactly one part, in order: 0-9, 10-19, 20-24.
+    assert times == [list(range(0, 10)), list(range(10, 20)), list(range(20, 25))]
+    # One recording: the viewer merges the parts.
+    ids = {e.recording_id for p in parts for e in RrdReader(str(p)).recordings()}
+    assert len(ids) == 1
+
+
+def test_a_part_that_cannot_be_written_keeps_the_recording_in_the_current_file(tmp_path, capsys):
+    rrd = tmp_path / "run.rrd"
+    (tmp_path / "run_1.rrd").mkdir()  # the next part's path is taken by a directory
+    with Recorder(save=rrd, part_s=5.0) as r:
+        G = robot()
+        r.system(G, T0)
+        assert not r.part_due(T0)
+        assert r.part_due(T0 + 5)
+        assert r.next_part(T0 + 5, G) is None
+        r.metrics([(T0 + 6, G)])
+        assert not r.part_due(T0 + 60)  # no more parts tried
+    assert "cannot start part" in capsys.readouterr().err
+    assert r.parts == [rrd]
+    theta = [row for row in rows(rrd)["/metrics/topic/image/theta"] if "Scalars:scalars" in row]
+    assert [row["time"] for row in theta] == [int((T0 + 6) * 1e9)]
