@@ -61,9 +61,8 @@ def run_duration(nodes: int, minutes: float, domain: int, period: float, save: b
     csv_path = OUT / f"duration_{tag}.csv"
     db = OUT / f"duration_{tag}.sqlite"
     rrd = OUT / f"duration_{tag}.rrd" if save else None
-    for f in (db, rrd):
-        if f is not None and f.exists():
-            f.unlink()
+    for f in [db, *(OUT.glob(f"duration_{tag}*.rrd") if rrd else ())]:
+        f.unlink(missing_ok=True)
     me = psutil.Process()
     rows: list[dict[str, float]] = []
     try:
@@ -110,7 +109,7 @@ def run_duration(nodes: int, minutes: float, domain: int, period: float, save: b
     print(f"[monitor] history = {cfg.monitor.history} samples per member")
     what = f"{nodes}-node generated system (rates {rate[0]}-{rate[1]} Hz, {per_process} nodes per process)" \
         if nodes else "demo robot, fault-free"
-    _summary_duration(rows, what, minutes, period, csv_path, db, rrd)
+    _summary_duration(rows, what, minutes, period, csv_path, db, mon.view.rec.parts)
 
 
 def _cpu(procs: list[psutil.Process]) -> float:
@@ -125,7 +124,7 @@ def _cpu(procs: list[psutil.Process]) -> float:
     return total
 
 
-def _summary_duration(rows, what, minutes, period, csv_path, db, rrd) -> None:
+def _summary_duration(rows, what, minutes, period, csv_path, db, rrd_parts) -> None:
     print(f"\nduration: {what}, {minutes} min, period {period} s, "
           f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores")
     print(f"samples: {len(rows)}; model: {rows[-1]['nodes']} nodes, {rows[-1]['topics']} topics, "
@@ -149,9 +148,9 @@ def _summary_duration(rows, what, minutes, period, csv_path, db, rrd) -> None:
     rss = [r["rss_mb"] for r in rows]
     hours = rows[-1]["elapsed_s"] / 3600
     sizes = f"db {db.stat().st_size / 2**20:.2f} MB"
-    if rrd:
-        mb = rrd.stat().st_size / 2**20
-        sizes += f", rrd {mb:.1f} MB ({mb / hours:.1f} MB/h)"
+    if rrd_parts:
+        mb = sum(p.stat().st_size for p in rrd_parts) / 2**20
+        sizes += f", rrd {mb:.1f} MB in {len(rrd_parts)} parts ({mb / hours:.1f} MB/h)"
     print(f"alerts stored: {rows[-1]['alerts']} ({rows[-1]['alerts'] / hours:.1f}/h)")
     print(f"RSS: start {rss[0]:.1f} MB, max {max(rss):.1f} MB, end {rss[-1]:.1f} MB; {sizes}")
     print(f"CSV: {csv_path}")

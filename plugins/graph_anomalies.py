@@ -61,11 +61,22 @@ def _endpoints(G: Any, topic: str) -> tuple[dict[str, list[Any]], dict[str, list
     return pubs, subs
 
 
+def discovery_burst(G: Any, added: Any, least: int, ratio: float) -> bool:
+    """Return True if the ``added`` members hold at least ``least`` nodes and ``ratio`` of the
+    nodes of ``G``: the graph is still being discovered."""
+    n = sum(1 for m in added if str(m).startswith("node:"))
+    total = sum(1 for _, kind in G.nodes(data="kind") if kind == "node")
+    return n >= least and n >= ratio * total
+
+
 class GraphAnomalies(Plugin):
     """Alerts on:
 
     * two nodes with one name (node attribute ``instances`` > 1, as the collector counts them): error;
-    * a subscriber whose topic has had no publisher for ``grace_s``: warn on the subscriber;
+    * a subscriber whose topic has had no publisher for ``grace_s``: warn on the subscriber. The
+      grace starts again whenever many nodes appear in one sample (at least ``burst_min`` and
+      ``burst_ratio`` of the nodes): a system still being discovered (bring-up, or the monitor
+      attaching to 500 nodes) shows subscribers seconds before their publishers;
     * incompatible QoS between a publisher and a subscriber of a topic (see `_endpoints`):
       error on the subscriber.
 
@@ -76,7 +87,7 @@ class GraphAnomalies(Plugin):
     kinds = ("node", "topic")
     settings: ClassVar[dict[str, Any]] = {
         "grace_s": 5.0, "ignore_topics": [], "duplicates": True, "no_publisher": True, "qos": True,
-        "recheck_s": 10.0,
+        "recheck_s": 10.0, "burst_min": 5, "burst_ratio": 0.05,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -89,11 +100,14 @@ class GraphAnomalies(Plugin):
                     yield ctx.alert(node, "error", f"{n} nodes share this name", symptom="duplicate_name",
                                     instances=n)
         orphan_since = ctx.state.setdefault("orphan_since", {})
+        if discovery_burst(ctx.graph, ctx.diff.added_members, s["burst_min"], s["burst_ratio"]):
+            ctx.state["settled_from"] = ctx.t
+        settled_from = ctx.state.get("settled_from", -float("inf"))
         current = set()
         for topic, orphan, subs, qos_bad in self._analyse(ctx):
             if orphan and s["no_publisher"]:
                 current.add(topic)
-                since = orphan_since.setdefault(topic, ctx.t)
+                since = max(orphan_since.setdefault(topic, ctx.t), settled_from)
                 if ctx.t - since >= s["grace_s"]:
                     for v in subs:
                         yield ctx.alert(v, "warn", f"subscribes to {topic} which has had no publisher for "

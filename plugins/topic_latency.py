@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import BASELINE_SETTINGS, rise, streak
+from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, streak
 from stream_viz.records import Alert
 
 
@@ -21,6 +21,11 @@ class TopicLatency(Plugin):
     samples with a message newer than the previous sample count (``age_s``): a topic slower than
     the sampling keeps one late message in its window for several samples, which is one
     observation, not ``confirm``.
+
+    Common mode: when at least ``common_mode_min`` topics and ``common_mode_ratio`` of the topics
+    measured in a sample rise at once, the sample is a stall of the host or of the monitor (the
+    receive stamps are ours), not a fault of those topics' publishers: it neither counts nor
+    breaks a streak, and the stall is counted in the plugin state (``common_mode``).
     """
 
     name = "topic_latency"
@@ -34,6 +39,8 @@ class TopicLatency(Plugin):
         "confirm": 3,
         "drops_min_per_s": 1.0,
         "drops_ratio": 0.05,
+        "common_mode_min": 4,
+        "common_mode_ratio": 0.5,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -41,10 +48,12 @@ class TopicLatency(Plugin):
         alerting = ctx.state.setdefault("alerting", set())
         since = ctx.t - ctx.state.get("t_prev", -math.inf)
         ctx.state["t_prev"] = ctx.t
+        seen = []  # (topic, attr, excess, fresh)
+        drops_alerts = []
+        floors = (("latency_ms", s["latency_min_rise_ms"]), ("jitter_ms", s["jitter_min_rise_ms"]))
         for topic in ctx.watched("topic"):
             age = ctx.value(topic, "age_s")
             fresh = age != age or age < since  # a message since the last sample (age unknown: yes)
-            floors = (("latency_ms", s["latency_min_rise_ms"]), ("jitter_ms", s["jitter_min_rise_ms"]))
             for attr, floor in floors:
                 if attr == "jitter_ms":
                     # Scheduling noise on a busy host scales with the period: a 20 Hz topic's
@@ -52,16 +61,34 @@ class TopicLatency(Plugin):
                     rate = ctx.value(topic, "rate_hz")
                     if rate > 0:
                         floor = max(floor, s["jitter_period_ratio"] * 1000.0 / rate)
-                risen = rise(ctx, topic, attr, floor, alerting, fresh)
-                if risen is not None:
-                    value, med = risen
-                    what = attr.removesuffix("_ms")
-                    yield ctx.alert(topic, "warn", f"{what} {value:.1f} ms, normally {med:.1f} ms",
-                                    symptom=f"{what}_rise", value_ms=value, baseline_ms=med)
+                seen.append((topic, attr, excess(ctx, topic, attr, floor, alerting), fresh))
             drops = ctx.value(topic, "drops_per_s")
             if not math.isnan(drops):
                 rate = ctx.value(topic, "rate_hz")
                 limit = max(s["drops_min_per_s"], s["drops_ratio"] * (0.0 if math.isnan(rate) else rate))
                 if streak(ctx.state, (topic, "drops"), drops >= limit, fresh) >= s["confirm"]:
-                    yield ctx.alert(topic, "warn", f"{drops:.3g} messages/s dropped",
-                                    symptom="drops", drops_per_s=drops)
+                    drops_alerts.append(ctx.alert(topic, "warn", f"{drops:.3g} messages/s dropped",
+                                                  symptom="drops", drops_per_s=drops))
+        stall = common_mode(seen, s["common_mode_min"], s["common_mode_ratio"])
+        if stall:
+            ctx.state["common_mode"] = ctx.state.get("common_mode", 0) + 1
+        for topic, attr, ex, fresh in seen:
+            risen = confirm(ctx, topic, attr, ex, alerting, fresh and not stall)
+            if risen is not None:
+                value, med = risen
+                what = attr.removesuffix("_ms")
+                yield ctx.alert(topic, "warn", f"{what} {value:.1f} ms, normally {med:.1f} ms",
+                                symptom=f"{what}_rise", value_ms=value, baseline_ms=med)
+        yield from drops_alerts
+
+
+def common_mode(seen: list[tuple[str, str, tuple[float, float, bool] | None, bool]], least: int,
+                ratio: float) -> bool:
+    """Return True if at least ``least`` topics and ``ratio`` of the topics measured afresh (with a
+    baseline) exceed their baseline in one sample: a stall of all, not a fault of each.
+
+    ``seen`` holds ``(topic, attr, excess, fresh)`` per topic and attribute (`excess` result).
+    """
+    measured = {topic for topic, _, ex, fresh in seen if ex is not None and fresh}
+    risen = {topic for topic, _, ex, fresh in seen if ex is not None and fresh and ex[2]}
+    return len(risen) >= least and len(risen) >= ratio * len(measured)

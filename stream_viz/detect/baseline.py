@@ -104,29 +104,45 @@ def streak(state: dict[str, Any], key: Any, condition: bool, fresh: bool = True)
     return 0
 
 
-def rise(ctx: Any, member: str, attr: str, floor: float, alerting: set,
-         fresh: bool = True) -> tuple[float, float] | None:
-    """Return ``(value, median)`` while ``member``'s ``attr`` stays risen above its own baseline.
+def excess(ctx: Any, member: str, attr: str, floor: float, alerting: set) -> tuple[float, float, bool] | None:
+    """Return ``(value, median, exceeded)`` of ``member``'s ``attr`` against its own baseline.
 
-    Risen means ``value - median ≥ max(k·σ, floor)`` for ``confirm`` fresh samples in a row; a
-    sample that is not ``fresh`` (computed from the same data as the one before, e.g. a slow
-    topic's window holding the same message) neither counts nor breaks the streak. The
+    ``exceeded`` means ``value - median ≥ max(k·σ, floor)`` (``k`` from ``ctx.settings``). The
     baseline (`cached_baseline`, from ``ctx.settings``' ``warmup_s``, ``min_samples``,
-    ``refresh_s``, ``window``) is frozen while ``(member, attr)`` is in ``alerting``, which this
-    keeps up to date. None while warming up, when the value is missing or when not risen.
+    ``refresh_s``, ``window``) is frozen while ``(member, attr)`` is in ``alerting``. None while
+    warming up or when the value is missing (NaN).
     """
     s = ctx.settings
     value = ctx.value(member, attr)
     if value != value:  # NaN: not measured this sample
         return None
-    key = (member, attr)
     base = cached_baseline(ctx, member, attr, warmup_s=s["warmup_s"], min_samples=s["min_samples"],
-                           refresh_s=s["refresh_s"], window=s["window"], frozen=key in alerting)
+                           refresh_s=s["refresh_s"], window=s["window"], frozen=(member, attr) in alerting)
     if base is None:
         return None
     med, sigma, _ = base
-    if streak(ctx.state, key, value - med >= max(s["k"] * sigma, floor), fresh) >= s["confirm"]:
+    return value, med, value - med >= max(s["k"] * sigma, floor)
+
+
+def confirm(ctx: Any, member: str, attr: str, seen: tuple[float, float, bool] | None, alerting: set,
+            fresh: bool = True) -> tuple[float, float] | None:
+    """Return ``(value, median)`` once `excess` ``seen`` has held for ``confirm`` fresh samples in a
+    row, keeping ``alerting`` up to date; a sample that is not ``fresh`` (the same data as the one
+    before, e.g. a slow topic's window holding the same message) neither counts nor breaks the
+    streak. None otherwise."""
+    if seen is None:
+        return None
+    value, med, exceeded = seen
+    key = (member, attr)
+    if streak(ctx.state, key, exceeded, fresh) >= ctx.settings["confirm"]:
         alerting.add(key)
         return value, med
     alerting.discard(key)
     return None
+
+
+def rise(ctx: Any, member: str, attr: str, floor: float, alerting: set,
+         fresh: bool = True) -> tuple[float, float] | None:
+    """Return ``(value, median)`` while ``member``'s ``attr`` stays risen above its own baseline:
+    `excess` for ``confirm`` fresh samples in a row (`confirm`)."""
+    return confirm(ctx, member, attr, excess(ctx, member, attr, floor, alerting), alerting, fresh)

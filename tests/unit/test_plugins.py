@@ -272,3 +272,72 @@ def test_topic_latency_counts_one_late_message_once():
     more = [(0.3, 210.0), (1.3, 210.0), (0.2, 190.0)]
     frames += [(33.0 + i, model(latency=lat, age=age), []) for i, (age, lat) in enumerate(more)]
     assert drive("topic_latency", frames) == [(35.0, "topic:/img", "warn")]
+
+
+def test_common_mode_counts_topics_measured_afresh():
+    from plugins.topic_latency import common_mode
+
+    up, flat = (90.0, 2.0, True), (2.0, 2.0, False)
+    seen = [("a", "latency_ms", up, True), ("a", "jitter_ms", up, True), ("b", "jitter_ms", up, True),
+            ("c", "latency_ms", up, True), ("d", "latency_ms", flat, True), ("e", "latency_ms", None, True),
+            ("f", "latency_ms", up, False)]
+    # Measured afresh with a baseline: a, b, c, d (e warming up, f stale); risen: a, b, c.
+    assert common_mode(seen, 3, 0.5) is True
+    assert common_mode(seen, 4, 0.5) is False  # too few topics
+    assert common_mode(seen, 3, 0.8) is False  # 3 of 4 < 80 %
+    assert common_mode([], 1, 0.5) is False
+
+
+def topics_model(n, risen=(), jitter=1.0):
+    """``n`` topics /t0…, each from its own node and process; the ``risen`` ones with 150 ms latency."""
+    G = new_graph()
+    for i in range(n):
+        add_member(G, f"process:{100 + i}", pid=100 + i, alive=True)
+        add_member(G, f"node:/n{i}", pid=100 + i, alive=True)
+        add_member(G, f"topic:/t{i}", theta=make_theta("topic", {
+            "rate_hz": 10.0, "latency_ms": 150.0 if i in risen else noisy(2.0, 0.3),
+            "jitter_ms": noisy(jitter, 0.3), "publishers": 1, "subscribers": 0}))
+        add_flow_edge(G, f"node:/n{i}", f"topic:/t{i}", "pub")
+        add_tree_edge(G, f"process:{100 + i}", f"node:/n{i}")
+    return G
+
+
+def test_topic_latency_a_stall_of_most_topics_at_once_is_not_a_fault_of_each():
+    healthy = [(float(t), topics_model(6), []) for t in range(30)]
+    # A stall: 5 of 6 topics rise together for 4 samples, then all recover. No alert.
+    stall = healthy + [(float(t), topics_model(6, risen={0, 1, 2, 3, 4}), []) for t in range(30, 34)]
+    stall += [(float(t), topics_model(6), []) for t in range(34, 38)]
+    assert drive("topic_latency", stall) == []
+    # One topic of six rising is that topic's fault, as before.
+    one = healthy + [(float(t), topics_model(6, risen={2}), []) for t in range(30, 34)]
+    assert drive("topic_latency", one) == [(32.0, "topic:/t2", "warn"), (33.0, "topic:/t2", "warn")]
+    # A fault reaching 3 of 10 topics (below the ratio) still alerts on each.
+    ten = [(float(t), topics_model(10), []) for t in range(30)]
+    ten += [(float(t), topics_model(10, risen={1, 2, 3}), []) for t in range(30, 33)]
+    assert sorted(m for _, m, _ in drive("topic_latency", ten)) == ["topic:/t1", "topic:/t2", "topic:/t3"]
+    # The ratio and the minimum are settings: off (ratio > 1) gives the per-topic alerts back.
+    off = drive("topic_latency", stall[:33], settings={"common_mode_ratio": 2.0})
+    assert sorted({m for _, m, _ in off}) == [f"topic:/t{i}" for i in range(5)]
+
+
+def test_graph_anomalies_grace_starts_again_while_the_system_is_being_discovered():
+    from plugins.graph_anomalies import discovery_burst
+
+    def grown(n):
+        """The orphan subscriber of `model` plus ``n`` more nodes discovered so far."""
+        G = model()
+        G.remove_edge("node:/camera", "topic:/img", 0)
+        for i in range(n):
+            add_member(G, f"node:/extra{i}")
+        return G
+
+    G = grown(0)
+    assert discovery_burst(G, {"node:/camera", "node:/detector", "topic:/img"}, 2, 0.5)
+    assert not discovery_burst(G, {"node:/camera", "topic:/img"}, 2, 0.5)  # one node only
+    assert not discovery_burst(grown(100), {f"node:/extra{i}" for i in range(5)}, 5, 0.05)  # 5 of 102
+    # 10 nodes more per sample for 6 s (bring-up): the orphan's grace counts from the last burst.
+    frames = [(float(t), grown(10 * min(t, 6)), []) for t in range(14)]
+    assert drive("graph_anomalies", frames) == [(t, "node:/detector", "warn") for t in (11.0, 12.0, 13.0)]
+    # A steady trickle (1 node per sample) is churn, not discovery: the grace runs from the start.
+    frames = [(float(t), grown(100 + t), []) for t in range(8)]
+    assert drive("graph_anomalies", frames) == [(t, "node:/detector", "warn") for t in (5.0, 6.0, 7.0)]
