@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import sys
+import uuid
 from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -90,6 +91,29 @@ def _stderr(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
+class Tee:
+    """The logging calls the ``log_*`` functions make, sent to every stream (viewer, file)."""
+
+    def __init__(self, streams: Sequence[rr.RecordingStream]) -> None:
+        self.streams = list(streams)
+
+    def log(self, *args: Any, **kwargs: Any) -> None:
+        for s in self.streams:
+            s.log(*args, **kwargs)
+
+    def send_columns(self, *args: Any, **kwargs: Any) -> None:
+        for s in self.streams:
+            s.send_columns(*args, **kwargs)
+
+    def set_time(self, *args: Any, **kwargs: Any) -> None:
+        for s in self.streams:
+            s.set_time(*args, **kwargs)
+
+    def disable_timeline(self, *args: Any, **kwargs: Any) -> None:
+        for s in self.streams:
+            s.disable_timeline(*args, **kwargs)
+
+
 class Recorder:
     """A recording stream of a STREAM run and what it has drawn so far.
 
@@ -111,7 +135,6 @@ class Recorder:
         Allow Rerun's usage analytics (default off; see `disable_rerun_telemetry`).
     part_s : float
         Start a new file part every this many seconds of the ``time`` timeline (0: one file).
-        Not with ``serve``: its server would restart and drop what the web viewer was shown.
     announce : callable
         Where to tell the user the viewer URL (default: stderr).
     """
@@ -149,7 +172,7 @@ class Recorder:
         self.viewer, self.app_id, self.url = viewer, app_id, None
         self.blueprint = blueprint
         self.parts: list[Path] = [self.save] if self.save is not None else []
-        self.part_s = part_s if self.save is not None and viewer != "serve" else 0.0
+        self.part_s = part_s if self.save is not None else 0.0
         self._part_t0: float | None = None
         self._last_rca: tuple[Any, ...] | None = None  # shown again at the top of a new part
         self._last_report: tuple[str, float | None] | None = None
@@ -159,38 +182,51 @@ class Recorder:
         self._tree_sig: Any = None
         self._closed = False
         self.enabled = viewer != "none" or self.save is not None
-        # Nothing to send to: disabled, so the stream does not buffer the whole run in memory.
-        self.rec = rr.RecordingStream(app_id, default_enabled=self.enabled)
-        self.rec.set_log_time_enabled(False)  # our own `time` timeline is the clock
-        sinks: list[Any] = []
+        # The viewer and the file get a stream each, of one recording id: the file's sink is
+        # swapped for the next part without touching the viewer's connection (a swap flushes the
+        # old sinks, which blocks for seconds on a viewer that went away).
+        rid = str(uuid.uuid4())
+        self._live = self._stream(rid) if viewer != "none" else None
+        self._file = self._stream(rid) if self.save is not None else None
+        # Nothing to send to: a disabled stream, so nothing is buffered for the whole run.
+        self.rec = Tee([s for s in (self._live, self._file) if s is not None]
+                       or [rr.RecordingStream(app_id, default_enabled=False)])
         try:
-            if viewer == "spawn":
-                port = grpc_port or DEFAULT_GRPC_PORT
-                self.rec.spawn(port=port, connect=False, memory_limit=memory_limit, hide_welcome_screen=True)
-                self.url = f"rerun+http://127.0.0.1:{port}/proxy"
-                sinks.append(rr.GrpcSink(self.url))
-            elif viewer == "serve":
-                server = rr.GrpcServerSink("127.0.0.1", grpc_port or DEFAULT_GRPC_PORT,
-                                           server_memory_limit=memory_limit)
-                sinks.append(server)
-                grpc_url = server.uri
-            elif viewer != "none":
-                self.url = viewer
-                sinks.append(rr.GrpcSink(viewer))
-            if self.save is not None:
-                sinks.append(rr.FileSink(str(self.save)))
-            if sinks:
-                self.rec.set_sinks(*sinks, default_blueprint=blueprint)
-            if viewer == "serve":
-                port = web_port or DEFAULT_WEB_PORT
-                rr.serve_web_viewer(web_port=port, open_browser=False, connect_to=grpc_url)
-                self.url = f"http://127.0.0.1:{port}/?url={quote(grpc_url, safe='')}"
+            if self._live is not None:
+                self.url = self._connect(self._live, memory_limit, web_port, grpc_port)
+            if self._file is not None:
+                self._file.set_sinks(rr.FileSink(str(self.save)), default_blueprint=blueprint)
         except (RuntimeError, OSError, ValueError) as e:
             raise OutputError(f"--viewer {viewer}: could not start the Rerun sink: {e}") from e
         if viewer == "serve":
             announce(f"Rerun web viewer: {self.url}")
         elif viewer == "spawn":
             announce(f"Rerun viewer spawned, streaming to {self.url}")
+
+    def _connect(self, live: rr.RecordingStream, memory_limit: str, web_port: int | None,
+                 grpc_port: int | None) -> str:
+        """Point the viewer's stream at its viewer; return the URL to tell the user."""
+        bp = self.blueprint
+        if self.viewer == "spawn":
+            port = grpc_port or DEFAULT_GRPC_PORT
+            live.spawn(port=port, connect=False, memory_limit=memory_limit, hide_welcome_screen=True)
+            url = f"rerun+http://127.0.0.1:{port}/proxy"
+            live.set_sinks(rr.GrpcSink(url), default_blueprint=bp)
+            return url
+        if self.viewer == "serve":
+            server = rr.GrpcServerSink("127.0.0.1", grpc_port or DEFAULT_GRPC_PORT,
+                                       server_memory_limit=memory_limit)
+            live.set_sinks(server, default_blueprint=bp)
+            port = web_port or DEFAULT_WEB_PORT
+            rr.serve_web_viewer(web_port=port, open_browser=False, connect_to=server.uri)
+            return f"http://127.0.0.1:{port}/?url={quote(server.uri, safe='')}"
+        live.set_sinks(rr.GrpcSink(self.viewer), default_blueprint=bp)
+        return self.viewer
+
+    def _stream(self, recording_id: str) -> rr.RecordingStream:
+        stream = rr.RecordingStream(self.app_id, recording_id=recording_id)
+        stream.set_log_time_enabled(False)  # our own `time` timeline is the clock
+        return stream
 
     # -- time -----------------------------------------------------------------------------------
     def set_time(self, t: float) -> None:
@@ -213,14 +249,12 @@ class Recorder:
         again, so it opens on its own too. A part that cannot be opened is reported and the
         current file goes on (nothing is lost, only the memory bound): returns None.
         """
-        if self.save is None:
+        if self.save is None or self._file is None:
             return None
         path = part_path(self.save, len(self.parts))
-        self.flush()
         try:
-            sinks: list[Any] = [rr.GrpcSink(self.url)] if self.url and self.viewer != "serve" else []
-            sinks.append(rr.FileSink(str(check_writable(path))))
-            self.rec.set_sinks(*sinks, default_blueprint=self.blueprint)
+            self._file.flush(timeout_sec=5.0)
+            self._file.set_sinks(rr.FileSink(str(check_writable(path))), default_blueprint=self.blueprint)
         except (StreamVizError, RuntimeError, OSError, ValueError) as e:
             _stderr(f"stream-viz: recording goes on in {self.parts[-1]}; cannot start part {path}: {e}")
             self.part_s = 0.0
@@ -286,10 +320,11 @@ class Recorder:
     # -- end ------------------------------------------------------------------------------------
     def flush(self, timeout: float = 5.0) -> None:
         """Flush pending data to the sinks; never raises (a vanished viewer must not stop a run)."""
-        try:
-            self.rec.flush(timeout_sec=timeout)
-        except Exception as e:
-            _stderr(f"stream-viz: flushing the Rerun recording: {e}")
+        for stream in self._file_first():
+            try:
+                stream.flush(timeout_sec=timeout)
+            except Exception as e:
+                _stderr(f"stream-viz: flushing the Rerun recording: {e}")
 
     def close(self, timeout: float = 5.0) -> None:
         """Flush and disconnect, so the ``.rrd`` gets its footer. Safe to call twice."""
@@ -297,10 +332,15 @@ class Recorder:
             return
         self._closed = True
         self.flush(timeout)
-        try:
-            self.rec.disconnect()
-        except Exception as e:
-            _stderr(f"stream-viz: closing the Rerun recording: {e}")
+        for stream in self._file_first():
+            try:
+                stream.disconnect()
+            except Exception as e:
+                _stderr(f"stream-viz: closing the Rerun recording: {e}")
+
+    def _file_first(self) -> list[rr.RecordingStream]:
+        # The file is the record: it is finished before a viewer that may have gone away is waited for.
+        return sorted(self.rec.streams, key=lambda s: s is not self._file)
 
     def __enter__(self) -> Recorder:
         return self
