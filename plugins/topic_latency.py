@@ -15,7 +15,8 @@ class TopicLatency(Plugin):
     """Alerts on latency / jitter rises and on message drops of watched topics.
 
     A rise counts when ``value - median ≥ max(k·σ, min_rise_ms)`` (σ = 1.4826·MAD of the topic's
-    own past after ``warmup_s``; for jitter also ≥ ``jitter_period_ratio`` × the period) for
+    own past after ``warmup_s``; also ≥ ``jitter_period_ratio`` × the period for jitter,
+    ``latency_period_ratio`` × the period for latency) for
     ``confirm`` samples in a row; drops when
     ``drops_per_s ≥ max(drops_min_per_s, drops_ratio × rate)`` for ``confirm`` samples. Only
     samples with a message newer than the previous sample count (``age_s``): a topic slower than
@@ -36,6 +37,7 @@ class TopicLatency(Plugin):
         "latency_min_rise_ms": 20.0,
         "jitter_min_rise_ms": 20.0,
         "jitter_period_ratio": 0.5,
+        "latency_period_ratio": 0.1,
         "confirm": 3,
         "drops_min_per_s": 1.0,
         "drops_ratio": 0.05,
@@ -54,13 +56,14 @@ class TopicLatency(Plugin):
         for topic in ctx.watched("topic"):
             age = ctx.value(topic, "age_s")
             fresh = age != age or age < since  # a message since the last sample (age unknown: yes)
+            rate = ctx.value(topic, "rate_hz")
             for attr, floor in floors:
-                if attr == "jitter_ms":
+                if rate > 0:
                     # Scheduling noise on a busy host scales with the period: a 20 Hz topic's
-                    # jitter must rise by half its 50 ms period before it counts.
-                    rate = ctx.value(topic, "rate_hz")
-                    if rate > 0:
-                        floor = max(floor, s["jitter_period_ratio"] * 1000.0 / rate)
+                    # jitter must rise by half its 50 ms period before it counts; latency by a
+                    # tenth (30 ms more on a 1 Hz topic is 3 % of the data's age, on 100 Hz 3 periods).
+                    ratio = s["jitter_period_ratio"] if attr == "jitter_ms" else s["latency_period_ratio"]
+                    floor = max(floor, ratio * 1000.0 / rate)
                 seen.append((topic, attr, excess(ctx, topic, attr, floor, alerting), fresh))
             drops = ctx.value(topic, "drops_per_s")
             if not math.isnan(drops):

@@ -8,6 +8,7 @@ built-ins at once for false alarms.
 
 from __future__ import annotations
 
+import os
 import signal
 import time
 
@@ -296,3 +297,50 @@ def test_healthy_system_no_alerts_from_any_builtin(children, tmp_path, run_of):
     run.observe(15.0)
     assert run.alerts == []
     assert run.problems == []
+
+
+PUBLISHER = """
+import sys
+import rclpy
+from rclpy.node import Node
+from std_msgs.msg import String
+rclpy.init()
+n = Node(sys.argv[1])
+pub = n.create_publisher(String, sys.argv[2], 10)
+n.create_timer(0.05, lambda: pub.publish(String(data='x')))
+print('ready', flush=True)
+rclpy.spin(n)
+"""
+
+
+def test_topic_latency_a_stall_of_every_publisher_at_once_is_not_a_fault_of_each(children, tmp_path,
+                                                                                 run_of):
+    """The host stalls (all publishers frozen for 1.2 s at once: SIGSTOP, as a machine that
+    swaps or a CPU storm does): every topic's jitter rises together — no topic alert. One
+    publisher stalling alone still alerts on its topic."""
+    pubs = [children.python(PUBLISHER, f"pub{i}", f"/t{i}", name=f"pub{i}") for i in range(5)]
+    run = run_of(["topic_latency"])
+    topics = [f"topic:/t{i}" for i in range(5)]
+    _ready(run, *topics)
+    wait_for(lambda: (run.step(), all(run.G.nodes[t]["measured"] for t in topics))[1], timeout=20,
+             period=PERIOD)
+    run.observe(8.0)
+    assert run.alerts == [], f"false alarms while healthy: {run.alerts}"
+
+    def freeze(procs, seconds):
+        for p in procs:
+            os.killpg(p.pid, signal.SIGSTOP)
+        time.sleep(seconds)
+        for p in procs:
+            os.killpg(p.pid, signal.SIGCONT)
+
+    freeze(pubs, 1.2)
+    run.observe(6.0)
+    assert run.alerts == [], f"a common stall alerted per topic: {run.alerts}"
+    (lp,) = [p for p in run.plugins.plugins if p.name == "topic_latency"]
+    assert lp.state.get("common_mode", 0) >= 1  # the stall was seen and counted
+    run.observe(4.0)  # back to normal
+    freeze(pubs[2:3], 1.2)
+    found = run.until(lambda a: a.member == "topic:/t2", timeout=10.0)
+    assert found and found[0].data["symptom"] == "jitter_rise", run.alerts
+    assert {a.member for a in run.alerts} == {"topic:/t2"}, run.alerts

@@ -341,3 +341,16 @@ def test_graph_anomalies_grace_starts_again_while_the_system_is_being_discovered
     # A steady trickle (1 node per sample) is churn, not discovery: the grace runs from the start.
     frames = [(float(t), grown(100 + t), []) for t in range(8)]
     assert drive("graph_anomalies", frames) == [(t, "node:/detector", "warn") for t in (5.0, 6.0, 7.0)]
+
+
+def test_topic_latency_rise_of_a_slow_topic_must_be_a_tenth_of_its_period():
+    # 1 Hz topic: +40 ms (3 → 43 ms, a loaded host) is 4 % of its period: no alert; +150 ms is.
+    base = [(float(t), model(rate=1.0, latency=noisy(3.0, 0.2), age=0.1), []) for t in range(30)]
+    small = base + [(float(t), model(rate=1.0, latency=43.0, age=0.1), []) for t in range(30, 34)]
+    assert drive("topic_latency", small) == []
+    big = base + [(float(t), model(rate=1.0, latency=153.0, age=0.1), []) for t in range(30, 34)]
+    assert drive("topic_latency", big) == [(32.0, "topic:/img", "warn"), (33.0, "topic:/img", "warn")]
+    # At 10 Hz the 20 ms floor rules (a tenth of the period is 10 ms): +40 ms alerts.
+    fast = [(float(t), model(rate=10.0, latency=noisy(3.0, 0.2)), []) for t in range(30)]
+    fast += [(float(t), model(rate=10.0, latency=43.0), []) for t in range(30, 34)]
+    assert drive("topic_latency", fast) == [(32.0, "topic:/img", "warn"), (33.0, "topic:/img", "warn")]
