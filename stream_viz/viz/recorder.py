@@ -340,7 +340,7 @@ class Recorder:
 
     def _file_first(self) -> list[rr.RecordingStream]:
         # The file is the record: it is finished before a viewer that may have gone away is waited for.
-        return sorted(self.rec.streams, key=lambda s: s is not self._file)
+        return [s for s in (self._file, self._live) if s is not None]
 
     def __enter__(self) -> Recorder:
         return self

@@ -109,6 +109,22 @@ def test_a_process_that_exits_between_listing_and_reading(children):
     assert set(third.errors) == {q.pid, 2**22 + 7} and third.processes == {}
 
 
+def test_ancestors_of_the_nodes_processes_are_read_every_fifth_sample(children):
+    """The launch tree above the nodes (here: this test process) is read every 5th sample and
+    stays in the tree without metrics in between; the given processes are read every time."""
+    p = children.run([sys.executable, "-c", "import time; time.sleep(60)"], name="node_process")
+    s = ProcessSampler(ancestors_every=5)
+    me = os.getpid()
+    read = []
+    for _ in range(6):
+        out = s.sample([p.pid])
+        assert me in out.processes and out.processes[p.pid].metrics  # in the tree; the node's read
+        read.append(bool(out.processes[me].metrics))
+        time.sleep(0.05)
+    assert read == [True, False, False, False, False, True]
+    assert "cpu_percent" in out.processes[me].metrics  # a rate over the 5 samples since
+
+
 OTHER_USER_NODE = """
 import os, contextvars, numpy, rclpy, rclpy.executors, rclpy.qos, rclpy.node, rclpy.timer
 from std_msgs.msg import String
