@@ -97,21 +97,21 @@ class Tee:
     def __init__(self, streams: Sequence[rr.RecordingStream]) -> None:
         self.streams = list(streams)
 
+    def _each(self, method: str, *args: Any, **kwargs: Any) -> None:
+        for stream in self.streams:
+            getattr(stream, method)(*args, **kwargs)
+
     def log(self, *args: Any, **kwargs: Any) -> None:
-        for s in self.streams:
-            s.log(*args, **kwargs)
+        self._each("log", *args, **kwargs)
 
     def send_columns(self, *args: Any, **kwargs: Any) -> None:
-        for s in self.streams:
-            s.send_columns(*args, **kwargs)
+        self._each("send_columns", *args, **kwargs)
 
     def set_time(self, *args: Any, **kwargs: Any) -> None:
-        for s in self.streams:
-            s.set_time(*args, **kwargs)
+        self._each("set_time", *args, **kwargs)
 
     def disable_timeline(self, *args: Any, **kwargs: Any) -> None:
-        for s in self.streams:
-            s.disable_timeline(*args, **kwargs)
+        self._each("disable_timeline", *args, **kwargs)
 
 
 class Recorder:
