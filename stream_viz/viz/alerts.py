@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import weakref
 from collections.abc import Iterable, Sequence
 
 import numpy as np
@@ -11,8 +10,6 @@ import rerun as rr
 from stream_viz.errors import ModelError
 from stream_viz.records import Alert
 from stream_viz.viz import paths, style
-
-_styled: weakref.WeakKeyDictionary[rr.RecordingStream, set[str]] = weakref.WeakKeyDictionary()
 
 
 def alert_text(alert: Alert) -> str:
@@ -48,7 +45,7 @@ def log_alerts(rec: rr.RecordingStream, alerts: Sequence[Alert] | Iterable[Alert
             color=[style.SEVERITY_COLOR.get(a.severity, (0, 0, 0)) for a in alerts],
         ),
     )
-    styled = _styled.setdefault(rec, set())
+    styled = style.styled(rec)
     by_member: dict[str, list[Alert]] = {}
     for a in alerts:
         by_member.setdefault(a.member, []).append(a)

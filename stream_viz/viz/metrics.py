@@ -8,7 +8,6 @@ a process's CPU and memory) are visible by default; the others are one click in 
 
 from __future__ import annotations
 
-import weakref
 from collections.abc import Iterable
 from typing import Any
 
@@ -22,8 +21,6 @@ from stream_viz.viz import paths, style
 
 METRIC_KINDS = ("process", "topic")
 VISIBLE = {"topic": ("rate_hz",), "process": ("cpu_percent", "rss_mb")}
-# Entities already styled, per recording (SeriesLines are static: logged once per member).
-_styled: weakref.WeakKeyDictionary[rr.RecordingStream, set[str]] = weakref.WeakKeyDictionary()
 
 
 def _t_graph(sample: Any) -> tuple[float, nx.MultiDiGraph]:
@@ -130,7 +127,7 @@ def log_metrics(rec: rr.RecordingStream, batch: Iterable[Any] | MetricBatch,
         if not batch:
             return 0
         columns, last_G = metric_columns(batch, kinds), _t_graph(batch[-1])[1]
-    styled = _styled.setdefault(rec, set())
+    styled = style.styled(rec)
     n = 0
     for member, (ts, xs) in sorted(columns.items()):
         path = paths.metrics_path(member, paths.THETA)

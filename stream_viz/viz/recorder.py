@@ -261,6 +261,7 @@ class Recorder:
             return None
         self.parts.append(path)
         self._part_t0 = t
+        style.forget_styled(self.rec)  # static styles are not carried over to a new sink
         if G is not None:
             self.system(G, t, force=True)
         if self._last_rca is not None:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import weakref
+from typing import Any
+
 # RGB; active members (ROS nodes) are big blue discs, distributors smaller and warm/green.
 KIND_COLOR = {
     "node": (66, 133, 244),
@@ -41,3 +44,18 @@ def rgb_for_index(i: int) -> tuple[int, int, int]:
     palette = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
                (140, 86, 75), (227, 119, 194), (127, 127, 127), (188, 189, 34), (23, 190, 207)]
     return palette[i % len(palette)]
+
+
+# Entities whose static style (SeriesLines / SeriesPoints) a recording stream has logged: static
+# data is logged once per entity, and again after `forget_styled` (a new file part starts empty).
+_styled: weakref.WeakKeyDictionary[Any, set[str]] = weakref.WeakKeyDictionary()
+
+
+def styled(rec: Any) -> set[str]:
+    """Return the entity paths ``rec`` has logged a static style for (add a path after logging)."""
+    return _styled.setdefault(rec, set())
+
+
+def forget_styled(rec: Any) -> None:
+    """Make ``rec`` log its static styles again (its new sink has none of them)."""
+    _styled.pop(rec, None)

@@ -189,6 +189,8 @@ def test_a_long_recording_is_saved_in_parts_that_each_open_alone(tmp_path):
         assert [row["time"] for row in data[paths.SYSTEM] if row.get("rca_iteration") is None] == [
             int((T0 + 10 * len(times)) * 1e9)]
         assert paths.PROCESS_TREE in data and paths.RCA_REPORT in data
+        # The static series style (readable names) is in every part, not only the first.
+        assert any("SeriesLines:names" in row for row in data["/metrics/topic/image/theta"]), p
         (bp,) = RrdReader(str(p)).blueprints()
         assert bp.application_id == "stream_viz"
         ts = sorted(row["time"] // 10**9 - int(T0)
