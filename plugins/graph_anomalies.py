@@ -65,8 +65,9 @@ def discovery_burst(G: Any, added: Any, least: int, ratio: float) -> bool:
     """Return True if the ``added`` members hold at least ``least`` nodes and ``ratio`` of the
     nodes of ``G``: the graph is still being discovered."""
     n = sum(1 for m in added if str(m).startswith("node:"))
-    total = sum(1 for _, kind in G.nodes(data="kind") if kind == "node")
-    return n >= least and n >= ratio * total
+    if n < least:  # the usual sample: no need to count the graph's nodes
+        return False
+    return n >= ratio * sum(1 for _, kind in G.nodes(data="kind") if kind == "node")
 
 
 class GraphAnomalies(Plugin):

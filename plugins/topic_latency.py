@@ -67,7 +67,6 @@ class TopicLatency(Plugin):
                 seen.append((topic, attr, excess(ctx, topic, attr, floor, alerting), fresh))
             drops = ctx.value(topic, "drops_per_s")
             if not math.isnan(drops):
-                rate = ctx.value(topic, "rate_hz")
                 limit = max(s["drops_min_per_s"], s["drops_ratio"] * (0.0 if math.isnan(rate) else rate))
                 if streak(ctx.state, (topic, "drops"), drops >= limit, fresh) >= s["confirm"]:
                     drops_alerts.append(ctx.alert(topic, "warn", f"{drops:.3g} messages/s dropped",
