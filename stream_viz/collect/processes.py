@@ -82,17 +82,15 @@ class ProcessSampler:
     def _read(self, pid: int, out: ProcSample) -> ProcessReading | None:
         tr = self._tracked.get(pid)
         try:
-            if tr is None:
-                p = psutil.Process(pid)
-                if not _running(p):
-                    out.errors[pid] = "process is not running"
+            proc = psutil.Process(pid) if tr is None else tr.proc
+            with proc.oneshot():  # the status file `_running` reads serves `_measure` too
+                if not _running(proc):  # gone (or a zombie, or its pid reused)
+                    if tr is None:
+                        out.errors[pid] = "process is not running"
+                    else:
+                        self._gone(pid, out, "process exited")
                     return None
-                tr = self._track(p)
-            with tr.proc.oneshot():  # the status file `_running` reads serves `_measure` too
-                if not _running(tr.proc):  # gone (or a zombie, or its pid reused)
-                    self._gone(pid, out, "process exited")
-                    return None
-                r = self._measure(tr)
+                r = self._measure(tr or self._track(proc))
         except psutil.NoSuchProcess:
             self._gone(pid, out, "process exited while being read")
             return None
