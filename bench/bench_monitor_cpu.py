@@ -3,8 +3,8 @@
 The real demo robot (12 rclpy nodes in 7 processes, its own ROS_DOMAIN_ID) and the real
 in-process `Monitor` (default config, 1 sample/s). Phase 1 measures CPU time per thread with no
 profiler (the monitor's main loop, the topic drain thread, the native rclpy / Fast DDS threads);
-phase 2 runs the same loop under cProfile and splits the main loop into its stages. Compare the
-rows as shares of one run: the machine is shared and noisy.
+phase 2 runs the same loop with each stage of the main loop timed by the main thread's CPU
+clock. Compare the rows as shares of one run: the machine is shared and noisy.
 
     .venv/bin/python bench/bench_monitor_cpu.py                 # viewer off, 60 s per phase
     .venv/bin/python bench/bench_monitor_cpu.py --save --seconds 30   # with the .rrd written
@@ -13,9 +13,8 @@ rows as shares of one run: the machine is shared and noisy.
 from __future__ import annotations
 
 import argparse
-import cProfile
+import importlib
 import os
-import pstats
 import sys
 import tempfile
 import threading
@@ -27,25 +26,69 @@ import psutil
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-# (label, file suffix, function name) of the stages of Monitor.step, as cProfile names them.
+# (label, module, attribute) of the stages of Monitor.step: an imported function is wrapped in
+# the module that calls it, a method on its class.
 STAGES = [
-    ("collector.sample (graph, pids, psutil, topic stats)", "collect/collector.py", "sample"),
-    ("  read_graph (ROS graph API)", "collect/rosgraph.py", "read_graph"),
-    ("  ProcessSampler.sample (psutil)", "collect/processes.py", "sample"),
-    ("  TopicMonitor.stats (window metrics)", "collect/topics.py", "stats"),
-    ("  build_model", "collect/build.py", "build_model"),
-    ("  diff", "model/diff.py", "diff"),
-    ("remember (the seen graph)", "model/seen.py", "remember"),
-    ("History.add", "model/history.py", "add"),
-    ("process_anomalies", "detect/watchlist.py", "process_anomalies"),
-    ("initial_watchlist", "detect/watchlist.py", "initial_watchlist"),
-    ("PluginSet.run (all plugins)", "detect/registry.py", "run"),
-    ("AlertStore.add", "detect/store.py", "add"),
-    ("AlertStore.add_snapshot", "detect/store.py", "add_snapshot"),
-    ("RcaEngine.update", "rca/engine.py", "update"),
-    ("LiveView.update (Rerun)", "stream_viz/live_view.py", "update"),
-    ("Monitor._status", "stream_viz/monitor.py", "_status"),
+    ("Monitor.step (all)", "stream_viz.monitor", "Monitor.step"),
+    ("collector.sample (graph, pids, psutil, topic stats)", "stream_viz.collect.collector",
+     "Collector.sample"),
+    ("  read_graph (ROS graph API)", "stream_viz.collect.collector", "read_graph"),
+    ("  PidResolver.resolve (node -> pid)", "stream_viz.collect.pidmap", "PidResolver.resolve"),
+    ("  ProcessSampler.sample (psutil)", "stream_viz.collect.processes", "ProcessSampler.sample"),
+    ("  TopicMonitor.stats (drain + window metrics)", "stream_viz.collect.topics", "TopicMonitor.stats"),
+    ("    TopicMonitor.drain (take every message)", "stream_viz.collect.topics", "TopicMonitor.drain"),
+    ("    window_metrics", "stream_viz.collect.topics", "window_metrics"),
+    ("  build_model", "stream_viz.collect.collector", "build_model"),
+    ("  diff", "stream_viz.collect.collector", "diff"),
+    ("remember (the seen graph)", "stream_viz.monitor", "remember"),
+    ("History.add", "stream_viz.model.history", "History.add"),
+    ("process_anomalies", "stream_viz.monitor", "process_anomalies"),
+    ("initial_watchlist", "stream_viz.monitor", "initial_watchlist"),
+    ("PluginSet.run (main thread's part)", "stream_viz.detect.registry", "PluginSet.run"),
+    ("AlertStore.add", "stream_viz.detect.store", "AlertStore.add"),
+    ("AlertStore.add_snapshot", "stream_viz.detect.store", "AlertStore.add_snapshot"),
+    ("RcaEngine.update", "stream_viz.rca.engine", "RcaEngine.update"),
+    ("LiveView.update (Rerun)", "stream_viz.live_view", "LiveView.update"),
+    ("Monitor._status", "stream_viz.monitor", "Monitor._status"),
 ]
+
+
+class StageClock:
+    """Main-thread CPU time per stage: each stage's function wrapped with `time.thread_time`.
+
+    A profiler would inflate code made of many small Python calls (networkx) against code made of
+    few C calls (numpy, rclpy); a wrapper per stage costs the same small amount for each.
+    """
+
+    def __init__(self) -> None:
+        self.cpu: dict[str, float] = {}
+        self._main = threading.get_ident()
+        self._undo: list[tuple[object, str, object]] = []
+
+    def wrap(self, label: str, module: str, attr: str) -> None:
+        owner: object = importlib.import_module(module)
+        *path, name = attr.split(".")
+        for p in path:
+            owner = getattr(owner, p)
+        fn = owner.__dict__[name] if isinstance(owner, type) else getattr(owner, name)
+        clock, main, cpu = time.thread_time, self._main, self.cpu
+
+        def timed(*a, **kw):
+            if threading.get_ident() != main:
+                return fn(*a, **kw)
+            t0 = clock()
+            try:
+                return fn(*a, **kw)
+            finally:
+                cpu[label] = cpu.get(label, 0.0) + clock() - t0
+
+        self._undo.append((owner, name, fn))
+        setattr(owner, name, timed)
+
+    def restore(self) -> None:
+        for owner, name, fn in reversed(self._undo):
+            setattr(owner, name, fn)
+        self._undo.clear()
 
 
 def thread_cpu(proc: psutil.Process) -> dict[int, float]:
@@ -57,6 +100,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seconds", type=float, default=60.0, help="length of each phase")
     ap.add_argument("--warmup", type=float, default=15.0, help="s of monitoring before measuring")
     ap.add_argument("--save", action="store_true", help="write the .rrd (Rerun cost included)")
+    ap.add_argument("--config", type=Path, help="a stream-viz config file (default: the defaults)")
     args = ap.parse_args(argv)
 
     from rosenv import claim_domain
@@ -74,8 +118,8 @@ def main(argv: list[str] | None = None) -> int:
     robot.start()
     try:
         robot.wait_ready(timeout=120)
-        mon = Monitor(load_config(None), db=tmp / "a.sqlite", save=tmp / "r.rrd" if args.save else None,
-                      viewer="none", domain_id=domain)
+        mon = Monitor(load_config(args.config), db=tmp / "a.sqlite",
+                      save=tmp / "r.rrd" if args.save else None, viewer="none", domain_id=domain)
         try:
             mon.run(args.warmup, threading.Event())
             py_threads = {t.native_id: t.name for t in threading.enumerate()}
@@ -96,27 +140,28 @@ def main(argv: list[str] | None = None) -> int:
             for name, c in sorted(groups.items(), key=lambda x: -x[1]):
                 print(f"{name:42s} {c:7.2f} {100 * c / wall:6.2f}% {100 * c / total:5.0f}%")
             print(f"{'all':42s} {total:7.2f} {100 * total / wall:6.2f}%")
-            # Phase 2: the main loop's stages under cProfile (inflated; read the shares).
-            prof = cProfile.Profile()
-            prof.enable()
-            mon.run(args.seconds, threading.Event())
-            prof.disable()
-            stats = pstats.Stats(prof).stats
-            step = _cum(stats, "stream_viz/monitor.py", "step")
-            print(f"\nstages of Monitor.step under cProfile ({step:.2f} s in step = 100 %):")
-            for label, path, fn in STAGES:
-                c = _cum(stats, path, fn)
+            # Phase 2: the main loop's stages, by the main thread's CPU clock around each.
+            clock = StageClock()
+            for label, module, attr in STAGES:
+                clock.wrap(label, module, attr)
+            s1 = mon.samples
+            try:
+                mon.run(args.seconds, threading.Event())
+            finally:
+                clock.restore()
+            n2 = max(1, mon.samples - s1)
+            step = clock.cpu.get(STAGES[0][0], 0.0)
+            print(f"\nstages of Monitor.step, main-thread CPU ({1000 * step / n2:.2f} ms per sample "
+                  "= 100 %):")
+            for label, _, _ in STAGES:
+                c = clock.cpu.get(label, 0.0)
                 if c:
-                    print(f"{label:52s} {100 * c / step:5.1f} %")
+                    print(f"{label:52s} {100 * c / step:5.1f} % {1000 * c / n2:6.2f} ms")
         finally:
             mon.close()
     finally:
         robot.stop()
     return 0
-
-
-def _cum(stats: dict, path: str, fn: str) -> float:
-    return sum(v[3] for (f, _, name), v in stats.items() if name == fn and f.endswith(path))
 
 
 if __name__ == "__main__":
