@@ -21,7 +21,7 @@ from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.pidmap import PidResolver
 from stream_viz.collect.processes import ProcessSampler
 from stream_viz.collect.readings import GraphReading, PidInfo, ProcessReading
-from stream_viz.collect.rosgraph import QosCache, read_graph
+from stream_viz.collect.rosgraph import GidCache, QosCache, read_graph
 from stream_viz.collect.topics import TopicMonitor, diag_events, log_event
 from stream_viz.errors import CollectError
 from stream_viz.model.diff import diff
@@ -93,6 +93,7 @@ class Collector:
         self.resolver: PidResolver | None = None
         self.sampler = ProcessSampler()
         self.qos = QosCache()
+        self.gids = GidCache()
         self._prev = new_graph()
         self._prev_pids: dict[str, int | None] = {}
         self._dead: dict[int, ProcessReading] = {}
@@ -128,13 +129,15 @@ class Collector:
             raise CollectError("Collector.sample() called before start() (or after close())")
         t = time.time()
         reading = read_graph(self.node, own=self.own, include_hidden=self.include_hidden,
-                             include_internal=self.include_internal, qos=self.qos)
+                             include_internal=self.include_internal, qos=self.qos, gids=self.gids)
         self.topics.update(reading.topics)
         pids = self.resolver.resolve(reading.rosout_gids)
         for fqn in reading.nodes:
             pids.setdefault(fqn, PidInfo(None, "unknown"))
         node_pids = {n: p.pid for n, p in pids.items() if n in reading.nodes}
         ps = self.sampler.sample({p for p in node_pids.values() if p is not None})
+        if ps.exited:  # one of its nodes may be back under the same name, with a new gid
+            self.gids.invalidate()
         events = self._process_events(t, ps.exited, node_pids)
         events += self._restarts(t, node_pids)
         # Keep the process of nodes DDS still lists after their process died (SIGKILL: ~20 s).

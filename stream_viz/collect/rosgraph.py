@@ -90,8 +90,47 @@ class QosCache:
         self._qos = {k: v for k, v in self._qos.items() if k[0] in topics}
 
 
+class GidCache:
+    """Each node's /rosout publisher gid (what maps a node to its process), read only when due.
+
+    ``get_publishers_info_by_topic`` scans every endpoint and rclpy builds a QoS object for each
+    one found: 40 % of a graph read on the demo, for gids that change only when a node is created
+    again. They are read when a node appears (and again each sample while one still has no gid,
+    for ``settle_s`` after the node set changed: its endpoints are discovered after its name),
+    after `invalidate` (the collector calls it when a process exits: a node restarted under the
+    same name has a new gid), and at least every ``every_s``.
+    """
+
+    def __init__(self, every_s: float = 5.0, settle_s: float = 3.0) -> None:
+        self.every_s, self.settle_s = every_s, settle_s
+        self.reads = 0  # calls to the graph API so far (for tests and benchmarks)
+        self._gids: dict[str, bytes] = {}
+        self._names: frozenset[str] = frozenset()
+        self._read_at: float | None = None
+        self._changed_at = 0.0
+
+    def invalidate(self) -> None:
+        """Read the gids again on the next call."""
+        self._read_at = None
+
+    def get(self, node: Node, nodes: dict[str, NodeReading], now: float) -> dict[str, bytes]:
+        """Return node fqn → gid for ``nodes`` (those whose gid is known), read again when due."""
+        names = frozenset(nodes)
+        if names != self._names:
+            self._names, self._changed_at = names, now
+        missing = not names <= self._gids.keys()
+        if (self._read_at is None or now - self._read_at >= self.every_s
+                or (missing and now - self._changed_at < self.settle_s)):
+            self._gids = {}
+            for ep in _endpoints(node.get_publishers_info_by_topic("/rosout"), "/rosout", nodes):
+                self._gids.setdefault(ep.node, ep.gid)
+            self._read_at, self.reads = now, self.reads + 1
+        return {n: g for n, g in self._gids.items() if n in names}
+
+
 def read_graph(node: Node, *, own: str, include_hidden: bool = False,
-               include_internal: bool = False, qos: QosCache | None = None) -> GraphReading:
+               include_internal: bool = False, qos: QosCache | None = None,
+               gids: GidCache | None = None) -> GraphReading:
     """Return the ROS graph as node ``node`` sees it now.
 
     Parameters
@@ -106,8 +145,11 @@ def read_graph(node: Node, *, own: str, include_hidden: bool = False,
         Keep parameter services, ``/rosout`` and ``/parameter_events``.
     qos : QosCache, optional
         Where endpoint QoS is kept between samples (a fresh one reads every topic's QoS).
+    gids : GidCache, optional
+        Where the nodes' /rosout gids are kept between samples (a fresh one reads them).
     """
     qos = qos or QosCache(budget_s=float("inf"))
+    gids = gids or GidCache()
     r = GraphReading()
     for name, ns in node.get_node_names_and_namespaces():
         fqn = node_fqn(ns, name)
@@ -154,8 +196,7 @@ def read_graph(node: Node, *, own: str, include_hidden: bool = False,
         r.publishers[topic] = [Endpoint(n, topic, t0, b"", qos.get(topic, n, "pub")) for n in pubs_]
         r.subscribers[topic] = [Endpoint(n, topic, t0, b"", qos.get(topic, n, "sub")) for n in subs_]
     qos.forget(set(r.topics))
-    for ep in _endpoints(node.get_publishers_info_by_topic("/rosout"), "/rosout", r.nodes):
-        r.rosout_gids.setdefault(ep.node, ep.gid)
+    r.rosout_gids = gids.get(node, r.nodes, time.monotonic())
     return r
 
 

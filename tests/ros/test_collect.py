@@ -166,3 +166,45 @@ def test_collector_real_system(children, ros_domain):
         s = col.sample()
         assert not [e for e in s.events if e.kind == "exit"]  # reported once
         assert s.graph.nodes["node:/ns/talker"]["alive"] is True
+
+
+PHOENIX = """
+import rclpy
+from rclpy.node import Node
+from std_msgs.msg import String
+rclpy.init()
+n = Node('phoenix')
+p = n.create_publisher(String, '/ashes', 10)
+n.create_timer(0.1, lambda: p.publish(String(data='v')))
+try:
+    rclpy.spin(n)
+except KeyboardInterrupt:
+    pass
+"""
+
+
+def test_a_node_restarted_under_its_name_is_found_in_its_new_process(children, ros_domain):
+    """The /rosout gids are read only when due: a restart must still move the node to its new pid."""
+    first = children.python(PHOENIX, name="phoenix")
+    with Collector(ros_domain) as col:
+        def on(pid):
+            def check():
+                s = col.sample()
+                node = s.graph.nodes.get("node:/phoenix")
+                return s if node is not None and node["pid"] == pid else None
+            return check
+        wait_for(on(first.pid), timeout=20, period=0.3)
+        # Steady state: the graph's /rosout endpoints are not read every sample.
+        reads = col.gids.reads
+        for _ in range(4):
+            col.sample()
+            time.sleep(0.3)
+        assert col.gids.reads == reads
+        # Restarted at once under the same name (a launch respawn): found in the new process.
+        children.end(first)
+        second = children.python(PHOENIX, name="phoenix")
+        t0 = time.monotonic()
+        s = wait_for(on(second.pid), timeout=15, period=0.5)
+        took = time.monotonic() - t0
+        assert took < 4.0, f"found in the new process after {took:.1f} s (the periodic read is 5 s)"
+        assert s.graph.nodes["node:/phoenix"]["pid_status"] == "confirmed"

@@ -200,3 +200,68 @@ def test_drain_period_lets_the_fastest_topic_fill_a_quarter_of_its_queue():
     assert drain_period(1000, 0.1, 1000, 0.02, 0.25) == 0.025  # 10 kHz: 250 messages in 25 ms
     assert drain_period(5000, 0.1, 1000, 0.02, 0.25) == 0.02  # faster still: the shortest
     assert drain_period(5, 0.0, 1000, 0.02, 0.25) == 0.25
+
+
+class _Info:
+    def __init__(self, name: str, gid: int) -> None:
+        self.node_name, self.node_namespace, self.topic_type = name, "/", "rcl_interfaces/msg/Log"
+        self.endpoint_gid, self.qos_profile = [gid] * 16, _Qos()
+
+
+class _Qos:
+    history = reliability = durability = type("P", (), {"name": "UNKNOWN"})()
+    depth = 0
+
+
+class _GraphNode:
+    """Answers the one graph call GidCache makes; counts the calls."""
+
+    def __init__(self) -> None:
+        self.pubs: dict[str, int] = {}
+        self.calls = 0
+
+    def get_publishers_info_by_topic(self, topic: str) -> list[_Info]:
+        assert topic == "/rosout"
+        self.calls += 1
+        return [_Info(n.lstrip("/"), g) for n, g in self.pubs.items()]
+
+
+def _nodes(*names: str) -> dict[str, NodeReading]:
+    return {n: NodeReading(n, n.lstrip("/"), "/") for n in names}
+
+
+def test_gid_cache_reads_the_graph_only_when_due():
+    from stream_viz.collect.rosgraph import GidCache
+
+    g, cache = _GraphNode(), GidCache(every_s=5.0, settle_s=3.0)
+    g.pubs = {"/a": 1, "/b": 2}
+    assert cache.get(g, _nodes("/a", "/b"), 0.0) == {"/a": bytes([1] * 16), "/b": bytes([2] * 16)}
+    for t in (1.0, 2.0, 4.9):  # nothing changed: no graph call
+        cache.get(g, _nodes("/a", "/b"), t)
+    assert g.calls == 1
+    assert cache.get(g, _nodes("/a"), 5.0 - 1e-9) == {"/a": bytes([1] * 16)}  # a node left: filtered
+    assert g.calls == 1
+    cache.get(g, _nodes("/a", "/b"), 5.0)  # every_s passed
+    assert g.calls == 2
+    # A new node whose /rosout publisher is not discovered yet: read each call while settling.
+    cache.get(g, _nodes("/a", "/b", "/c"), 6.0)
+    cache.get(g, _nodes("/a", "/b", "/c"), 7.0)
+    assert g.calls == 4
+    g.pubs["/c"] = 3
+    assert cache.get(g, _nodes("/a", "/b", "/c"), 8.0)["/c"] == bytes([3] * 16)
+    assert g.calls == 5
+    cache.get(g, _nodes("/a", "/b", "/c"), 8.5)  # complete again: no call
+    assert g.calls == 5
+    # A node that never gets a gid (enable_rosout=False) is not re-read for after settling.
+    cache.get(g, _nodes("/a", "/b", "/c", "/quiet"), 9.0)
+    for t in (10.0, 11.0, 11.9):
+        cache.get(g, _nodes("/a", "/b", "/c", "/quiet"), t)
+    assert g.calls == 9
+    for t in (12.0, 13.0):
+        cache.get(g, _nodes("/a", "/b", "/c", "/quiet"), t)
+    assert g.calls == 9
+    # A process exited: the next call reads (a node may be back under its name, new gid).
+    g.pubs["/a"] = 7
+    cache.invalidate()
+    assert cache.get(g, _nodes("/a", "/b", "/c", "/quiet"), 13.5)["/a"] == bytes([7] * 16)
+    assert g.calls == 10
