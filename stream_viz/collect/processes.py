@@ -1,21 +1,71 @@
-"""psutil sampler: metrics of the nodes' processes and all their ancestors, exits noticed fast.
+"""Process sampler: metrics of the nodes' processes and all their ancestors, exits noticed fast.
 
-``psutil.Process`` objects are cached (``cpu_percent`` and the per-second rates need the previous
-reading). A process we may not fully read keeps what could be read (the rest NaN, listed in
-``unreadable``); one that exits mid-read is reported as gone, never raised.
+psutil finds a process and its identity (name, command line, user, start time). The metrics of
+a tracked process are read every sample: on Linux straight from ``/proc/<pid>/{stat,status,io,fd}``
+(psutil's own sources, with the same formulas, at a third of its cost — its Python layer was
+a fifth of the monitor's sample), elsewhere through psutil. A process we may not fully read keeps
+what could be read (the rest NaN, listed in ``unreadable``); one that exits mid-read is reported
+as gone, never raised.
 """
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import psutil
 
 from stream_viz.collect.readings import ProcessReading
 
 MB = 1024.0 * 1024.0
+PROCFS = os.path.exists("/proc/self/stat") and hasattr(os, "sysconf")
+CLK_TCK = os.sysconf("SC_CLK_TCK") if PROCFS else 100
+PAGE = os.sysconf("SC_PAGE_SIZE") if PROCFS else 4096
+
+
+class ProcStat(NamedTuple):
+    """The fields of ``/proc/<pid>/stat`` the sampler uses."""
+
+    state: str
+    ppid: int
+    cpu_s: float  # user + system time of the process itself, s
+    threads: int
+    start: int  # start time after boot in clock ticks: with the pid, the process's identity
+    rss_bytes: int
+
+
+def parse_stat(text: bytes) -> ProcStat:
+    """Parse ``/proc/<pid>/stat`` (proc(5)); the name in parentheses may hold spaces and ``)``."""
+    rest = text[text.rindex(b")") + 2:].split()
+    return ProcStat(state=rest[0].decode(), ppid=int(rest[1]),
+                    cpu_s=(int(rest[11]) + int(rest[12])) / CLK_TCK, threads=int(rest[17]),
+                    start=int(rest[19]), rss_bytes=int(rest[21]) * PAGE)
+
+
+def parse_fields(text: bytes, names: tuple[bytes, ...]) -> tuple[int, ...]:
+    """Return the integer values of ``name: value`` lines (``/proc/<pid>/status`` or ``io``)."""
+    text = b"\n" + text  # every field, the first too, starts after a newline
+    out = []
+    for name in names:
+        key = b"\n" + name + b":"
+        i = text.find(key)
+        if i < 0:
+            raise KeyError(name.decode())
+        end = text.find(b"\n", i + len(key))
+        out.append(int(text[i + len(key):end if end >= 0 else None]))
+    return tuple(out)
+
+
+CTX_FIELDS = (b"voluntary_ctxt_switches", b"nonvoluntary_ctxt_switches")
+IO_FIELDS = (b"read_bytes", b"write_bytes")
+
+
+def _read_bytes(path: str) -> bytes:
+    with open(path, "rb", buffering=0) as f:
+        return f.read()
 
 
 @dataclass
@@ -26,6 +76,8 @@ class _Tracked:
     ctx: float | None = None
     io: tuple[float, float] | None = None
     cpu_primed: bool = False
+    start: int | None = None  # /proc start ticks (PROCFS only)
+    cpu_s: float | None = None  # process CPU time at `t` (PROCFS only)
 
 
 @dataclass
@@ -46,9 +98,9 @@ class ProcessSampler:
     flatten their baselines). They are half the processes of a typical robot and seldom the fault.
     """
 
-    def __init__(self, ancestors_every: int = 5) -> None:
+    def __init__(self, ancestors_every: int = 5, procfs: bool = PROCFS) -> None:
         self._tracked: dict[int, _Tracked] = {}
-        self.ancestors_every = ancestors_every
+        self.ancestors_every, self.procfs = ancestors_every, procfs
         self._calls = 0
 
     def sample(self, pids: Iterable[int]) -> ProcSample:
@@ -81,6 +133,8 @@ class ProcessSampler:
 
     def _read(self, pid: int, out: ProcSample) -> ProcessReading | None:
         tr = self._tracked.get(pid)
+        if self.procfs:
+            return self._read_procfs(pid, tr, out)
         try:
             proc = psutil.Process(pid) if tr is None else tr.proc
             with proc.oneshot():  # the status file `_running` reads serves `_measure` too
@@ -99,6 +153,58 @@ class ProcessSampler:
             return None
         out.processes[pid] = r
         return r
+
+    def _read_procfs(self, pid: int, tr: _Tracked | None, out: ProcSample) -> ProcessReading | None:
+        try:
+            st = parse_stat(_read_bytes(f"/proc/{pid}/stat"))
+            if st.state == "Z" or (tr is not None and st.start != tr.start):  # a zombie, a reused pid
+                raise ProcessLookupError
+            if tr is None:
+                tr = self._track(psutil.Process(pid))
+                tr.start = st.start
+            r = self._measure_procfs(tr, st)
+        except (FileNotFoundError, ProcessLookupError, psutil.NoSuchProcess):
+            if tr is None:
+                out.errors[pid] = "process is not running"
+            else:
+                self._gone(pid, out, "process exited")
+            return None
+        except (PermissionError, psutil.AccessDenied):
+            out.errors[pid] = "access denied"
+            return None
+        out.processes[pid] = r
+        return r
+
+    def _measure_procfs(self, tr: _Tracked, st: ProcStat) -> ProcessReading:
+        """psutil's formulas over the files it reads: cpu_percent, memory_info().rss, num_threads,
+        num_ctx_switches, num_fds, io_counters."""
+        pid, now = tr.info.pid, time.monotonic()
+        m: dict[str, float] = {"rss_mb": st.rss_bytes / MB, "threads": float(st.threads)}
+        denied = [f for f in tr.info.unreadable if f == "cmdline"]
+        dt = now - tr.t
+        if tr.cpu_s is not None and dt > 0:
+            m["cpu_percent"] = 100.0 * (st.cpu_s - tr.cpu_s) / dt
+        tr.cpu_s = st.cpu_s
+        tr.info.ppid = st.ppid or None
+        ctx = float(sum(parse_fields(_read_bytes(f"/proc/{pid}/status"), CTX_FIELDS)))
+        if tr.ctx is not None and dt > 0:
+            m["ctx_switches_per_s"] = (ctx - tr.ctx) / dt
+        tr.ctx = ctx
+        try:
+            m["open_files"] = float(len(os.listdir(f"/proc/{pid}/fd")))
+        except PermissionError:
+            denied.append("open_files")
+        try:
+            cur = tuple(float(v) for v in parse_fields(_read_bytes(f"/proc/{pid}/io"), IO_FIELDS))
+            if tr.io is not None and dt > 0:
+                m["io_read_kBps"] = (cur[0] - tr.io[0]) / dt / 1000.0
+                m["io_write_kBps"] = (cur[1] - tr.io[1]) / dt / 1000.0
+            tr.io = cur
+        except (PermissionError, KeyError):
+            denied.append("io")
+        tr.t = now
+        tr.info.metrics, tr.info.unreadable = m, denied
+        return tr.info
 
     def _gone(self, pid: int, out: ProcSample, why: str) -> None:
         out.errors[pid] = why

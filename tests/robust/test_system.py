@@ -93,10 +93,11 @@ def test_a_long_run_on_a_churning_system_forgets_what_vanished_long_ago(children
         mon.close()
 
 
-def test_a_process_that_exits_between_listing_and_reading(children):
-    """psutil raises NoSuchProcess mid-read: reported as gone, never raised (real processes)."""
+@pytest.mark.parametrize("procfs", [True, False], ids=["procfs", "psutil"])
+def test_a_process_that_exits_between_listing_and_reading(children, procfs):
+    """A process gone when read is reported as gone, never raised (real processes)."""
     p = children.run([sys.executable, "-c", "import time; time.sleep(60)"], name="short")
-    s = ProcessSampler()
+    s = ProcessSampler(procfs=procfs)
     first = s.sample([p.pid])
     assert p.pid in first.processes
     children.end(p, signal.SIGKILL)
@@ -105,7 +106,7 @@ def test_a_process_that_exits_between_listing_and_reading(children):
     assert "exited" in second.errors[p.pid]
     q = children.run([sys.executable, "-c", "pass"], name="gone")
     q.wait(10)
-    third = ProcessSampler().sample([q.pid, 2**22 + 7])  # never tracked: ended / never existed
+    third = ProcessSampler(procfs=procfs).sample([q.pid, 2**22 + 7])  # never tracked: ended / never existed
     assert set(third.errors) == {q.pid, 2**22 + 7} and third.processes == {}
 
 
@@ -267,3 +268,29 @@ def test_a_very_fast_topic_and_very_large_messages(children, tmp_path):
              if ln.startswith("rate ")]
     print(f"\\n/fast publisher reached {rates} Hz (10 kHz asked for)")
     assert fast.poll() is None
+
+
+def test_procfs_reads_what_psutil_reads(children):
+    """The /proc fast path and psutil agree on a real busy process with threads and files."""
+    code = ("import threading, time, tempfile\n"
+            "files = [tempfile.TemporaryFile() for _ in range(7)]\n"
+            "data = bytearray(50_000_000)\n"
+            "def burn():\n    while True: sum(range(10000))\n"
+            "for _ in range(2): threading.Thread(target=burn, daemon=True).start()\n"
+            "time.sleep(60)\n")
+    p = children.run([sys.executable, "-c", code], name="busy")
+    fast, slow = ProcessSampler(procfs=True), ProcessSampler(procfs=False)
+    wait_for(lambda: psutil.Process(p.pid).num_fds() >= 10, timeout=10)
+    for s in (fast, slow):
+        s.sample([p.pid])
+    time.sleep(1.0)
+    a, b = fast.sample([p.pid]).processes[p.pid], slow.sample([p.pid]).processes[p.pid]
+    assert a.metrics.keys() == b.metrics.keys() == {
+        "cpu_percent", "rss_mb", "threads", "ctx_switches_per_s", "open_files", "io_read_kBps",
+        "io_write_kBps"}
+    assert a.metrics["threads"] == b.metrics["threads"] == 3
+    assert a.metrics["open_files"] == b.metrics["open_files"]
+    assert abs(a.metrics["rss_mb"] - b.metrics["rss_mb"]) < 2 and a.metrics["rss_mb"] > 50
+    assert 50 < a.metrics["cpu_percent"] < 210
+    assert abs(a.metrics["cpu_percent"] - b.metrics["cpu_percent"]) < 30
+    assert (a.ppid, a.name, a.create_time) == (b.ppid, b.name, b.create_time)

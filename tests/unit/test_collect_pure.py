@@ -265,3 +265,17 @@ def test_gid_cache_reads_the_graph_only_when_due():
     cache.invalidate()
     assert cache.get(g, _nodes("/a", "/b", "/c", "/quiet"), 13.5)["/a"] == bytes([7] * 16)
     assert g.calls == 10
+
+
+def test_parse_proc_stat_and_fields():
+    from stream_viz.collect.processes import CLK_TCK, PAGE, parse_fields, parse_stat
+
+    # proc(5): the name is in parentheses and may itself hold spaces and parentheses.
+    line = (b"4242 (my (odd) name) S 17 4242 4242 0 -1 4194560 900 0 0 0 250 50 0 0 20 0 7 0 "
+            b"123456 1000000 3000 18446744073709551615 1 1 0 0 0 0 0 0 0 0 0 0 17 1 0 0 0 0 0\n")
+    st = parse_stat(line)
+    assert st == (("S", 17, 300 / CLK_TCK, 7, 123456, 3000 * PAGE))
+    status = b"Name:\tx\nvoluntary_ctxt_switches:\t15\nnonvoluntary_ctxt_switches:\t4\n"
+    assert parse_fields(status, (b"voluntary_ctxt_switches", b"nonvoluntary_ctxt_switches")) == (15, 4)
+    io = b"rchar: 1\nwchar: 2\nread_bytes: 4096\nwrite_bytes: 8192\ncancelled_write_bytes: 0\n"
+    assert parse_fields(io, (b"read_bytes", b"write_bytes")) == (4096, 8192)
