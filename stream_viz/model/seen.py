@@ -8,9 +8,10 @@ import networkx as nx
 def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float) -> nx.MultiDiGraph:
     """Return the union of ``seen`` and the live model ``G`` at time ``t``.
 
-    Members and edges of ``G`` take their current attributes (``gone`` cleared); those only in
-    ``seen`` keep their last attributes with ``gone=True`` and ``gone_at`` (the first time they
-    were missed). A crashed node leaves the live graph but stays a root-cause candidate.
+    Members and edges of ``G`` take their current attributes (no ``gone``; an attribute they no
+    longer have is not carried over); those only in ``seen`` keep their last attributes with
+    ``gone=True`` and ``gone_at`` (the first time they were missed). A crashed node leaves the
+    live graph but stays a root-cause candidate.
 
     Parameters
     ----------
@@ -21,23 +22,18 @@ def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float) -> nx.MultiDiG
     t : float
         Time of ``G``.
     """
-    out = seen.copy()
-    for m, attrs in out.nodes(data=True):
-        if m not in G and not attrs.get("gone"):
-            attrs["gone"], attrs["gone_at"] = True, t
-    for u, v, k, attrs in out.edges(keys=True, data=True):
-        if not G.has_edge(u, v, k) and not attrs.get("gone"):
-            attrs["gone"], attrs["gone_at"] = True, t
-    for m, attrs in G.nodes(data=True):
-        if m in out:
-            out.nodes[m].pop("gone", None)
-            out.nodes[m].pop("gone_at", None)
-        out.add_node(m, **attrs)
-    for u, v, k, attrs in G.edges(keys=True, data=True):
-        if out.has_edge(u, v, k):
-            out.edges[u, v, k].pop("gone", None)
-            out.edges[u, v, k].pop("gone_at", None)
-        out.add_edge(u, v, key=k, **attrs)
+    # Built from G, not from seen: on a steady system nothing is gone and this is one copy.
+    out = G.copy()
+    for m, attrs in seen.nodes(data=True):
+        if m not in G:
+            out.add_node(m, **attrs)
+            if not attrs.get("gone"):
+                out.nodes[m].update(gone=True, gone_at=t)
+    for u, v, k, attrs in seen.edges(keys=True, data=True):
+        if not G.has_edge(u, v, k):
+            out.add_edge(u, v, key=k, **attrs)
+            if not attrs.get("gone"):
+                out.edges[u, v, k].update(gone=True, gone_at=t)
     return out
 
 

@@ -160,6 +160,13 @@ def test_remember_keeps_vanished_members_marked_gone():
     seen = remember(seen, robot(), 4.0)  # it came back
     assert "gone" not in seen.nodes["node:/camera"]
     assert "gone" not in seen.edges["node:/camera", "topic:/image", 0]
+    # Live members carry their current attributes only: a reason that no longer holds goes.
+    c = robot()
+    c.nodes["topic:/image"]["reason"] = "cannot subscribe"
+    seen = remember(seen, c, 5.0)
+    assert seen.nodes["topic:/image"]["reason"] == "cannot subscribe"
+    seen = remember(seen, robot(), 6.0)
+    assert seen.nodes["topic:/image"] == robot().nodes["topic:/image"]
 
 
 def test_drop_gone_forgets_members_vanished_longer_than_the_retention():
