@@ -37,7 +37,7 @@ STAGES = [
     ("  ProcessSampler.sample (psutil)", "stream_viz.collect.processes", "ProcessSampler.sample"),
     ("  TopicMonitor.stats (drain + window metrics)", "stream_viz.collect.topics", "TopicMonitor.stats"),
     ("    TopicMonitor.drain (take every message)", "stream_viz.collect.topics", "TopicMonitor.drain"),
-    ("    window_metrics", "stream_viz.collect.topics", "window_metrics"),
+    ("    TopicWindow.metrics", "stream_viz.collect.window", "TopicWindow.metrics"),
     ("  build_model", "stream_viz.collect.collector", "build_model"),
     ("  diff", "stream_viz.collect.collector", "diff"),
     ("remember (the seen graph)", "stream_viz.monitor", "remember"),

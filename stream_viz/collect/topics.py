@@ -1,8 +1,8 @@
 """Topic metrics from raw subscriptions drained without an executor, plus /rosout and /diagnostics.
 
-A background thread takes every waiting message each ~100 ms (``take_message`` on the handle; no
-callbacks, no deserialisation) and keeps ``(received, source timestamp, size, sequence number)``
-per topic over a sliding window. Inter-arrival times stay exact: they come from the
+A background thread takes every waiting message (``take_message`` on the handle; no callbacks,
+no deserialisation) and keeps ``(received, source timestamp, size, sequence number)`` per topic
+over a sliding window with running sums (`TopicWindow`). Inter-arrival times stay exact: they come from the
 ``received_timestamp`` DDS stamps, not from when we drained. ``/rosout`` and ``/diagnostics`` are
 deserialised and turned into events. The QoS (best effort, volatile) matches any publisher.
 """
@@ -10,25 +10,21 @@ deserialised and turned into events. The QoS (best effort, volatile) matches any
 from __future__ import annotations
 
 import importlib
-import itertools
 import threading
 import time
-from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from stream_viz.collect.readings import TopicStats
+from stream_viz.collect.window import TopicWindow
 from stream_viz.records import Event
 
 OBSERVE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
 NO_RAW = frozenset({"/rosout", "/parameter_events"})  # busy infrastructure topics: no metrics
-RECENT = 5  # intervals behind `rate_recent_hz`
-WARMUP_S = 1.0  # a fresh subscription has seen too little to call a rate (0 would read as silence)
 
 
 def import_type(type_name: str) -> type:
@@ -42,7 +38,7 @@ def import_type(type_name: str) -> type:
 class _Watch:
     sub: Any
     created_ns: int
-    buf: deque
+    window: TopicWindow
     deserialize: bool = False
 
 
@@ -123,7 +119,7 @@ class TopicMonitor:
             return
         with self._lock:
             self._failed.pop(topic, None)
-            self._watches[topic] = _Watch(sub, time.time_ns(), deque(), deserialize)
+            self._watches[topic] = _Watch(sub, time.time_ns(), TopicWindow(), deserialize)
 
     def _run(self) -> None:
         while not self._stop.wait(self.period_s):
@@ -137,7 +133,7 @@ class TopicMonitor:
             elapsed, self._last_drain = now - self._last_drain, now
             for topic, w in self._watches.items():
                 raw = not w.deserialize
-                handle, append, taken = w.sub.handle, w.buf.append, 0
+                handle, add, taken = w.sub.handle, w.window.add, 0
                 try:
                     # The handle is held once per topic, not per message: the per-message cost
                     # is what topic metrics cost on a busy system.
@@ -146,8 +142,8 @@ class TopicMonitor:
                         while (got := take(msg_type, raw)) is not None:
                             msg, info = got
                             taken += 1
-                            append((info["received_timestamp"], info["source_timestamp"],
-                                    len(msg) if raw else 0, info.get("publication_sequence_number")))
+                            add(info["received_timestamp"], info["source_timestamp"],
+                                len(msg) if raw else 0, info.get("publication_sequence_number"))
                             if not raw:
                                 self._messages.append((topic, msg, info))
                 except Exception:  # a destroyed handle or a bad message: skip this topic this round
@@ -171,10 +167,9 @@ class TopicMonitor:
         out: dict[str, TopicStats] = {t: TopicStats(False, why) for t, why in self._failed.items()}
         with self._lock:
             for t, w in self._watches.items():
-                while w.buf and w.buf[0][0] < now - self.window_ns:
-                    w.buf.popleft()
-                m = window_metrics(list(w.buf), now, w.created_ns, self.window_ns,
-                                   publishers.get(t, 0), sized=not w.deserialize)
+                w.window.expire(now - self.window_ns)
+                m = w.window.metrics(now, w.created_ns, self.window_ns, publishers.get(t, 0),
+                                     sized=not w.deserialize)
                 out[t] = TopicStats(True, "", m)
         if not self.metrics:
             for t in publishers:
@@ -201,44 +196,11 @@ def drain_period(peak: int, elapsed_s: float, depth: int, shortest: float, longe
 
 def window_metrics(buf: list[tuple], now_ns: int, created_ns: int, window_ns: int,
                    n_publishers: int, sized: bool = True) -> dict[str, float]:
-    """Rate, jitter, latency, bandwidth and drops from ``(recv_ns, src_ns, size, seq)`` records.
-
-    Pure: ``span`` is the window, or less while the subscription is younger than the window; a
-    subscription younger than `WARMUP_S` gives no rate (NaN). Drops count sequence-number gaps and
-    only with one publisher (interleaved publishers' numbers cannot be told apart).
-
-    Two fast signals beside the window's: ``age_s``, the time since the newest message (a topic
-    that stops shows at once, not when the window has emptied), and ``rate_recent_hz``, the rate
-    over the last ``RECENT`` intervals up to now (at least 3; the open interval since the newest
-    message counts, so a slowed topic shows before the window has turned over).
-    """
-    span_ns = min(window_ns, now_ns - created_ns)
-    m: dict[str, float] = {}
-    if span_ns < WARMUP_S * 1e9:
-        return m
-    span = span_ns / 1e9
-    n = len(buf)
-    m["rate_hz"] = n / span
-    if n >= 1:
-        recv = np.array([b[0] for b in buf], dtype=np.int64)
-        src = np.array([b[1] for b in buf], dtype=np.int64)
-        m["latency_ms"] = float(np.mean(recv - src)) / 1e6
-        if sized:
-            m["bandwidth_kBps"] = sum(b[2] for b in buf) / span / 1000.0
-        if n >= 3:
-            m["jitter_ms"] = float(np.std(np.diff(recv))) / 1e6
-        newest = int(recv.max())
-        m["age_s"] = max(0, now_ns - newest) / 1e9
-        if n >= 4:
-            k = min(RECENT, n - 1)
-            first = int(np.partition(recv, n - 1 - k)[n - 1 - k])  # the (k+1)-th newest arrival
-            m["rate_recent_hz"] = k / max((now_ns - first) / 1e9, 1e-9)
-    if n_publishers == 1:
-        seqs = [b[3] for b in buf if b[3] is not None]
-        if len(seqs) == n:
-            gaps = sum(max(0, b - a - 1) for a, b in itertools.pairwise(seqs))
-            m["drops_per_s"] = gaps / span
-    return m
+    """Return `TopicWindow.metrics` of the ``(recv_ns, src_ns, size, seq)`` records ``buf``. Pure."""
+    w = TopicWindow()
+    for r in buf:
+        w.add(*r)
+    return w.metrics(now_ns, created_ns, window_ns, n_publishers, sized)
 
 
 LOG_LEVELS = {30: "warn", 40: "error", 50: "fatal"}

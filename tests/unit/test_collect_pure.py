@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -279,3 +280,47 @@ def test_parse_proc_stat_and_fields():
     assert parse_fields(status, (b"voluntary_ctxt_switches", b"nonvoluntary_ctxt_switches")) == (15, 4)
     io = b"rchar: 1\nwchar: 2\nread_bytes: 4096\nwrite_bytes: 8192\ncancelled_write_bytes: 0\n"
     assert parse_fields(io, (b"read_bytes", b"write_bytes")) == (4096, 8192)
+
+
+def _reference_metrics(buf, now_ns, span_ns, n_publishers):
+    """The metrics computed afresh with numpy over the records (what the running sums must equal)."""
+    m = {"rate_hz": len(buf) / (span_ns / 1e9)}
+    if buf:
+        recv = np.array([b[0] for b in buf], dtype=np.int64)
+        m["latency_ms"] = float(np.mean(recv - np.array([b[1] for b in buf]))) / 1e6
+        m["bandwidth_kBps"] = sum(b[2] for b in buf) / (span_ns / 1e9) / 1000.0
+        if len(buf) >= 3:
+            m["jitter_ms"] = float(np.std(np.diff(recv))) / 1e6
+        m["age_s"] = (now_ns - int(recv.max())) / 1e9
+        if len(buf) >= 4:
+            k = min(5, len(buf) - 1)
+            m["rate_recent_hz"] = k / ((now_ns - int(np.sort(recv)[-1 - k])) / 1e9)
+    seqs = [b[3] for b in buf]
+    if n_publishers == 1 and None not in seqs:
+        gaps = sum(max(0, b - a - 1) for a, b in itertools.pairwise(seqs))
+        m["drops_per_s"] = gaps / (span_ns / 1e9)
+    return m
+
+
+def test_topic_window_running_sums_equal_a_fresh_computation():
+    from stream_viz.collect.window import TopicWindow
+
+    rng = np.random.default_rng(7)
+    s, w, held = 1_000_000_000, TopicWindow(), []
+    t, seq = 10 * s, 0
+    for step in range(400):
+        for _ in range(int(rng.integers(0, 12))):  # a burst of arrivals, sometimes a lost one
+            t += int(rng.integers(1_000_000, 200_000_000))
+            seq += 1 + int(rng.random() < 0.1)
+            rec = (t, t - int(rng.integers(0, 5_000_000)), int(rng.integers(0, 60_000)),
+                   None if 150 <= step < 170 else seq)
+            w.add(*rec)
+            held.append(rec)
+        now = t + int(rng.integers(0, s))
+        w.expire(now - 3 * s)
+        held = [r for r in held if r[0] >= now - 3 * s]
+        assert list(w.buf) == held
+        got, want = w.metrics(now, 0, 3 * s, 1), _reference_metrics(held, now, 3 * s, 1)
+        assert got.keys() == want.keys(), step
+        for k in want:
+            assert got[k] == pytest.approx(want[k], rel=1e-9, abs=1e-9), (step, k)

@@ -1,0 +1,102 @@
+"""One topic's messages over a sliding window, with running sums: its metrics cost O(1) a sample.
+
+Every record is ``(received ns, source ns, size bytes, sequence number or None)`` in arrival
+order. All sums are Python ints of nanoseconds, so adding and removing never drifts: the metrics
+equal a fresh computation over the records in the window.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+RECENT = 5  # intervals behind `rate_recent_hz`
+WARMUP_S = 1.0  # a fresh subscription has seen too little to call a rate (0 would read as silence)
+
+
+def _gap(a: int | None, b: int | None) -> int:
+    return max(0, b - a - 1) if a is not None and b is not None else 0
+
+
+class TopicWindow:
+    """Records of one topic, oldest first, and the running sums its metrics need."""
+
+    __slots__ = ("buf", "gaps", "no_seq", "s_d", "s_d2", "s_recv", "s_size", "s_src")
+
+    def __init__(self) -> None:
+        self.buf: deque[tuple[int, int, int, int | None]] = deque()
+        self.s_recv = self.s_src = self.s_size = 0
+        self.s_d = self.s_d2 = 0  # sums of consecutive arrival intervals and of their squares
+        self.gaps = 0  # missing sequence numbers between consecutive records
+        self.no_seq = 0  # records without a sequence number
+
+    def add(self, recv: int, src: int, size: int, seq: int | None) -> None:
+        """Append the newest record."""
+        if self.buf:
+            last = self.buf[-1]
+            d = recv - last[0]
+            self.s_d += d
+            self.s_d2 += d * d
+            self.gaps += _gap(last[3], seq)
+        self.buf.append((recv, src, size, seq))
+        self.s_recv += recv
+        self.s_src += src
+        self.s_size += size
+        self.no_seq += seq is None
+
+    def expire(self, before_ns: int) -> None:
+        """Drop the records received before ``before_ns``."""
+        buf = self.buf
+        while buf and buf[0][0] < before_ns:
+            recv, src, size, seq = buf.popleft()
+            self.s_recv -= recv
+            self.s_src -= src
+            self.s_size -= size
+            self.no_seq -= seq is None
+            if buf:
+                d = buf[0][0] - recv
+                self.s_d -= d
+                self.s_d2 -= d * d
+                self.gaps -= _gap(seq, buf[0][3])
+
+    def metrics(self, now_ns: int, created_ns: int, window_ns: int, n_publishers: int,
+                sized: bool = True) -> dict[str, float]:
+        """Rate, jitter, latency, bandwidth and drops of the records held.
+
+        ``span`` is the window, or less while the subscription is younger than the window; a
+        subscription younger than `WARMUP_S` gives no rate (NaN). Drops count sequence-number
+        gaps and only with one publisher (interleaved publishers' numbers cannot be told apart).
+
+        Two fast signals beside the window's: ``age_s``, the time since the newest message (a
+        topic that stops shows at once, not when the window has emptied), and ``rate_recent_hz``,
+        the rate over the last ``RECENT`` intervals up to now (at least 3; the open interval since
+        the newest message counts, so a slowed topic shows before the window has turned over).
+        """
+        span_ns = min(window_ns, now_ns - created_ns)
+        m: dict[str, float] = {}
+        if span_ns < WARMUP_S * 1e9:
+            return m
+        span = span_ns / 1e9
+        n = len(self.buf)
+        m["rate_hz"] = n / span
+        if n >= 1:
+            m["latency_ms"] = (self.s_recv - self.s_src) / n / 1e6
+            if sized:
+                m["bandwidth_kBps"] = self.s_size / span / 1000.0
+            if n >= 3:
+                k = n - 1  # population variance of the intervals, exact in integers
+                m["jitter_ms"] = math.sqrt((k * self.s_d2 - self.s_d * self.s_d) / (k * k)) / 1e6
+            # Arrival order is receive-stamp order but for a reordering between transports: the
+            # newest stamps are among the last few records.
+            tail = sorted(r[0] for r in _tail(self.buf, 2 * (RECENT + 1)))
+            m["age_s"] = max(0, now_ns - tail[-1]) / 1e9
+            if n >= 4:
+                k = min(RECENT, n - 1)
+                m["rate_recent_hz"] = k / max((now_ns - tail[-1 - k]) / 1e9, 1e-9)
+        if n_publishers == 1 and self.no_seq == 0:
+            m["drops_per_s"] = self.gaps / span
+        return m
+
+
+def _tail(buf: deque, k: int) -> list:
+    return [buf[i] for i in range(max(0, len(buf) - k), len(buf))]
