@@ -26,7 +26,7 @@ ACTION_GOAL_SUFFIX = "/_action/send_goal"
 
 def is_hidden(name: str) -> bool:
     """Return True for a hidden ROS name (any token starts with ``_``)."""
-    return any(tok.startswith("_") for tok in name.split("/") if tok)
+    return name.startswith("_") or "/_" in name
 
 
 def is_param_service(name: str, node_fqn_: str) -> bool:

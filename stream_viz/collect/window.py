@@ -14,10 +14,6 @@ RECENT = 5  # intervals behind `rate_recent_hz`
 WARMUP_S = 1.0  # a fresh subscription has seen too little to call a rate (0 would read as silence)
 
 
-def _gap(a: int | None, b: int | None) -> int:
-    return max(0, b - a - 1) if a is not None and b is not None else 0
-
-
 class TopicWindow:
     """Records of one topic, oldest first, and the running sums its metrics need."""
 
@@ -37,7 +33,8 @@ class TopicWindow:
             d = recv - last[0]
             self.s_d += d
             self.s_d2 += d * d
-            self.gaps += _gap(last[3], seq)
+            if seq is not None and last[3] is not None and seq > last[3] + 1:
+                self.gaps += seq - last[3] - 1
         self.buf.append((recv, src, size, seq))
         self.s_recv += recv
         self.s_src += src
@@ -57,7 +54,9 @@ class TopicWindow:
                 d = buf[0][0] - recv
                 self.s_d -= d
                 self.s_d2 -= d * d
-                self.gaps -= _gap(seq, buf[0][3])
+                nxt = buf[0][3]
+                if seq is not None and nxt is not None and nxt > seq + 1:
+                    self.gaps -= nxt - seq - 1
 
     def metrics(self, now_ns: int, created_ns: int, window_ns: int, n_publishers: int,
                 sized: bool = True) -> dict[str, float]:

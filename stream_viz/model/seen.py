@@ -21,19 +21,26 @@ def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float) -> nx.MultiDiG
         The live model now.
     t : float
         Time of ``G``.
+
+    Returns
+    -------
+    MultiDiGraph
+        A new graph; or ``G`` itself when ``seen`` holds nothing ``G`` lacks (the steady state:
+        no copy), so treat the result as read-only, like ``G``.
     """
-    # Built from G, not from seen: on a steady system nothing is gone and this is one copy.
+    nodes = [(m, a) for m, a in seen.nodes(data=True) if m not in G]
+    edges = [(u, v, k, a) for u, v, k, a in seen.edges(keys=True, data=True) if not G.has_edge(u, v, k)]
+    if not nodes and not edges:
+        return G
     out = G.copy()
-    for m, attrs in seen.nodes(data=True):
-        if m not in G:
-            out.add_node(m, **attrs)
-            if not attrs.get("gone"):
-                out.nodes[m].update(gone=True, gone_at=t)
-    for u, v, k, attrs in seen.edges(keys=True, data=True):
-        if not G.has_edge(u, v, k):
-            out.add_edge(u, v, key=k, **attrs)
-            if not attrs.get("gone"):
-                out.edges[u, v, k].update(gone=True, gone_at=t)
+    for m, attrs in nodes:
+        out.add_node(m, **attrs)
+        if not attrs.get("gone"):
+            out.nodes[m].update(gone=True, gone_at=t)
+    for u, v, k, attrs in edges:
+        out.add_edge(u, v, key=k, **attrs)
+        if not attrs.get("gone"):
+            out.edges[u, v, k].update(gone=True, gone_at=t)
     return out
 
 

@@ -48,7 +48,8 @@ def test_decode_rejects_other_vendors_and_short():
 
 def test_hidden_and_param_names():
     assert is_hidden("/fib/_action/feedback") and is_hidden("/_stream_viz_observer_1")
-    assert not is_hidden("/ns/talker")
+    assert not is_hidden("/ns/talker") and not is_hidden("/ns_/a_b") and not is_hidden("/")
+    assert is_hidden("_private") and is_hidden("rel/_x")
     assert is_param_service("/ns/talker/get_parameters", "/ns/talker")
     assert not is_param_service("/ns/talker/get_parameters", "/other")
     assert not is_param_service("/ns/talker/reset", "/ns/talker")

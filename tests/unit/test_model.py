@@ -165,8 +165,10 @@ def test_remember_keeps_vanished_members_marked_gone():
     c.nodes["topic:/image"]["reason"] = "cannot subscribe"
     seen = remember(seen, c, 5.0)
     assert seen.nodes["topic:/image"]["reason"] == "cannot subscribe"
-    seen = remember(seen, robot(), 6.0)
+    d = robot()
+    seen = remember(seen, d, 6.0)
     assert seen.nodes["topic:/image"] == robot().nodes["topic:/image"]
+    assert seen is d  # nothing gone: the live model itself, no copy
 
 
 def test_drop_gone_forgets_members_vanished_longer_than_the_retention():
