@@ -91,13 +91,13 @@ class PluginContext:
         from stream_viz.model.ids import kind_of
 
         n = None if last is None else last + 1  # the present sample may be in the history
-        times = self.history.times(member, n)
+        times, values = self.history.series(member, n)
         if len(times) == 0:
             return times, times
         schema = SCHEMAS.get(kind_of(member), ())
         if attr not in schema:
             return np.zeros(0), np.zeros(0)
-        values = self.history.values(member, n)[:, schema.index(attr)]
+        values = values[:, schema.index(attr)]
         keep = times < self.t
         return times[keep], values[keep]
 

@@ -68,8 +68,9 @@ def process_anomaly(
     list of str
         Subset of ``["cpu", "memory", "memory_growth"]``.
     """
-    keep = times <= now
-    times, values = times[keep], values[keep]
+    if len(times) and times[-1] > now:  # samples after `now` (a replay): left out
+        keep = times <= now
+        times, values = times[keep], values[keep]
     if len(times) < warmup + 1:
         return []
     past, cur = values[:-1], values[-1]
@@ -77,14 +78,15 @@ def process_anomaly(
     for col, floor, what in ((_CPU, cpu_min_rise, "cpu"), (_RSS, rss_min_rise_mb, "memory")):
         # The median is at least the minimum: a value not `floor` above the minimum cannot be
         # `floor` above the median, so the healthy case needs no median (called every sample).
-        if not np.isfinite(cur[col]) or not cur[col] - np.nanmin(past[:, col], initial=np.inf) >= floor:
+        # fmin/fmax skip NaN (an unread sample) as nanmin/nanmax do, in one ufunc call each.
+        if not np.isfinite(cur[col]) or not cur[col] - np.fmin.reduce(past[:, col], initial=np.inf) >= floor:
             continue
         med, sigma, _ = robust(past[:, col])
         if np.isfinite(med) and cur[col] - med >= max(k * sigma, floor):
             out.append(what)
     recent = times >= now - trend_s
     span = values[recent, _RSS]
-    grew = np.nanmax(span, initial=-np.inf) - np.nanmin(span, initial=np.inf)
+    grew = np.fmax.reduce(span, initial=-np.inf) - np.fmin.reduce(span, initial=np.inf)
     if recent.sum() >= 5 and grew >= growth_min_mb:
         s = slope(times[recent], span)
         if np.isfinite(s) and s >= growth_mb_per_s:
@@ -114,8 +116,8 @@ def process_anomalies(G: nx.MultiDiGraph, history: History, now: float | None = 
     for m, kind in G.nodes(data="kind"):
         if kind != "process" or m not in history:
             continue
-        times = history.times(m, window)
-        if process_anomaly(times, history.values(m, window), times[-1] if now is None else now, **kw):
+        times, values = history.series(m, window)
+        if process_anomaly(times, values, times[-1] if now is None else now, **kw):
             out.add(m)
             out.update(c for _, c, key in G.out_edges(m, keys=True)
                        if key == 1 and G.nodes[c].get("kind") == "node")

@@ -74,6 +74,11 @@ class History:
         ring = self._series.get(member)
         return np.zeros((0, 0)) if ring is None else ring.last(last)[1]
 
+    def series(self, member: str, last: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """`times` and `values` of ``member`` at once (one ring read instead of two)."""
+        ring = self._series.get(member)
+        return (np.zeros(0), np.zeros((0, 0))) if ring is None else ring.last(last)
+
     def forget(self, keep: set[str]) -> None:
         """Drop members not in ``keep`` (bounds memory when the graph churns)."""
         for m in list(self._series):

@@ -99,6 +99,8 @@ def test_history_ring_matches_a_plain_bounded_queue():
                 want = list(ref)[-last:] if last else list(ref)
                 assert list(h.times("m", last)) == [t for t, _ in want]
                 assert np.array_equal(h.values("m", last), np.vstack([v for _, v in want]))
+                t_, v_ = h.series("m", last)
+                assert np.array_equal(t_, h.times("m", last)) and np.array_equal(v_, h.values("m", last))
     h = History(maxlen=4)
     h.add("m", 0.0, np.zeros(3))
     out = h.values("m")
