@@ -7,6 +7,7 @@ recording streamed), so ending the run any way loses nothing already collected.
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import signal
 import sys
@@ -71,6 +72,12 @@ class Monitor:
         self.injected: Mapping[str, Any] | None = None
         self.collector = Collector(domain_id, topic_metrics=config.monitor.topic_metrics)
         self.collector.start()
+        # Everything loaded so far (rclpy, numpy, networkx, Rerun, plugins: ~10^5 objects) lives
+        # as long as the process: out of the collector's sight, a full collection no longer walks
+        # it each time (46 ms each on the demo, a fifth of the main loop's CPU). Garbage first,
+        # so none is frozen; `close` unfreezes.
+        gc.collect()
+        gc.freeze()
 
     # -- one tick ---------------------------------------------------------------------------
     def step(self) -> None:
@@ -188,7 +195,7 @@ class Monitor:
                 self.store.set_meta("injected", dict(self.injected))
             self.store.close()
 
-        steps = [self.collector.close, self.progress.done, write, commit, self.plugins.close]
+        steps = [self.collector.close, self.progress.done, write, commit, self.plugins.close, gc.unfreeze]
         if not keep_view:
             steps.append(self.view.close)
         first: BaseException | None = None
