@@ -1,0 +1,129 @@
+"""Two parts of a collector sample, each side by side with what it replaced, in one run.
+
+1. Reading a tracked process: the sampler's /proc path vs its psutil path, on real processes
+   (Python children with threads and open files, like rclpy nodes), in alternation. The metrics
+   are the same (``tests/robust/test_system.py``).
+2. Topic metrics of one sample: `TopicWindow` running sums (adds of one second of messages plus
+   expire and metrics) vs the fresh numpy computation over the window's records it replaced, on
+   the demo robot's topic rates (50, 20, 20, 15, 10 x4, 1 x3 Hz, 3 s window). Equal results
+   (``tests/unit/test_collect_pure.py``).
+
+Figures are main-thread CPU time (medians); compare the ratios, the machine is shared.
+
+    .venv/bin/python bench/bench_collect_parts.py --processes 10 --rounds 300
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from stream_viz.collect.processes import ProcessSampler
+from stream_viz.collect.window import RECENT, TopicWindow
+
+CHILD = ("import threading, time, tempfile\n"
+         "files = [tempfile.TemporaryFile() for _ in range(20)]\n"
+         "for _ in range(4): threading.Thread(target=time.sleep, args=(600,), daemon=True).start()\n"
+         "time.sleep(600)\n")
+DEMO_RATES = (50, 20, 20, 15, 10, 10, 10, 10, 1, 1, 1)
+WINDOW_NS = 3_000_000_000
+
+
+def processes(n_children: int, rounds: int) -> None:
+    kids = [subprocess.Popen([sys.executable, "-c", CHILD]) for _ in range(n_children)]
+    try:
+        time.sleep(1.0)
+        pids = [k.pid for k in kids]
+        # Ancestors read every time, so both read the same processes every round.
+        samplers = {"procfs": ProcessSampler(ancestors_every=1, procfs=True),
+                    "psutil": ProcessSampler(ancestors_every=1, procfs=False)}
+        cost: dict[str, list[float]] = {k: [] for k in samplers}
+        n = 0
+        for _ in range(rounds):
+            for name, s in samplers.items():
+                t0 = time.thread_time()
+                n = len(s.sample(pids).processes)
+                cost[name].append(time.thread_time() - t0)
+        us = {k: 1e6 * statistics.median(v) / n for k, v in cost.items()}
+        print(f"1. {n_children} children + their ancestors = {n} processes, {rounds} rounds")
+        for k, v in us.items():
+            print(f"   {k:7s} {v:6.1f} µs per process per sample")
+        print(f"   procfs / psutil = {us['procfs'] / us['psutil']:.2f}")
+    finally:
+        for k in kids:
+            k.kill()
+
+
+def fresh_metrics(buf: list[tuple], now_ns: int) -> dict[str, float]:
+    """What the collector computed before `TopicWindow`: numpy over the records, every sample."""
+    span, n = WINDOW_NS / 1e9, len(buf)
+    m = {"rate_hz": n / span}
+    recv = np.array([b[0] for b in buf], dtype=np.int64)
+    src = np.array([b[1] for b in buf], dtype=np.int64)
+    m["latency_ms"] = float(np.mean(recv - src)) / 1e6
+    m["bandwidth_kBps"] = sum(b[2] for b in buf) / span / 1000.0
+    m["jitter_ms"] = float(np.std(np.diff(recv))) / 1e6
+    m["age_s"] = max(0, now_ns - int(recv.max())) / 1e9
+    k = min(RECENT, n - 1)
+    m["rate_recent_hz"] = k / max((now_ns - int(np.partition(recv, n - 1 - k)[n - 1 - k])) / 1e9, 1e-9)
+    seqs = [b[3] for b in buf]
+    m["drops_per_s"] = sum(max(0, b - a - 1) for a, b in itertools.pairwise(seqs)) / span
+    return m
+
+
+def topic_metrics(rounds: int) -> None:
+    t_end = 100 * 10**9
+    streams = []
+    for rate in DEMO_RATES:  # 3 s of records, then one more second arriving per sample
+        step = 10**9 // rate
+        recs = [(t, t - 2_000_000, 500, i) for i, t in enumerate(range(t_end - 4 * 10**9, t_end, step))]
+        streams.append(recs)
+    cost: dict[str, list[float]] = {"running sums": [], "fresh numpy": []}
+    for _ in range(rounds):
+        # Time only one sample's work: each stream's last second of adds, expire, metrics.
+        windows = []
+        for recs in streams:
+            w = TopicWindow()
+            for r in recs[: 3 * len(recs) // 4]:
+                w.add(*r)
+            windows.append(w)
+        t0 = time.thread_time()
+        for recs, w in zip(streams, windows, strict=True):
+            for r in recs[3 * len(recs) // 4:]:
+                w.add(*r)
+            w.expire(t_end - WINDOW_NS)
+            w.metrics(t_end, 0, WINDOW_NS, 1)
+        cost["running sums"].append(time.thread_time() - t0)
+        t0 = time.thread_time()
+        for recs in streams:
+            held = [r for r in recs if r[0] >= t_end - WINDOW_NS]
+            fresh_metrics(held, t_end)
+        cost["fresh numpy"].append(time.thread_time() - t0)
+    us = {k: 1e6 * statistics.median(v) for k, v in cost.items()}
+    print(f"2. topic metrics of one sample, {len(DEMO_RATES)} topics at the demo's rates, {rounds} rounds")
+    for k, v in us.items():
+        print(f"   {k:13s} {v:6.0f} µs per sample")
+    print(f"   running sums / fresh numpy = {us['running sums'] / us['fresh numpy']:.2f}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--processes", type=int, default=10)
+    ap.add_argument("--rounds", type=int, default=300)
+    args = ap.parse_args(argv)
+    processes(args.processes, args.rounds)
+    topic_metrics(args.rounds)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
