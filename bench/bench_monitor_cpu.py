@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import json
 import os
 import sys
 import tempfile
@@ -101,6 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--warmup", type=float, default=15.0, help="s of monitoring before measuring")
     ap.add_argument("--save", action="store_true", help="write the .rrd (Rerun cost included)")
     ap.add_argument("--config", type=Path, help="a stream-viz config file (default: the defaults)")
+    ap.add_argument("--no-stages", action="store_true", help="phase 1 only (per thread)")
+    ap.add_argument("--json", type=Path, help="also write phase 1's figures here (bench_cpu_ab.py)")
     args = ap.parse_args(argv)
 
     from rosenv import claim_domain
@@ -140,6 +143,13 @@ def main(argv: list[str] | None = None) -> int:
             for name, c in sorted(groups.items(), key=lambda x: -x[1]):
                 print(f"{name:42s} {c:7.2f} {100 * c / wall:6.2f}% {100 * c / total:5.0f}%")
             print(f"{'all':42s} {total:7.2f} {100 * total / wall:6.2f}%")
+            if args.json:
+                args.json.write_text(json.dumps({"wall_s": wall, "samples": n, "cpu_s": groups,
+                                                 "total_pct": 100 * total / wall,
+                                                 "load": os.getloadavg()[0],
+                                                 "code": sys.modules["stream_viz"].__file__}))
+            if args.no_stages:
+                return 0
             # Phase 2: the main loop's stages, by the main thread's CPU clock around each.
             clock = StageClock()
             for label, module, attr in STAGES:

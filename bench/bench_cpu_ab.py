@@ -1,0 +1,74 @@
+"""The monitor's CPU on the demo robot, this tree against an earlier commit, interleaved.
+
+Each round runs `bench_monitor_cpu.py --no-stages` (phase 1: CPU per thread over ``--seconds``,
+own demo robot, own ROS_DOMAIN_ID) once with the code of ``--base`` (a git worktree of that
+commit put first on PYTHONPATH; this tree's bench script and plugins) and once with this tree,
+alternating which goes first. The machine is shared and drifts: read the per-round ratios.
+
+    .venv/bin/python bench/bench_cpu_ab.py --base 9cd4bbe --rounds 3 --seconds 40
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_once(code_root: Path, seconds: float, out: Path) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(code_root))
+    subprocess.run([sys.executable, str(ROOT / "bench/bench_monitor_cpu.py"), "--no-stages",
+                    "--seconds", str(seconds), "--json", str(out)],
+                   env=env, cwd=code_root, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return json.loads(out.read_text())
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--base", required=True, help="the earlier commit")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--seconds", type=float, default=40.0)
+    args = ap.parse_args(argv)
+    tmp = Path(tempfile.mkdtemp(prefix="bench_cpu_ab_"))
+    base = tmp / "base"
+    subprocess.run(["git", "worktree", "add", "--detach", str(base), args.base], cwd=ROOT, check=True,
+                   capture_output=True)
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                             text=True).stdout.strip()
+        print(f"monitor CPU on the demo, % of one core over {args.seconds:.0f} s: {args.base} vs this tree "
+              f"({rev}{'+changes' if _dirty() else ''})")
+        print(f"{'round':>5s} {'base':>7s} {'this':>7s} {'ratio':>6s}   {'base main/native':>17s} "
+              f"{'this main/native':>17s}  load")
+        ratios = []
+        for i in range(args.rounds):
+            order = [("base", base), ("this", ROOT)] if i % 2 == 0 else [("this", ROOT), ("base", base)]
+            got = {name: run_once(root, args.seconds, tmp / f"{name}_{i}.json") for name, root in order}
+            pct = {k: v["total_pct"] for k, v in got.items()}
+            split = {k: "{:.2f}/{:.2f}".format(*(100 * v["cpu_s"].get(g, 0.0) / v["wall_s"] for g in (
+                "main loop (Monitor.step)", "native (rclpy / Fast DDS)"))) for k, v in got.items()}
+            ratios.append(pct["this"] / pct["base"])
+            for name, root in order:  # the code that ran is the one asked for
+                assert got[name]["code"].startswith(str(root)), got[name]["code"]
+            print(f"{i + 1:5d} {pct['base']:6.2f}% {pct['this']:6.2f}% {ratios[-1]:6.2f}   "
+                  f"{split['base']:>17s} {split['this']:>17s}  {got['this']['load']:.1f}", flush=True)
+        print(f"median ratio this/base: {statistics.median(ratios):.2f}")
+    finally:
+        subprocess.run(["git", "worktree", "remove", "--force", str(base)], cwd=ROOT, capture_output=True)
+    return 0
+
+
+def _dirty() -> bool:
+    return bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
+                               capture_output=True, text=True).stdout.strip())
+
+
+if __name__ == "__main__":
+    sys.exit(main())
