@@ -103,6 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--save", action="store_true", help="write the .rrd (Rerun cost included)")
     ap.add_argument("--config", type=Path, help="a stream-viz config file (default: the defaults)")
     ap.add_argument("--no-stages", action="store_true", help="phase 1 only (per thread)")
+    ap.add_argument("--fault", metavar="KIND:NODE", help="inject this demo fault right after the warm-up "
+                    "(e.g. errlog:/controller): the cost while alerts flow and the RCA works")
     ap.add_argument("--json", type=Path, help="also write phase 1's figures here (bench_cpu_ab.py)")
     args = ap.parse_args(argv)
 
@@ -112,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     os.environ.pop("ROS_LOCALHOST_ONLY", None)
     from stream_viz.config import load_config
+    from stream_viz.demo.faults import FaultSpec
     from stream_viz.demo.robot import Robot
     from stream_viz.monitor import Monitor
 
@@ -125,6 +128,9 @@ def main(argv: list[str] | None = None) -> int:
                       save=tmp / "r.rrd" if args.save else None, viewer="none", domain_id=domain)
         try:
             mon.run(args.warmup, threading.Event())
+            if args.fault:
+                kind, _, target = args.fault.partition(":")
+                robot.inject(FaultSpec(kind, target, 0.0))
             py_threads = {t.native_id: t.name for t in threading.enumerate()}
             # Phase 1: CPU per thread, no profiler.
             c0, w0, s0 = thread_cpu(me), time.monotonic(), mon.samples
@@ -138,7 +144,8 @@ def main(argv: list[str] | None = None) -> int:
                 groups[name] = groups.get(name, 0.0) + c - c0.get(tid, 0.0)
             total = sum(groups.values())
             print(f"monitor on the demo robot: {wall:.0f} s, {n} samples, viewer off, .rrd "
-                  f"{'on' if args.save else 'off'}, load {os.getloadavg()[0]:.1f}, {os.cpu_count()} cores")
+                  f"{'on' if args.save else 'off'}, fault {args.fault or 'none'}, "
+                  f"load {os.getloadavg()[0]:.1f}, {os.cpu_count()} cores")
             print(f"{'thread':42s} {'CPU s':>7s} {'% core':>7s} {'share':>6s}")
             for name, c in sorted(groups.items(), key=lambda x: -x[1]):
                 print(f"{name:42s} {c:7.2f} {100 * c / wall:6.2f}% {100 * c / total:5.0f}%")
