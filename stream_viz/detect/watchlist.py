@@ -17,7 +17,10 @@ from stream_viz.model.history import History
 from stream_viz.model.ids import kind_of
 from stream_viz.model.theta import SCHEMAS
 
-AUTO_LIMIT = 300
+# `auto` watches every member up to here: the plugins cost ~44 ms a sample for 1,000 watched
+# members inline under a load of 54 (docs/plugins.md), small beside a 500-node system's ~250 ms
+# sample; a 300 limit left a 500-node system's topics unwatched, so a hang there raised nothing.
+AUTO_LIMIT = 2000
 _CPU = SCHEMAS["process"].index("cpu_percent")
 _RSS = SCHEMAS["process"].index("rss_mb")
 
@@ -149,13 +152,17 @@ def initial_watchlist(G: nx.MultiDiGraph, settings: Any, history: History | None
     -----
     ``all`` (and ``auto`` on a graph of at most ``auto_limit`` members) watches every member.
     Otherwise: the configured members, every process (process monitoring is cheap and is what
-    finds anomalous members), and the processes/nodes `process_anomalies` flags.
+    finds anomalous members), and the processes/nodes `process_anomalies` flags; ``auto`` also
+    every node (the candidates: a crash, an error log or a resource alert lands on the nodes of
+    a process, and an alert on an unwatched member never starts the diagnosis), topics and
+    services joining as the subgraph grows.
     """
     mode = _get(settings, "mode", "auto")
     if mode == "all" or (mode == "auto" and G.number_of_nodes() <= auto_limit):
         return set(G.nodes)
     watch = match_members(G, _get(settings, "members", ()))
-    watch.update(m for m in G.nodes if kind_of(m) == "process")
+    kinds = ("process", "node") if mode == "auto" else ("process",)
+    watch.update(m for m in G.nodes if kind_of(m) in kinds)
     if history is not None:
         watch |= process_anomalies(G, history)
     return watch

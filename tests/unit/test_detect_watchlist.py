@@ -66,10 +66,15 @@ def test_history_keeps_maxlen_and_reads_the_last_samples():
 
 
 def test_initial_watchlist_modes():
-    small, big = _graph(), _graph(n_extra=400)
+    small, big = _graph(), _graph(n_extra=2100)
     assert initial_watchlist(small, WatchlistConfig(mode="auto"), None) == set(small.nodes)
+    assert initial_watchlist(_graph(n_extra=1000), WatchlistConfig(mode="auto"), None) == set(
+        _graph(n_extra=1000).nodes)  # a 500-node robot's ~1,000 members are all watched
     assert initial_watchlist(big, {"mode": "all"}, None) == set(big.nodes)
-    cfg = WatchlistConfig(mode="auto", members=("node:/camera_l*",))
+    # Above the limit, auto: every process and every node (and configured members), no topic.
+    nodes = {"node:/camera_left", "node:/camera_right", "node:/planner"}
+    assert initial_watchlist(big, WatchlistConfig(mode="auto"), None) == nodes | {"process:1", "process:2"}
+    cfg = WatchlistConfig(mode="config", members=("node:/camera_l*",))
     assert initial_watchlist(big, cfg, None) == {"node:/camera_left", "process:1", "process:2"}
     assert initial_watchlist(big, cfg, _history(90.0)) == {"node:/camera_left", "process:1", "process:2",
                                                            "node:/planner"}
