@@ -37,6 +37,18 @@ class ProcStat(NamedTuple):
     rss_bytes: int
 
 
+class Counters(NamedTuple):
+    """A process's raw counters, read from /proc or through psutil; metrics are derived from two."""
+
+    ppid: int | None
+    cpu_s: float  # user + system time, s
+    rss_bytes: int
+    threads: int
+    ctx: int  # voluntary + involuntary context switches
+    fds: int | None  # None: we may not read them
+    io: tuple[int, int] | None  # (read_bytes, write_bytes); None: we may not read them
+
+
 def parse_stat(text: bytes) -> ProcStat:
     """Parse ``/proc/<pid>/stat`` (proc(5)); the name in parentheses may hold spaces and ``)``."""
     rest = text[text.rindex(b")") + 2:].split()
@@ -80,11 +92,10 @@ class _Tracked:
     proc: psutil.Process
     info: ProcessReading
     t: float = 0.0
-    ctx: float | None = None
-    io: tuple[float, float] | None = None
-    cpu_primed: bool = False
+    ctx: int | None = None
+    io: tuple[int, int] | None = None
     start: int | None = None  # /proc start ticks (PROCFS only)
-    cpu_s: float | None = None  # process CPU time at `t` (PROCFS only)
+    cpu_s: float | None = None  # process CPU time at `t`
 
 
 @dataclass
@@ -151,7 +162,8 @@ class ProcessSampler:
                     else:
                         self._gone(pid, out, "process exited")
                     return None
-                r = self._measure(tr or self._track(proc))
+                tr = tr or self._track(proc)
+                r = self._measure(tr, _psutil_counters(proc))
         except psutil.NoSuchProcess:
             self._gone(pid, out, "process exited while being read")
             return None
@@ -169,7 +181,7 @@ class ProcessSampler:
             if tr is None:
                 tr = self._track(psutil.Process(pid))
                 tr.start = st.start
-            r = self._measure_procfs(tr, st)
+            r = self._measure(tr, _procfs_counters(pid, st))
         except (FileNotFoundError, ProcessLookupError, psutil.NoSuchProcess):
             if tr is None:
                 out.errors[pid] = "process is not running"
@@ -181,37 +193,6 @@ class ProcessSampler:
             return None
         out.processes[pid] = r
         return r
-
-    def _measure_procfs(self, tr: _Tracked, st: ProcStat) -> ProcessReading:
-        """psutil's formulas over the files it reads: cpu_percent, memory_info().rss, num_threads,
-        num_ctx_switches, num_fds, io_counters."""
-        pid, now = tr.info.pid, time.monotonic()
-        m: dict[str, float] = {"rss_mb": st.rss_bytes / MB, "threads": float(st.threads)}
-        denied = [f for f in tr.info.unreadable if f == "cmdline"]
-        dt = now - tr.t
-        if tr.cpu_s is not None and dt > 0:
-            m["cpu_percent"] = 100.0 * (st.cpu_s - tr.cpu_s) / dt
-        tr.cpu_s = st.cpu_s
-        tr.info.ppid = st.ppid or None
-        ctx = float(sum(parse_fields(_read_bytes(f"/proc/{pid}/status"), CTX_FIELDS)))
-        if tr.ctx is not None and dt > 0:
-            m["ctx_switches_per_s"] = (ctx - tr.ctx) / dt
-        tr.ctx = ctx
-        try:
-            m["open_files"] = float(count_fds(pid))
-        except PermissionError:
-            denied.append("open_files")
-        try:
-            cur = tuple(float(v) for v in parse_fields(_read_bytes(f"/proc/{pid}/io"), IO_FIELDS))
-            if tr.io is not None and dt > 0:
-                m["io_read_kBps"] = (cur[0] - tr.io[0]) / dt / 1000.0
-                m["io_write_kBps"] = (cur[1] - tr.io[1]) / dt / 1000.0
-            tr.io = cur
-        except (PermissionError, KeyError):
-            denied.append("io")
-        tr.t = now
-        tr.info.metrics, tr.info.unreadable = m, denied
-        return tr.info
 
     def _gone(self, pid: int, out: ProcSample, why: str) -> None:
         out.errors[pid] = why
@@ -236,40 +217,58 @@ class ProcessSampler:
         self._tracked[pid] = tr
         return tr
 
-    def _measure(self, tr: _Tracked) -> ProcessReading:
-        p, now = tr.proc, time.monotonic()
-        m: dict[str, float] = {}
+    def _measure(self, tr: _Tracked, c: Counters) -> ProcessReading:
+        """psutil's formulas (cpu_percent, per-second rates) over two readings of the counters."""
+        now = time.monotonic()
+        dt = now - tr.t
+        m: dict[str, float] = {"rss_mb": c.rss_bytes / MB, "threads": float(c.threads)}
         denied = [f for f in tr.info.unreadable if f == "cmdline"]
-        with p.oneshot():
-            tr.info.ppid = p.ppid() or None
-            cpu = p.cpu_percent(None)
-            if tr.cpu_primed:  # the first call only sets the reference point
-                m["cpu_percent"] = cpu
-            tr.cpu_primed = True
-            m["rss_mb"] = p.memory_info().rss / MB
-            m["threads"] = float(p.num_threads())
-            c = p.num_ctx_switches()
-            ctx = float(c.voluntary + c.involuntary)
-            dt = now - tr.t
-            if tr.ctx is not None and dt > 0:
-                m["ctx_switches_per_s"] = (ctx - tr.ctx) / dt
-            tr.ctx = ctx
-            try:
-                m["open_files"] = float(p.num_fds())
-            except (psutil.AccessDenied, AttributeError):
-                denied.append("open_files")
-            try:
-                io = p.io_counters()
-                cur = (float(io.read_bytes), float(io.write_bytes))
-                if tr.io is not None and dt > 0:
-                    m["io_read_kBps"] = (cur[0] - tr.io[0]) / dt / 1000.0
-                    m["io_write_kBps"] = (cur[1] - tr.io[1]) / dt / 1000.0
-                tr.io = cur
-            except (psutil.AccessDenied, AttributeError):
-                denied.append("io")
-        tr.t = now
+        if tr.cpu_s is not None and dt > 0:  # the first reading only sets the reference point
+            m["cpu_percent"] = 100.0 * (c.cpu_s - tr.cpu_s) / dt
+            m["ctx_switches_per_s"] = (c.ctx - tr.ctx) / dt
+        if c.fds is None:
+            denied.append("open_files")
+        else:
+            m["open_files"] = float(c.fds)
+        if c.io is None:
+            denied.append("io")
+        elif tr.io is not None and dt > 0:
+            m["io_read_kBps"] = (c.io[0] - tr.io[0]) / dt / 1000.0
+            m["io_write_kBps"] = (c.io[1] - tr.io[1]) / dt / 1000.0
+        tr.cpu_s, tr.ctx, tr.io, tr.t = c.cpu_s, c.ctx, c.io or tr.io, now
+        tr.info.ppid = c.ppid
         tr.info.metrics, tr.info.unreadable = m, denied
         return tr.info
+
+
+def _procfs_counters(pid: int, st: ProcStat) -> Counters:
+    """The counters from ``/proc/<pid>/{stat,status,io}`` and the size of ``fd/``."""
+    ctx = sum(parse_fields(_read_bytes(f"/proc/{pid}/status"), CTX_FIELDS))
+    try:
+        fds: int | None = count_fds(pid)
+    except PermissionError:
+        fds = None
+    try:
+        io: tuple[int, int] | None = parse_fields(_read_bytes(f"/proc/{pid}/io"), IO_FIELDS)
+    except (PermissionError, KeyError):
+        io = None
+    return Counters(st.ppid or None, st.cpu_s, st.rss_bytes, st.threads, ctx, fds, io)
+
+
+def _psutil_counters(p: psutil.Process) -> Counters:
+    """The same counters through psutil (call inside ``p.oneshot()``)."""
+    try:
+        fds: int | None = p.num_fds()
+    except (psutil.AccessDenied, AttributeError):
+        fds = None
+    try:
+        i = p.io_counters()
+        io: tuple[int, int] | None = (i.read_bytes, i.write_bytes)
+    except (psutil.AccessDenied, AttributeError):
+        io = None
+    t, c = p.cpu_times(), p.num_ctx_switches()
+    return Counters(p.ppid() or None, t.user + t.system, p.memory_info().rss, p.num_threads(),
+                    c.voluntary + c.involuntary, fds, io)
 
 
 def _running(p: psutil.Process) -> bool:
