@@ -13,6 +13,7 @@ clock. Compare the rows as shares of one run: the machine is shared and noisy.
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import json
 import os
@@ -92,6 +93,41 @@ class StageClock:
         self._undo.clear()
 
 
+def graph_read_cost(col, reads: int = 200) -> str:
+    """Main-thread CPU of one ROS graph read with the nodes' /rosout gids read each time (what
+    every sample did before `GidCache`) and with the collector's cache (what it does now)."""
+    from stream_viz.collect.rosgraph import GidCache, read_graph
+
+    def cost(gids_for_each) -> float:
+        t0 = time.thread_time()
+        for _ in range(reads):
+            read_graph(col.node, own=col.own, qos=col.qos, gids=gids_for_each())
+        return 1e3 * (time.thread_time() - t0) / reads
+
+    fresh, cached = cost(GidCache), cost(lambda: col.gids)
+    return (f"graph read: {fresh:.2f} ms with the /rosout gids read, {cached:.2f} ms with them "
+            f"cached ({reads} reads each)")
+
+
+def full_collection_cost() -> str:
+    """Main-thread CPU of one full garbage collection with the start-up objects frozen (as the
+    monitor runs) and unfrozen (as it ran before `gc.freeze`)."""
+    def cost() -> float:
+        t0 = time.thread_time()
+        gc.collect()
+        return 1e3 * (time.thread_time() - t0)
+
+    frozen = min(cost() for _ in range(3))
+    n_frozen = gc.get_freeze_count()
+    gc.unfreeze()
+    try:
+        walked = min(cost() for _ in range(3))
+    finally:
+        gc.freeze()
+    return (f"full garbage collection: {walked:.1f} ms walking everything, {frozen:.1f} ms with "
+            f"the {n_frozen} start-up objects frozen")
+
+
 def thread_cpu(proc: psutil.Process) -> dict[int, float]:
     return {t.id: t.user_time + t.system_time for t in proc.threads()}
 
@@ -157,6 +193,9 @@ def main(argv: list[str] | None = None) -> int:
                                                  "code": sys.modules["stream_viz"].__file__}))
             if args.no_stages:
                 return 0
+            print()
+            print(graph_read_cost(mon.collector))
+            print(full_collection_cost())
             # Phase 2: the main loop's stages, by the main thread's CPU clock around each.
             clock = StageClock()
             for label, module, attr in STAGES:
