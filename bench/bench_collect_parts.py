@@ -4,7 +4,8 @@
    (Python children with threads and open files, like rclpy nodes), in alternation. The metrics
    are the same (``tests/robust/test_system.py``).
 2. Topic metrics of one sample: `TopicWindow` running sums (adds of one second of messages plus
-   expire and metrics) vs the fresh numpy computation over the window's records it replaced, on
+   expire and metrics) vs `window_metrics`, the numpy computation over the window's records
+   that every sample ran before (now the definition the sums are tested against), on
    the demo robot's topic rates (50, 20, 20, 15, 10 x4, 1 x3 Hz, 3 s window). Equal results
    (``tests/unit/test_collect_pure.py``).
 
@@ -16,19 +17,16 @@ Figures are main-thread CPU time (medians); compare the ratios, the machine is s
 from __future__ import annotations
 
 import argparse
-import itertools
 import statistics
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from stream_viz.collect.processes import ProcessSampler
-from stream_viz.collect.window import RECENT, TopicWindow
+from stream_viz.collect.window import TopicWindow, window_metrics
 
 CHILD = ("import threading, time, tempfile\n"
          "files = [tempfile.TemporaryFile() for _ in range(20)]\n"
@@ -63,23 +61,6 @@ def processes(n_children: int, rounds: int) -> None:
             k.kill()
 
 
-def fresh_metrics(buf: list[tuple], now_ns: int) -> dict[str, float]:
-    """What the collector computed before `TopicWindow`: numpy over the records, every sample."""
-    span, n = WINDOW_NS / 1e9, len(buf)
-    m = {"rate_hz": n / span}
-    recv = np.array([b[0] for b in buf], dtype=np.int64)
-    src = np.array([b[1] for b in buf], dtype=np.int64)
-    m["latency_ms"] = float(np.mean(recv - src)) / 1e6
-    m["bandwidth_kBps"] = sum(b[2] for b in buf) / span / 1000.0
-    m["jitter_ms"] = float(np.std(np.diff(recv))) / 1e6
-    m["age_s"] = max(0, now_ns - int(recv.max())) / 1e9
-    k = min(RECENT, n - 1)
-    m["rate_recent_hz"] = k / max((now_ns - int(np.partition(recv, n - 1 - k)[n - 1 - k])) / 1e9, 1e-9)
-    seqs = [b[3] for b in buf]
-    m["drops_per_s"] = sum(max(0, b - a - 1) for a, b in itertools.pairwise(seqs)) / span
-    return m
-
-
 def topic_metrics(rounds: int) -> None:
     t_end = 100 * 10**9
     streams = []
@@ -106,7 +87,7 @@ def topic_metrics(rounds: int) -> None:
         t0 = time.thread_time()
         for recs in streams:
             held = [r for r in recs if r[0] >= t_end - WINDOW_NS]
-            fresh_metrics(held, t_end)
+            window_metrics(held, t_end, 0, WINDOW_NS, 1)  # what the collector computed before
         cost["fresh numpy"].append(time.thread_time() - t0)
     us = {k: 1e6 * statistics.median(v) for k, v in cost.items()}
     print(f"2. topic metrics of one sample, {len(DEMO_RATES)} topics at the demo's rates, {rounds} rounds")

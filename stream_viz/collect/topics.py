@@ -194,15 +194,6 @@ def drain_period(peak: int, elapsed_s: float, depth: int, shortest: float, longe
     return min(longest, max(shortest, 0.25 * depth * elapsed_s / peak))
 
 
-def window_metrics(buf: list[tuple], now_ns: int, created_ns: int, window_ns: int,
-                   n_publishers: int, sized: bool = True) -> dict[str, float]:
-    """Return `TopicWindow.metrics` of the ``(recv_ns, src_ns, size, seq)`` records ``buf``. Pure."""
-    w = TopicWindow()
-    for r in buf:
-        w.add(*r)
-    return w.metrics(now_ns, created_ns, window_ns, n_publishers, sized)
-
-
 LOG_LEVELS = {30: "warn", 40: "error", 50: "fatal"}
 DIAG_LEVELS = {0: "info", 1: "warn", 2: "error", 3: "warn"}
 DIAG_NAMES = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}

@@ -7,8 +7,11 @@ equal a fresh computation over the records in the window.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import deque
+
+import numpy as np
 
 RECENT = 5  # intervals behind `rate_recent_hz`
 WARMUP_S = 1.0  # a fresh subscription has seen too little to call a rate (0 would read as silence)
@@ -60,17 +63,7 @@ class TopicWindow:
 
     def metrics(self, now_ns: int, created_ns: int, window_ns: int, n_publishers: int,
                 sized: bool = True) -> dict[str, float]:
-        """Rate, jitter, latency, bandwidth and drops of the records held.
-
-        ``span`` is the window, or less while the subscription is younger than the window; a
-        subscription younger than `WARMUP_S` gives no rate (NaN). Drops count sequence-number
-        gaps and only with one publisher (interleaved publishers' numbers cannot be told apart).
-
-        Two fast signals beside the window's: ``age_s``, the time since the newest message (a
-        topic that stops shows at once, not when the window has emptied), and ``rate_recent_hz``,
-        the rate over the last ``RECENT`` intervals up to now (at least 3; the open interval since
-        the newest message counts, so a slowed topic shows before the window has turned over).
-        """
+        """Return `window_metrics` of the records held, from the running sums (O(1) in them)."""
         span_ns = min(window_ns, now_ns - created_ns)
         m: dict[str, float] = {}
         if span_ns < WARMUP_S * 1e9:
@@ -99,3 +92,47 @@ class TopicWindow:
 
 def _tail(buf: deque, k: int) -> list:
     return [buf[i] for i in range(max(0, len(buf) - k), len(buf))]
+
+
+def window_metrics(buf: list[tuple], now_ns: int, created_ns: int, window_ns: int,
+                   n_publishers: int, sized: bool = True) -> dict[str, float]:
+    """Rate, jitter, latency, bandwidth and drops from ``(recv_ns, src_ns, size, seq)`` records.
+
+    The definition, computed afresh over the records (numpy); `TopicWindow.metrics` returns the
+    same from running sums without walking them, and is tested against this. Pure: ``span`` is
+    the window, or less while the subscription is younger than the window; a subscription
+    younger than `WARMUP_S` gives no rate (NaN). Drops count sequence-number gaps and
+    only with one publisher (interleaved publishers' numbers cannot be told apart).
+
+    Two fast signals beside the window's: ``age_s``, the time since the newest message (a topic
+    that stops shows at once, not when the window has emptied), and ``rate_recent_hz``, the rate
+    over the last ``RECENT`` intervals up to now (at least 3; the open interval since the newest
+    message counts, so a slowed topic shows before the window has turned over).
+    """
+    span_ns = min(window_ns, now_ns - created_ns)
+    m: dict[str, float] = {}
+    if span_ns < WARMUP_S * 1e9:
+        return m
+    span = span_ns / 1e9
+    n = len(buf)
+    m["rate_hz"] = n / span
+    if n >= 1:
+        recv = np.array([b[0] for b in buf], dtype=np.int64)
+        src = np.array([b[1] for b in buf], dtype=np.int64)
+        m["latency_ms"] = float(np.mean(recv - src)) / 1e6
+        if sized:
+            m["bandwidth_kBps"] = sum(b[2] for b in buf) / span / 1000.0
+        if n >= 3:
+            m["jitter_ms"] = float(np.std(np.diff(recv))) / 1e6
+        newest = int(recv.max())
+        m["age_s"] = max(0, now_ns - newest) / 1e9
+        if n >= 4:
+            k = min(RECENT, n - 1)
+            first = int(np.partition(recv, n - 1 - k)[n - 1 - k])  # the (k+1)-th newest arrival
+            m["rate_recent_hz"] = k / max((now_ns - first) / 1e9, 1e-9)
+    if n_publishers == 1:
+        seqs = [b[3] for b in buf if b[3] is not None]
+        if len(seqs) == n:
+            gaps = sum(max(0, b - a - 1) for a, b in itertools.pairwise(seqs))
+            m["drops_per_s"] = gaps / span
+    return m

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 import math
 
 import numpy as np
@@ -22,7 +21,8 @@ from stream_viz.collect.readings import (
     TopicStats,
 )
 from stream_viz.collect.rosgraph import is_hidden, is_param_service
-from stream_viz.collect.topics import diag_events, log_event, logger_node, window_metrics
+from stream_viz.collect.topics import diag_events, log_event, logger_node
+from stream_viz.collect.window import window_metrics
 from stream_viz.model.graph import flow_edges
 from stream_viz.model.theta import theta_dict
 
@@ -132,27 +132,40 @@ def test_build_model_single_top_has_no_root():
                                                                     ("process:10", "node:/a")}
 
 
+def _both(buf, *args, **kw):
+    """`window_metrics` (the definition) and `TopicWindow.metrics` (running sums) on ``buf``: equal."""
+    from stream_viz.collect.window import TopicWindow
+
+    w = TopicWindow()
+    for r in buf:
+        w.add(*r)
+    want, got = window_metrics(buf, *args, **kw), w.metrics(*args, **kw)
+    assert got.keys() == want.keys()
+    assert all(got[k] == pytest.approx(want[k], rel=1e-9, abs=1e-9) for k in want), (got, want)
+    return want
+
+
 def test_window_metrics_literal():
     s = 1_000_000_000
     # 5 messages 0.5 s apart over a 3 s window, 1 ms latency, 100 bytes each, seq 1,2,4,5,6.
     buf = [(t * s // 2, t * s // 2 - 1_000_000, 100, q) for t, q in zip(range(1, 6), (1, 2, 4, 5, 6),
                                                                          strict=True)]
-    m = window_metrics(buf, now_ns=3 * s, created_ns=0, window_ns=3 * s, n_publishers=1)
+    m = _both(buf, now_ns=3 * s, created_ns=0, window_ns=3 * s, n_publishers=1)
     assert m["rate_hz"] == pytest.approx(5 / 3)
     assert m["latency_ms"] == pytest.approx(1.0)
     assert m["jitter_ms"] == pytest.approx(0.0)
     assert m["bandwidth_kBps"] == pytest.approx(500 / 3 / 1000)
     assert m["drops_per_s"] == pytest.approx(1 / 3)
     # Two publishers: drops cannot be attributed; a young subscription: no rate at all.
-    assert "drops_per_s" not in window_metrics(buf, 3 * s, 0, 3 * s, n_publishers=2)
-    assert window_metrics(buf, 3 * s, int(2.5 * s), 3 * s, 1) == {}
+    assert "drops_per_s" not in _both(buf, 3 * s, 0, 3 * s, n_publishers=2)
+    assert _both(buf, 3 * s, int(2.5 * s), 3 * s, 1) == {}
     # Silence after warm-up is a rate of 0, not unknown.
-    assert window_metrics([], 3 * s, 0, 3 * s, 1)["rate_hz"] == 0.0
+    assert _both([], 3 * s, 0, 3 * s, 1)["rate_hz"] == 0.0
     # The fast signals: the newest came 0.5 s ago; the last 4 intervals (of 5 messages) up to now: 2.5 s.
     assert m["age_s"] == pytest.approx(0.5)
     assert m["rate_recent_hz"] == pytest.approx(4 / 2.5)
-    assert "rate_recent_hz" not in window_metrics(buf[:3], 3 * s, 0, 3 * s, 1)  # 2 intervals: too few
-    assert "age_s" not in window_metrics([], 3 * s, 0, 3 * s, 1)
+    assert "rate_recent_hz" not in _both(buf[:3], 3 * s, 0, 3 * s, 1)  # 2 intervals: too few
+    assert "age_s" not in _both([], 3 * s, 0, 3 * s, 1)
 
 
 def test_window_metrics_recent_rate_sees_a_slowdown_the_window_hides():
@@ -160,7 +173,7 @@ def test_window_metrics_recent_rate_sees_a_slowdown_the_window_hides():
     # 10 Hz for 2.5 s, then one message 0.4 s later: the window still says 9 Hz, recent 5.6 Hz.
     recv = [i * s // 10 for i in range(26)] + [29 * s // 10]
     buf = [(r, r, 10, None) for r in recv]
-    m = window_metrics(buf, now_ns=3 * s, created_ns=0, window_ns=3 * s, n_publishers=1)
+    m = _both(buf, now_ns=3 * s, created_ns=0, window_ns=3 * s, n_publishers=1)
     assert m["rate_hz"] == pytest.approx(27 / 3)
     assert m["rate_recent_hz"] == pytest.approx(5 / 0.9)
     assert m["age_s"] == pytest.approx(0.1)
@@ -283,26 +296,6 @@ def test_parse_proc_stat_and_fields():
     assert parse_fields(io, (b"read_bytes", b"write_bytes")) == (4096, 8192)
 
 
-def _reference_metrics(buf, now_ns, span_ns, n_publishers):
-    """The metrics computed afresh with numpy over the records (what the running sums must equal)."""
-    m = {"rate_hz": len(buf) / (span_ns / 1e9)}
-    if buf:
-        recv = np.array([b[0] for b in buf], dtype=np.int64)
-        m["latency_ms"] = float(np.mean(recv - np.array([b[1] for b in buf]))) / 1e6
-        m["bandwidth_kBps"] = sum(b[2] for b in buf) / (span_ns / 1e9) / 1000.0
-        if len(buf) >= 3:
-            m["jitter_ms"] = float(np.std(np.diff(recv))) / 1e6
-        m["age_s"] = (now_ns - int(recv.max())) / 1e9
-        if len(buf) >= 4:
-            k = min(5, len(buf) - 1)
-            m["rate_recent_hz"] = k / ((now_ns - int(np.sort(recv)[-1 - k])) / 1e9)
-    seqs = [b[3] for b in buf]
-    if n_publishers == 1 and None not in seqs:
-        gaps = sum(max(0, b - a - 1) for a, b in itertools.pairwise(seqs))
-        m["drops_per_s"] = gaps / (span_ns / 1e9)
-    return m
-
-
 def test_topic_window_running_sums_equal_a_fresh_computation():
     from stream_viz.collect.window import TopicWindow
 
@@ -321,7 +314,7 @@ def test_topic_window_running_sums_equal_a_fresh_computation():
         w.expire(now - 3 * s)
         held = [r for r in held if r[0] >= now - 3 * s]
         assert list(w.buf) == held
-        got, want = w.metrics(now, 0, 3 * s, 1), _reference_metrics(held, now, 3 * s, 1)
+        got, want = w.metrics(now, 0, 3 * s, 1), window_metrics(held, now, 0, 3 * s, 1)
         assert got.keys() == want.keys(), step
         for k in want:
             assert got[k] == pytest.approx(want[k], rel=1e-9, abs=1e-9), (step, k)
