@@ -74,7 +74,7 @@ class Monitor:
         self.collector.start()
         # Everything loaded so far (rclpy, numpy, networkx, Rerun, plugins: ~10^5 objects) lives
         # as long as the process: out of the collector's sight, a full collection no longer walks
-        # it each time (46 ms each on the demo, a fifth of the main loop's CPU). Garbage first,
+        # it each time (40 ms vs 0.4 ms frozen on the demo, bench/bench_monitor_cpu.py). Garbage first,
         # so none is frozen; `close` unfreezes.
         gc.collect()
         gc.freeze()

@@ -94,9 +94,10 @@ class GidCache:
     """Each node's /rosout publisher gid (what maps a node to its process), read only when due.
 
     ``get_publishers_info_by_topic`` scans every endpoint and rclpy builds a QoS object for each
-    one found: 40 % of a graph read on the demo, for gids that change only when a node is created
-    again. They are read when a node appears (and again each sample while one still has no gid,
-    for ``settle_s`` after the node set changed: its endpoints are discovered after its name),
+    one found (a graph read on the demo: 1.28 ms with them, 0.73 ms without; bench_monitor_cpu.py),
+    for gids that change only when a node is created again. They are read when a node appears
+    (and again each sample while one still has no gid, for ``settle_s`` after the node set
+    changed: its endpoints are discovered after its name),
     after `invalidate` (the collector calls it when a process exits: a node restarted under the
     same name has a new gid), and at least every ``every_s``.
     """
