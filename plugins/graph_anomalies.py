@@ -7,6 +7,8 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.model.graph import FLOW
+from stream_viz.model.queries import publishers, subscribers
 from stream_viz.records import Alert
 
 
@@ -42,8 +44,8 @@ def _endpoints(G: Any, topic: str) -> tuple[dict[str, list[Any]], dict[str, list
     The topic attribute ``qos`` (a list of ``{"node", "role", "reliability", "durability", …}``,
     one per endpoint, as the collector writes it) is used when present, else an edge's ``qos``.
     """
-    pubs: dict[str, list[Any]] = {u: [] for u, _, k in G.in_edges(topic, keys=True) if k == 0}
-    subs: dict[str, list[Any]] = {v: [] for _, v, k in G.out_edges(topic, keys=True) if k == 0}
+    pubs: dict[str, list[Any]] = {u: [] for u in publishers(G, topic)}
+    subs: dict[str, list[Any]] = {v: [] for v in subscribers(G, topic)}
     for q in G.nodes[topic].get("qos") or ():
         if not isinstance(q, dict):
             continue
@@ -52,11 +54,13 @@ def _endpoints(G: Any, topic: str) -> tuple[dict[str, list[Any]], dict[str, list
         member = node if str(node).startswith("node:") else f"node:{node}"
         if side is not None and member in side:
             side[member].append(q)
-    for u, _, k, q in G.in_edges(topic, keys=True, data="qos"):
-        if k == 0 and q is not None and not pubs[u]:
+    for u in pubs:
+        q = G.edges[u, topic, FLOW].get("qos")
+        if q is not None and not pubs[u]:
             pubs[u].append(q)
-    for _, v, k, q in G.out_edges(topic, keys=True, data="qos"):
-        if k == 0 and q is not None and not subs[v]:
+    for v in subs:
+        q = G.edges[topic, v, FLOW].get("qos")
+        if q is not None and not subs[v]:
             subs[v].append(q)
     return pubs, subs
 

@@ -5,22 +5,10 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Any, ClassVar
 
-import networkx as nx
-
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.model.ids import kind_of, pid_of
+from stream_viz.model.ids import kind_of
+from stream_viz.model.queries import nodes_of_process
 from stream_viz.records import Alert
-
-
-def hosted_nodes(G: nx.MultiDiGraph, process: str) -> list[str]:
-    """Nodes of ``process``: its layer-1 children of kind node, or nodes whose ``pid`` is its pid."""
-    out = set()
-    if process in G:
-        out.update(c for _, c, k in G.out_edges(process, keys=True)
-                   if k == 1 and G.nodes[c].get("kind") == "node")
-    pid = pid_of(process)
-    out.update(m for m, d in G.nodes(data=True) if d.get("kind") == "node" and d.get("pid") == pid)
-    return sorted(out)
 
 
 class MemberGone(Plugin):
@@ -51,7 +39,8 @@ class MemberGone(Plugin):
                 # process; a process with nodes is reported on its nodes.
                 targets = [e.member]
                 if kind_of(e.member) == "process":
-                    nodes = set(hosted_nodes(ctx.graph, e.member)) | set(e.data.get("nodes", ()))
+                    nodes = set(nodes_of_process(ctx.graph, e.member, by_pid=True))
+                    nodes |= set(e.data.get("nodes", ()))
                     targets = sorted(nodes) or [e.member]
                 for m in targets:
                     exited.add(m)

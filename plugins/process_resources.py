@@ -7,11 +7,10 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 import numpy as np
-from stream_viz_plugins.member_gone import hosted_nodes
 
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import BASELINE_SETTINGS, rise, slope
-from stream_viz.model.ids import make_id
+from stream_viz.model.queries import nodes_of_process, process_of_node
 from stream_viz.records import Alert
 
 
@@ -53,12 +52,9 @@ class ProcessResources(Plugin):
         G = ctx.graph
         procs = set(ctx.watched("process"))
         for node in ctx.watched("node"):
-            parents = [u for u, _, k in G.in_edges(node, keys=True)
-                       if k == 1 and G.nodes[u].get("kind") == "process"]
-            pid = G.nodes[node].get("pid")
-            if not parents and isinstance(pid, int) and make_id("process", pid) in G:
-                parents = [make_id("process", pid)]
-            procs.update(parents)
+            proc = process_of_node(G, node)
+            if proc is not None:
+                procs.add(proc)
         alerting = ctx.state.setdefault("alerting", set())
         for gone in ctx.diff.removed_members:  # bound the state when processes come and go
             ctx.state.get("rss", {}).pop(gone, None)
@@ -77,7 +73,7 @@ class ProcessResources(Plugin):
                 found.append(("memory_growth", f"memory growing {growth:.1f} MB/s", {"mb_per_s": growth}))
             if not found:
                 continue
-            nodes = hosted_nodes(G, proc)
+            nodes = nodes_of_process(G, proc, by_pid=True)
             mode = s["alert_on"]
             targets = [proc] if mode == "process" or not nodes else []
             targets += nodes if mode != "process" else []

@@ -11,6 +11,7 @@ from typing import Any
 import networkx as nx
 
 from stream_viz.errors import OutputError
+from stream_viz.model.graph import FLOW
 from stream_viz.records import Alert
 
 SCHEMA = "stream-viz.report/v1"
@@ -50,7 +51,7 @@ def build_report(
     edges = [
         {"src": u, "dst": v, "kind": kind}
         for u, v, key, kind in sorted(G.edges(keys=True, data="kind"), key=lambda e: (e[2], e[0], e[1]))
-        if key == 0
+        if key == FLOW
     ]
     report: dict[str, Any] = {
         "schema": SCHEMA,

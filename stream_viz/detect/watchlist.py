@@ -15,6 +15,7 @@ import numpy as np
 from stream_viz.detect.baseline import robust, slope
 from stream_viz.model.history import History
 from stream_viz.model.ids import kind_of
+from stream_viz.model.queries import nodes_of_process
 from stream_viz.model.theta import SCHEMAS
 
 # `auto` watches every member up to here: the plugins cost ~44 ms a sample for 1,000 watched
@@ -122,8 +123,7 @@ def process_anomalies(G: nx.MultiDiGraph, history: History, now: float | None = 
         times, values = history.series(m, window)
         if process_anomaly(times, values, times[-1] if now is None else now, **kw):
             out.add(m)
-            out.update(c for _, c, key in G.out_edges(m, keys=True)
-                       if key == 1 and G.nodes[c].get("kind") == "node")
+            out.update(nodes_of_process(G, m))
     return out
 
 

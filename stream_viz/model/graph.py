@@ -20,6 +20,8 @@ ACTIVE_KINDS = frozenset({"node"})
 PASSIVE_KINDS = frozenset({"topic", "service", "action", "process", "host", "root"})
 # Allowed (source kind class, target kind class) per layer-0 edge kind, data-flow direction.
 FLOW_KINDS = {"pub": ("active", "passive"), "sub": ("passive", "active"), "send": ("active", "active")}
+# The graph's layers, the edge key of ``((u, v), i)``: data flow, then the trees T_i (i ≥ 1).
+FLOW = 0
 PROCESS_TREE = 1
 
 
@@ -63,12 +65,12 @@ def add_flow_edge(G: nx.MultiDiGraph, src: str, dst: str, kind: str, **attrs: An
             raise ModelError(f"edge {src} -> {dst}: member {member!r} is not in the graph")
         if is_active(G, member) != (want == "active"):
             raise ModelError(f"{kind} edge {src} -> {dst}: {member} must be {want}")
-    G.add_edge(src, dst, key=0, kind=kind, **attrs)
+    G.add_edge(src, dst, key=FLOW, kind=kind, **attrs)
 
 
 def add_tree_edge(G: nx.MultiDiGraph, parent: str, child: str, layer: int = PROCESS_TREE) -> None:
     """Add a tree edge ``((parent, child), layer)``; layers ≥ 1 are rooted trees (parent → child)."""
-    if layer < 1:
+    if layer <= FLOW:
         raise ModelError(f"tree edges live on layers >= 1, not {layer}")
     for member in (parent, child):
         if member not in G:
@@ -79,7 +81,7 @@ def add_tree_edge(G: nx.MultiDiGraph, parent: str, child: str, layer: int = PROC
 def flow_edges(G: nx.MultiDiGraph) -> Iterator[tuple[str, str, str]]:
     """Yield ``(src, dst, kind)`` for every layer-0 edge."""
     for u, v, key, kind in G.edges(keys=True, data="kind"):
-        if key == 0:
+        if key == FLOW:
             yield u, v, kind
 
 

@@ -13,12 +13,14 @@ from collections.abc import Container
 
 import networkx as nx
 
+from stream_viz.model.graph import FLOW
+
 SILENT_COST = 2.0  # a hop through a member with no symptom costs more than one through a symptom
 
 
 def _flow(kd: dict) -> str | None:
     """Kind of the layer-0 edge in a keydict, or None when there is none."""
-    attrs = kd.get(0)
+    attrs = kd.get(FLOW)
     if attrs is None:
         return None
     return attrs.get("kind", "pub")
@@ -57,13 +59,6 @@ def publishers(G: nx.MultiDiGraph, x: str) -> list[str]:
 def outputs(G: nx.MultiDiGraph, n: str) -> list[str]:
     """Passive members the node ``n`` feeds (its published topics)."""
     return [v for v in effects(G, n) if not is_node(G, v)]
-
-
-def hosted_nodes(G: nx.MultiDiGraph, p: str) -> list[str]:
-    """Nodes that are children of ``p`` in the process tree (layer 1): the nodes a process hosts."""
-    if p not in G:
-        return []
-    return [v for v, kd in G._succ[p].items() if 1 in kd and is_node(G, v)]
 
 
 def trace(

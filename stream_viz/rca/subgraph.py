@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import networkx as nx
 
+from stream_viz.model.queries import flow_predecessors, flow_successors
 from stream_viz.rca.causal import causes, is_node
 from stream_viz.records import Alert
 
@@ -103,20 +104,6 @@ def initial_state(watchlist: Iterable[str], t: float = 0.0) -> SubgraphState:
     """Return iteration 0: empty subgraph, watchlist ``W_0``."""
     w0 = frozenset(watchlist)
     return SubgraphState(frozenset(), frozenset(), w0, Iteration(0, t, None, None, added_watch=w0))
-
-
-def flow_successors(G: nx.MultiDiGraph, m: str) -> set[str]:
-    """Members ``x`` with an edge ``((m, x), 0)``."""
-    if m not in G:
-        return set()
-    return {v for v, keys in G._succ[m].items() if 0 in keys}
-
-
-def flow_predecessors(G: nx.MultiDiGraph, m: str) -> set[str]:
-    """Members ``x`` with an edge ``((x, m), 0)``."""
-    if m not in G:
-        return set()
-    return {u for u, keys in G._pred[m].items() if 0 in keys}
 
 
 def upstream_of(G: nx.MultiDiGraph, m: str) -> set[str]:

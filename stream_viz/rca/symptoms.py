@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 import networkx as nx
 import numpy as np
 
-from stream_viz.rca.causal import causes, hosted_nodes, is_node, outputs, publishers
+from stream_viz.model.queries import nodes_of_process
+from stream_viz.rca.causal import causes, is_node, outputs, publishers
 from stream_viz.rca.settings import RcaSettings
 from stream_viz.records import Alert
 
@@ -121,7 +122,7 @@ def node_views(
         if is_node(G, m):
             view(m).evidence = max(view(m).evidence, x)
         elif m.startswith("process:"):
-            for n in hosted_nodes(G, m):
+            for n in nodes_of_process(G, m):
                 view(n).evidence = max(view(n).evidence, x)
         else:
             ev_topic[m] = x
@@ -133,7 +134,7 @@ def node_views(
             v.own.insert(0, m)
             v.plugins |= s.plugins[m]
         elif m.startswith(("process:", "host:")) or m == "root":
-            for n in hosted_nodes(G, m):
+            for n in nodes_of_process(G, m):
                 v = view(n)
                 v.direct = max(v.direct, a)
                 v.onset = min(v.onset, s.onset[m])

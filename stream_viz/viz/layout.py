@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import networkx as nx
 
-from stream_viz.model.graph import flow_edges
+from stream_viz.model.graph import FLOW, flow_edges
 from stream_viz.model.ids import make_id
 
 COL = 200.0  # horizontal distance between layers
@@ -103,7 +103,7 @@ def service_servers(G: nx.MultiDiGraph) -> dict[str, list[str]]:
     # The collector names services and servers by ROS name ("/map/get", "/map_server"); member
     # ids ("service:/map/get") are accepted too.
     for _u, v, key, data in G.edges(keys=True, data=True):
-        if key == 0 and data.get("kind") == "send":
+        if key == FLOW and data.get("kind") == "send":
             for label, kind in (("services", "service"), ("actions", "action")):
                 for s in data.get(label, ()) or ():
                     out.setdefault(_as_id(kind, s), set()).add(v)

@@ -23,7 +23,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from stream_viz.errors import ConfigError, OutputError, StreamVizError
-from stream_viz.model.graph import flow_edges
+from stream_viz.model.graph import FLOW, flow_edges
 from stream_viz.records import Alert
 from stream_viz.viz import paths, style
 from stream_viz.viz.alerts import log_alerts
@@ -282,7 +282,7 @@ class Recorder:
         gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
         sig = (frozenset(G.nodes), frozenset(flow_edges(G)), gone_all, frozenset(self.status.items()),
                frozenset((m, lab) for m, lab in G.nodes(data="label")))
-        tree_sig = (frozenset((u, v, k) for u, v, k in G.edges(keys=True) if k >= 1), gone_all)
+        tree_sig = (frozenset((u, v, k) for u, v, k in G.edges(keys=True) if k != FLOW), gone_all)
         if tree_sig != self._tree_sig or force:
             log_process_tree(self.rec, G)
             self._tree_sig = tree_sig

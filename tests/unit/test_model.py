@@ -21,7 +21,21 @@ from stream_viz.model import (
     psi,
     successors,
 )
+from stream_viz.model.graph import FLOW, PROCESS_TREE
 from stream_viz.model.ids import node_fqn, pid_of
+from stream_viz.model.queries import (
+    called_servers,
+    clients,
+    flow_predecessors,
+    flow_successors,
+    nodes_of_process,
+    process_of_node,
+    published_topics,
+    publishers,
+    servers,
+    subscribed_topics,
+    subscribers,
+)
 from stream_viz.model.serialize import from_data, to_data
 from stream_viz.model.theta import make_theta, theta_dict
 
@@ -33,6 +47,7 @@ def robot():
               "topic:/image", "topic:/objects", "service:/get_map",
               "process:10", "process:11", "process:1", ROOT]:
         add_member(G, m)
+    G.nodes["service:/get_map"].update(servers=["/map_server"], clients=["/planner"])
     add_flow_edge(G, "node:/camera", "topic:/image", "pub")
     add_flow_edge(G, "topic:/image", "node:/detector", "sub")
     add_flow_edge(G, "node:/detector", "topic:/objects", "pub")
@@ -86,6 +101,35 @@ def test_predecessors_and_successors():
     # Tree layer: a process's children are its nodes and child processes.
     assert successors(G, "process:1", layer=1) == ["process:10", "process:11"]
     assert predecessors(G, "node:/camera", layer=1) == ["process:10"]
+
+
+def test_named_queries():
+    G = robot()
+    assert publishers(G, "topic:/image") == ["node:/camera"]
+    assert subscribers(G, "topic:/image") == ["node:/detector"]
+    assert published_topics(G, "node:/detector") == ["topic:/objects"]
+    assert subscribed_topics(G, "node:/detector") == ["topic:/image"]
+    assert servers(G, "service:/get_map") == ["node:/map_server"]
+    assert clients(G, "service:/get_map") == ["node:/planner"]
+    assert called_servers(G, "node:/planner") == ["node:/map_server"]
+    assert nodes_of_process(G, "process:10") == ["node:/camera", "node:/detector"]
+    assert nodes_of_process(G, "process:1") == []  # child processes are not its nodes
+    assert process_of_node(G, "node:/planner") == "process:11"
+    assert flow_successors(G, "node:/planner") == {"node:/map_server"}
+    assert flow_predecessors(G, "topic:/objects") == {"node:/detector"}
+    # Members missing from the graph: empty answers.
+    assert publishers(G, "topic:/nothing") == [] and process_of_node(G, "node:/ghost") is None
+    assert predecessors(G, "node:/ghost") == [] and nodes_of_process(G, "process:99") == []
+
+
+def test_node_of_a_process_known_only_by_pid():
+    G = robot()
+    add_member(G, "node:/orphan", pid=11)
+    assert process_of_node(G, "node:/orphan") == "process:11"
+    assert nodes_of_process(G, "process:11") == ["node:/map_server", "node:/planner"]
+    assert nodes_of_process(G, "process:11", by_pid=True) == ["node:/map_server", "node:/orphan",
+                                                              "node:/planner"]
+    assert (FLOW, PROCESS_TREE) == (0, 1)
 
 
 def test_layer_subgraphs():
