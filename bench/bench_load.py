@@ -17,7 +17,7 @@ Run: ``.venv/bin/python bench/bench_load.py duration --nodes 100 --minutes 8``
      ``.venv/bin/python bench/bench_load.py duration --nodes 0 --minutes 10 --save`` (healthy demo)
      ``.venv/bin/python bench/bench_load.py storm --rate 10000 --seconds 60``
 The issue's figure: ``duration --nodes 500 --minutes 30 --rate 0.5 1 --per-process 25 --save``
-(at the demo's default 2-5 Hz and 8 nodes per process a 500-node system does not fit on 2 cores).
+(at the default 2-5 Hz and 8 nodes per process a 500-node system does not fit on 2 cores: docs/demo.md)
 """
 
 from __future__ import annotations

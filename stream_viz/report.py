@@ -1,4 +1,4 @@
-"""The report JSON of DESIGN.md §4 (``stream-viz.report/v1``), written atomically."""
+"""The report JSON of docs/contracts.md (``stream-viz.report/v1``), written atomically."""
 
 from __future__ import annotations
 

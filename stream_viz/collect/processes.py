@@ -2,8 +2,8 @@
 
 psutil finds a process and its identity (name, command line, user, start time). The metrics of
 a tracked process are read every sample: on Linux straight from ``/proc/<pid>/{stat,status,io,fd}``
-(psutil's own sources, with the same formulas, at 0.28x its CPU: bench/bench_collect_parts.py),
-elsewhere through psutil. A process we may not fully read keeps
+(psutil's own sources, with the same formulas, at a fraction of its CPU: bench/bench_collect_parts.py,
+figures in docs/collector.md), elsewhere through psutil. A process we may not fully read keeps
 what could be read (the rest NaN, listed in ``unreadable``); one that exits mid-read is reported
 as gone, never raised.
 """

@@ -94,7 +94,7 @@ class GidCache:
     """Each node's /rosout publisher gid (what maps a node to its process), read only when due.
 
     ``get_publishers_info_by_topic`` scans every endpoint and rclpy builds a QoS object for each
-    one found (a graph read on the demo: 1.28 ms with them, 0.73 ms without; bench_monitor_cpu.py),
+    one found (a large part of a graph read: bench/bench_monitor_cpu.py, figures in docs/collector.md),
     for gids that change only when a node is created again. They are read when a node appears
     (and again each sample while one still has no gid, for ``settle_s`` after the node set
     changed: its endpoints are discovered after its name),

@@ -137,8 +137,8 @@ def main(argv: list[str] | None = None) -> int:
     ctx = Context()
     rclpy.init(context=ctx, signal_handler_options=SignalHandlerOptions.NO)
     sims = {n.name: SimNode(n, ctx, topo.node_names()) for n in group.nodes}
-    # one single-threaded executor (and thread) per node: a hung node blocks only itself, and it is
-    # ~10x cheaper in CPU than one MultiThreadedExecutor for the whole process
+    # one single-threaded executor (and thread) per node: a hung node blocks only itself, and it
+    # costs far less CPU than one MultiThreadedExecutor for the whole process (docs/demo.md)
     executors, spinners = [], []
     for s in sims.values():
         ex = SingleThreadedExecutor(context=ctx)

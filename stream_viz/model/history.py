@@ -11,8 +11,8 @@ import numpy as np
 class _Ring:
     """One member's last samples in two numpy arrays used as a ring.
 
-    ~8 bytes per number instead of a Python tuple and array per sample (about 30 times less for
-    a short θ), and reading the last n samples is one slice, not n objects stacked. Capacity
+    ~8 bytes per number instead of a Python tuple and array per sample (bench/bench_history.py,
+    figures in docs/plugins.md), and reading the last n samples is one slice, not n objects stacked. Capacity
     doubles from 16 up to ``maxlen``, so a member that lives a few samples costs little.
     """
 

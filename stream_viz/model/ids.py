@@ -1,4 +1,4 @@
-"""Member ids, exactly as DESIGN.md §4 fixes them: ``node:/ns/name``, ``process:<pid>``, ``root``."""
+"""Member ids, exactly as docs/contracts.md fixes them: ``node:/ns/name``, ``process:<pid>``, ``root``."""
 
 from __future__ import annotations
 

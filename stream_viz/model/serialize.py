@@ -25,7 +25,7 @@ def _plain(value: Any) -> Any:
 
 
 def to_data(G: nx.MultiDiGraph) -> dict[str, list[dict[str, Any]]]:
-    """Return ``{"members": [...], "edges": [...]}`` in the report's form (DESIGN.md §4).
+    """Return ``{"members": [...], "edges": [...]}`` in the report's form (docs/contracts.md).
 
     Each member has ``id``, ``kind`` and its extra attributes (``pid`` …); ``theta`` is kept as
     a list when present. Each edge has ``src``, ``dst``, ``kind`` and ``layer``.

@@ -62,7 +62,7 @@ class RcaResult:
     extra: dict[str, Any] = field(default_factory=dict)
 
     def to_report(self) -> dict[str, Any]:
-        """The ``iterations`` and ``root_causes`` parts of the report JSON (DESIGN.md §4)."""
+        """The ``iterations`` and ``root_causes`` parts of the report JSON (docs/contracts.md)."""
         members: set[str] = set()
         edges: set[tuple[str, str]] = set()
         watched: set[str] = set()

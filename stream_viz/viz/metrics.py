@@ -2,7 +2,7 @@
 
 One entity per member holds all its θ series (one column each, named in a static
 ``SeriesLines``): per-row overhead (row id, time) is shared by the whole vector, which keeps a
-recording several times smaller than one entity per attribute. The key series (a topic's rate,
+recording much smaller than one entity per attribute (docs/viz.md). The key series (a topic's rate,
 a process's CPU and memory) are visible by default; the others are one click in the legend.
 """
 

@@ -1,4 +1,4 @@
-"""Rerun entity paths and timelines of a STREAM recording (DESIGN.md §4), in one place."""
+"""Rerun entity paths and timelines of a STREAM recording (docs/contracts.md), in one place."""
 
 from __future__ import annotations
 

@@ -8,11 +8,16 @@ import signal
 import sqlite3
 import subprocess
 import time
+from pathlib import Path
 
+import jsonschema
 import psutil
 import pytest
 from rerun.chunk import RrdReader
 from rosenv import EXE, TALKER, wait_for
+
+REPORT_SCHEMA = jsonschema.Draft202012Validator(
+    json.loads((Path(__file__).resolve().parents[2] / "docs" / "report.schema.json").read_text()))
 
 
 def run_cli(args: list[str], env: dict[str, str], timeout: float = 180) -> subprocess.CompletedProcess:
@@ -20,7 +25,8 @@ def run_cli(args: list[str], env: dict[str, str], timeout: float = 180) -> subpr
 
 
 def check_report(report: dict) -> None:
-    """The report contract of DESIGN.md §4."""
+    """The report contract of docs/contracts.md (every field checked by docs/report.schema.json)."""
+    REPORT_SCHEMA.validate(report)
     assert report["schema"] == "stream-viz.report/v1"
     assert report["ended_at"] >= report["started_at"] > 1e9
     for m in report["members"]:
