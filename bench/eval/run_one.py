@@ -25,14 +25,7 @@ import psutil
 from bench.eval.baseline import culprits, flag_times
 from bench.eval.export import SKIP_TOPICS, service_name, wide_table
 from bench.eval.systems import expand_map, sink_watchlist, system_topology, truth_sets
-
-
-def claim_domain() -> int:
-    """A ROS_DOMAIN_ID no test run or other benchmark holds (the tests' lock files)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
-    from rosenv import claim_domain as claim
-
-    return claim()
+from stream_viz.testing import own_domain
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -48,10 +41,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run(spec: dict, out: Path) -> dict:
-    domain = claim_domain()
-    os.environ["ROS_DOMAIN_ID"] = str(domain)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+    domain = own_domain()  # no test run or other benchmark holds it
     from stream_viz.config import load_config
     from stream_viz.demo.robot import FaultSpec, Robot
     from stream_viz.model.theta import SCHEMAS

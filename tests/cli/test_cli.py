@@ -12,7 +12,8 @@ import time
 import psutil
 import pytest
 from rerun.chunk import RrdReader
-from rosenv import EXE, TALKER, wait_for
+
+from stream_viz.testing import EXE, TALKER, wait_for
 
 
 def run_cli(args: list[str], env: dict[str, str], timeout: float = 180) -> subprocess.CompletedProcess:
