@@ -21,9 +21,6 @@ import statistics
 import subprocess
 import sys
 import time
-from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from stream_viz.collect.processes import ProcessSampler
 from stream_viz.collect.window import TopicWindow, window_metrics

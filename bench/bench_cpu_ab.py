@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -41,6 +42,10 @@ def main(argv: list[str] | None = None) -> int:
     base = tmp / "base"
     subprocess.run(["git", "worktree", "add", "--detach", str(base), args.base], cwd=ROOT, check=True,
                    capture_output=True)
+    # The ROS helpers the bench script starts with are tooling, not code under test; a base from
+    # before stream_viz/testing.py existed gets this tree's.
+    if not (base / "stream_viz/testing.py").exists():
+        shutil.copy(ROOT / "stream_viz/testing.py", base / "stream_viz/testing.py")
     try:
         rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
                              text=True).stdout.strip()

@@ -19,8 +19,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
+from stream_viz.testing import own_domain
 
 SUBSCRIBER = r'''
 import json, sys, threading, time
@@ -80,11 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--seconds", type=float, default=30.0)
     args = ap.parse_args(argv)
-    from rosenv import claim_domain
-
-    domain = claim_domain()
-    os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+    own_domain()
     from stream_viz.demo.robot import Robot
     from stream_viz.demo.topology import DEMO
 

@@ -27,12 +27,13 @@ import csv
 import os
 import platform
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import psutil
+
+from stream_viz.testing import claim_domain
 
 OUT = Path(__file__).parent / "out" / "load"
 
@@ -248,9 +249,6 @@ def main() -> None:
     args = ap.parse_args()
     if args.what == "duration":
         if args.domain is None:
-            sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-            from rosenv import claim_domain
-
             args.domain = claim_domain()
         run_duration(args.nodes, args.minutes, args.domain, args.period, args.save, args.history,
                      tuple(args.rate), args.per_process)

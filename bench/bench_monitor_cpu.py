@@ -25,8 +25,7 @@ from pathlib import Path
 
 import psutil
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
+from stream_viz.testing import own_domain
 
 # (label, module, attribute) of the stages of Monitor.step: an imported function is wrapped in
 # the module that calls it, a method on its class.
@@ -144,11 +143,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", type=Path, help="also write phase 1's figures here (bench_cpu_ab.py)")
     args = ap.parse_args(argv)
 
-    from rosenv import claim_domain
-
-    domain = claim_domain()
-    os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+    domain = own_domain()
     from stream_viz.config import load_config
     from stream_viz.demo.faults import FaultSpec
     from stream_viz.demo.robot import Robot

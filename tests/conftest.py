@@ -3,14 +3,10 @@
 from __future__ import annotations
 
 import os
-import sys
-from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-from rosenv import Children, claim_domain, ros_env, shm_clean
+from stream_viz.testing import Children, claim_domain, ros_env, shm_clean
 
 
 @pytest.fixture(scope="session")

@@ -132,69 +132,81 @@ def report(out: Path) -> str:
     runs = load(out)
     rows = [row for run, peers in runs for row in score_run(run, peers)]
     if rows:
-        with open(out / "scores.csv", "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
-    ours = sorted({r["method"] for r in rows if r["method"].startswith("ours ")})
-    main = [OURS_LIVE, "ours both/trajectory", "ours both/pagerank", BASELINE, *PEERS]
-    demo = [r for r in rows if r["system"] == "demo"]
+        _write_scores(out / "scores.csv", rows)
+    text = results_md(runs, rows)
+    (out / "results.md").write_text(text)
+    (out / "summary.json").write_text(json.dumps(summary(runs, rows)))
+    _write_runs_jsonl(out / "runs.jsonl", runs)
+    return text
+
+
+def results_md(runs: list[tuple[dict, dict | None]], rows: list[dict]) -> str:
+    """The text of ``results.md``: accuracy, detection latency, false alerts and cost tables."""
     faulty = [run for run, _ in runs if run["spec"].get("fault")]
     clean = [run for run, _ in runs if not run["spec"].get("fault")]
-    lat = [(run, latencies(run)) for run in faulty]
     loads = [run["loadavg"][0] for run, _ in runs]
     md = [
         f"Runs: {len(faulty)} with a fault, {len(clean)} fault-free; load average (1 min) during runs "
         f"{min(loads, default=0):.1f}–{max(loads, default=0):.1f} on {os.cpu_count()} cores.",
         "",
+        *_accuracy_md(rows),
+        *_latency_md(faulty),
+        *_fault_free_md(clean, faulty),
+        *_cost_md([run for run, _ in runs]),
     ]
-    md += [
+    fails = failed_peers(p for _, p in runs)
+    if fails:
+        md += ["", "Peers that failed on some run: " + "; ".join(f"{k}: {v}" for k, v in fails.items())]
+    return "\n".join(md) + "\n"
+
+
+# The per-fault-kind tables of the demo runs: heading, truth level, score.
+FAULT_MATRICES = (
+    ("AC@1 per fault kind on the demo robot (strict: the target node)", "strict", "AC@1"),
+    ("AC@1 per fault kind on the demo robot (as injected: the node for node faults, any node "
+     "of its process for crash, cpu and leak)", "injected", "AC@1"),
+    ("AC@1 per fault kind on the demo robot (process-level: any node of the target's process)",
+     "process", "AC@1"),
+    ("AC@3 per fault kind on the demo robot (strict)", "strict", "AC@3"),
+)
+
+
+def _accuracy_md(rows: list[dict]) -> list[str]:
+    ours = sorted({r["method"] for r in rows if r["method"].startswith("ours ")})
+    main = [OURS_LIVE, "ours both/trajectory", "ours both/pagerank", BASELINE, *PEERS]
+    demo = [r for r in rows if r["system"] == "demo"]
+    md = [
         "### Accuracy on the demo robot, every method",
         "",
         accuracy_table(demo, [OURS_LIVE, *ours, BASELINE, *PEERS]),
         "",
     ]
-    md += [
-        "### AC@1 per fault kind on the demo robot (strict: the target node)",
-        "",
-        fault_matrix(demo, main, "strict"),
-        "",
-    ]
-    md += [
-        "### AC@1 per fault kind on the demo robot (as injected: the node for node faults, any node "
-        "of its process for crash, cpu and leak)",
-        "",
-        fault_matrix(demo, main, "injected"),
-        "",
-    ]
-    md += [
-        "### AC@1 per fault kind on the demo robot (process-level: any node of the target's process)",
-        "",
-        fault_matrix(demo, main, "process"),
-        "",
-    ]
-    md += [
-        "### AC@3 per fault kind on the demo robot (strict)",
-        "",
-        fault_matrix(demo, main, "strict", "AC@3"),
-        "",
-    ]
-    md += ["### Per system", "", accuracy_table(rows, main, by="system"), ""]
-    md += [
+    for heading, level, key in FAULT_MATRICES:
+        md += [f"### {heading}", "", fault_matrix(demo, main, level, key), ""]
+    return [*md, "### Per system", "", accuracy_table(rows, main, by="system"), ""]
+
+
+def _latency_md(faulty: list[dict]) -> list[str]:
+    md = [
         "### Detection latency (s after injection; – = never)",
         "",
         "| system | fault | target | first alert | ours: truth first (strict) | (process) | (as injected) | "
         "rate monitor: first flag |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    for run, la in lat:
-        s = run["spec"]
+    for run in faulty:
+        s, la = run["spec"], latencies(run)
         md.append(
             f"| {s['system']} | {s['fault']} | {s['target']} | {fmt(la['first_alert'])} | "
             f"{fmt(la['top1_strict'])} | {fmt(la['top1_process'])} | {fmt(la['top1_injected'])} | "
             f"{fmt(la['baseline_first_flag'])} |"
         )
-    md += [
+    return md
+
+
+def _fault_free_md(clean: list[dict], faulty: list[dict]) -> list[str]:
+    """The false alerts: every alert of a fault-free run, and faulty runs' alerts before the injection."""
+    md = [
         "",
         "### Fault-free runs (false alerts) and the alerts before injection",
         "",
@@ -209,34 +221,42 @@ def report(out: Path) -> str:
             f"{', '.join(members) or '–'} | {len(run['baseline_flags'])} |"
         )
     pre = [(run, len(alerts_before(run))) for run in faulty if alerts_before(run)]
-    md += [
+    return [
+        *md,
         "",
         f"Faulty runs with alerts before the injection: {len(pre)} of {len(faulty)}"
         + "".join(f"; {run_id(r['spec'])}: {n}" for r, n in pre),
         "",
     ]
-    md += [
+
+
+def _cost_md(runs: list[dict]) -> list[str]:
+    md = [
         "### Cost of the monitor (in-process, this machine)",
         "",
         "| system | runs | CPU share of one core (mean / max) | peak RSS MB (max) | samples/run |",
         "|---|---|---|---|---|",
     ]
-    for system in sorted({run["spec"]["system"] for run, _ in runs}):
-        sel = [run for run, _ in runs if run["spec"]["system"] == system]
+    for system in sorted({run["spec"]["system"] for run in runs}):
+        sel = [run for run in runs if run["spec"]["system"] == system]
         cpu = [run["cpu_share"] for run in sel]
         md.append(
             f"| {system} | {len(sel)} | {100 * sum(cpu) / len(cpu):.1f} % / {100 * max(cpu):.1f} % | "
             f"{max(run['peak_rss_mb'] for run in sel):.0f} | "
             f"{sum(run['samples'] for run in sel) / len(sel):.0f} |"
         )
-    fails = failed_peers(p for _, p in runs)
-    if fails:
-        md += ["", "Peers that failed on some run: " + "; ".join(f"{k}: {v}" for k, v in fails.items())]
-    text = "\n".join(md) + "\n"
-    (out / "results.md").write_text(text)
-    summary = {
+    return md
+
+
+def summary(runs: list[tuple[dict, dict | None]], rows: list[dict]) -> dict:
+    """The content of ``summary.json`` (the plots read it): score rows, latencies, cost per run."""
+    return {
         "rows": rows,
-        "latency": [{"system": r["spec"]["system"], "fault": r["spec"]["fault"], **la} for r, la in lat],
+        "latency": [
+            {"system": r["spec"]["system"], "fault": r["spec"]["fault"], **latencies(r)}
+            for r, _ in runs
+            if r["spec"].get("fault")
+        ],
         "cost": [
             {
                 "system": r["spec"]["system"],
@@ -247,13 +267,21 @@ def report(out: Path) -> str:
             for r, _ in runs
         ],
     }
-    (out / "summary.json").write_text(json.dumps(summary))
-    with open(out / "runs.jsonl", "w") as f:  # one line per run, without the per-tick trace
+
+
+def _write_scores(path: Path, rows: list[dict]) -> None:
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def _write_runs_jsonl(path: Path, runs: list[tuple[dict, dict | None]]) -> None:
+    with open(path, "w") as f:  # one line per run, without the per-tick trace
         for run, peers in runs:
             slim = {k: v for k, v in run.items() if k not in ("ticks", "expand")}
             f.write(json.dumps({**slim, "latency": latencies(run) if run["spec"].get("fault") else None,
                                 "peers": peers}) + "\n")
-    return text
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -18,6 +18,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import psutil
@@ -25,14 +26,13 @@ import psutil
 from bench.eval.baseline import culprits, flag_times
 from bench.eval.export import SKIP_TOPICS, service_name, wide_table
 from bench.eval.systems import expand_map, sink_watchlist, system_topology, truth_sets
+from stream_viz.testing import own_domain
 
-
-def claim_domain() -> int:
-    """A ROS_DOMAIN_ID no test run or other benchmark holds (the tests' lock files)."""
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
-    from rosenv import claim_domain as claim
-
-    return claim()
+if TYPE_CHECKING:  # imported where used, once this process has its ROS_DOMAIN_ID
+    from stream_viz.config import Config
+    from stream_viz.demo.topology import Topology
+    from stream_viz.monitor import Monitor
+    from stream_viz.records import Alert
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -48,21 +48,47 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run(spec: dict, out: Path) -> dict:
-    domain = claim_domain()
-    os.environ["ROS_DOMAIN_ID"] = str(domain)
-    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
-    os.environ.pop("ROS_LOCALHOST_ONLY", None)
+    """Run ``spec`` live, then rank offline; write the peers' files to ``out``; return run.json's record."""
+    domain = own_domain()  # no test run or other benchmark holds it
     from stream_viz.config import load_config
-    from stream_viz.demo.robot import FaultSpec, Robot
-    from stream_viz.model.theta import SCHEMAS
-    from stream_viz.monitor import Monitor
-    from stream_viz.rca.engine import analyze
-    from stream_viz.rca.settings import METHODS, POLICIES
 
     topo = system_topology(spec["system"], spec.get("seed", 0))
+    config = load_config(None)
+    live = _live(spec, topo, config, domain, out)
+    mon = live.mon
+    injected = dict(mon.injected or {})
+    expand = expand_map(topo, live.pids)
+    rankings = _rerank(mon, live.stored, live.report, live.anomalous, config, topo)
+    series, times, services = _export_metrics(out / "metrics.csv", mon, live.pids)
+    flags, rankings["baseline"] = _baseline(series, times, expand)
+    _write_meta(out / "meta.json", topo, live.pids, expand, services, injected.get("t"))
+    return _record(spec, domain, topo, live, injected, expand, rankings, flags)
+
+
+@dataclasses.dataclass
+class Live:
+    """What the live part of a run leaves: the closed monitor, its results, the run's times and cost."""
+
+    mon: Monitor
+    report: dict  # the monitor's final report (stream-viz.report/v1)
+    stored: list[Alert]
+    pids: dict[str, str]  # process member -> the system's process name
+    alive: dict[str, bool]
+    ticks: list[dict]
+    anomalous: set[str]
+    t_start: float
+    t_ready: float
+    cpu_s: float
+    wall_s: float
+
+
+def _live(spec: dict, topo: Topology, config: Config, domain: int, out: Path) -> Live:
+    """Start the system, inject the fault, monitor it; keep the alert database in ``out``."""
+    from stream_viz.demo.robot import FaultSpec, Robot
+    from stream_viz.monitor import Monitor
+
     warmup, post = float(spec.get("warmup", 20.0)), float(spec.get("post", 25.0))
     fault = spec.get("fault")
-    config = load_config(None)
     tmp = Path(tempfile.mkdtemp(prefix="stream_eval_"))
     me = psutil.Process()
     mon = Monitor(config, db=tmp / "alerts.sqlite", viewer="none", domain_id=domain)
@@ -108,10 +134,16 @@ def run(spec: dict, out: Path) -> dict:
     for f in tmp.glob("alerts.sqlite*"):
         shutil.move(str(f), out / f.name)
     shutil.rmtree(tmp, ignore_errors=True)
-    injected = dict(mon.injected or {})
-    t_inj = injected.get("t")
-    expand = expand_map(topo, pids)
-    strict, proc = truth_sets(topo, spec.get("target")) if fault else (set(), set())
+    cpu = (cpu1.user + cpu1.system) - (cpu0.user + cpu0.system)
+    return Live(mon=mon, report=report, stored=stored, pids=pids, alive=alive, ticks=ticks,
+                anomalous=anomalous, t_start=t_start, t_ready=t_ready, cpu_s=cpu, wall_s=wall1 - wall0)
+
+
+def _rerank(mon: Monitor, stored: list[Alert], report: dict, anomalous: set[str], config: Config,
+            topo: Topology) -> dict:
+    """Every policy × method ranking of the run's alerts, the live one first (name -> members)."""
+    from stream_viz.rca.engine import analyze
+    from stream_viz.rca.settings import METHODS, POLICIES
 
     # Our rankings: live (what the user saw) and offline re-ranks of the same alerts.
     rankings = {"live": [rc["member"] for rc in report["root_causes"]]}
@@ -129,13 +161,25 @@ def run(spec: dict, out: Path) -> dict:
             # everything and the policy cannot make a difference.
             res = analyze(mon.seen, stored, s, w0, evidence or None)
             rankings[f"{policy}/{method} W0=outputs"] = [rc.member for rc in res.root_causes]
+    return rankings
 
-    # Metric series the monitor saw → peers' table; rule-based baseline from topic rates.
+
+def _export_metrics(path: Path, mon: Monitor, pids: dict[str, str]) -> tuple[dict, np.ndarray, dict]:
+    """Write the metric series the monitor saw as the peers' table; return them, the times, the services."""
+    from stream_viz.model.theta import SCHEMAS
+
     hist = mon.history
     members = [m for m in mon.seen.nodes if m in hist]
     series = {m: (hist.times(m), hist.values(m)) for m in members}
     times, columns, matrix, services = wide_table(series, SCHEMAS, pids)
-    _write_csv(out / "metrics.csv", times, columns, matrix)
+    _write_csv(path, times, columns, matrix)
+    return series, times, services
+
+
+def _baseline(series: dict, times: np.ndarray, expand: dict[str, list[str]]) -> tuple[dict, list]:
+    """The rule-based baseline from the topic rates: flag times, and its ranking of publishers."""
+    from stream_viz.model.theta import SCHEMAS
+
     rate_j = SCHEMAS["topic"].index("rate_hz")
     rates = {
         m: (t, v[:, rate_j])
@@ -145,34 +189,43 @@ def run(spec: dict, out: Path) -> dict:
     t_end = float(times[-1]) if len(times) else time.time()
     flags = flag_times(rates, end=t_end)
     publishers = {m: ns for m, ns in expand.items() if m.startswith("topic:")}
-    rankings["baseline"] = [list(x) for x in culprits(flags, publishers)]
+    return flags, [list(x) for x in culprits(flags, publishers)]
 
+
+def _write_meta(path: Path, topo: Topology, pids: dict[str, str], expand: dict[str, list[str]],
+                services: dict, t_inj: float | None) -> None:
+    """What the peers need beside the table: injection time, services and their call graph."""
     svc_edges = sorted(
         {(service_name(a, pids), service_name(b, pids)) for a, b, _ in topo.edges()}
         | {(service_name(p, pids), service_name(n, pids)) for p, g in pids.items() for n in expand.get(p, ())}
     )
     meta = {"inject_time": t_inj, "services": services, "service_edges": svc_edges}
-    (out / "meta.json").write_text(json.dumps(meta))
+    path.write_text(json.dumps(meta))
 
+
+def _record(spec: dict, domain: int, topo: Topology, live: Live, injected: dict,
+            expand: dict[str, list[str]], rankings: dict, flags: dict) -> dict:
+    """The run's record (``run.json``): truth, rankings, alerts, latencies, cost."""
+    t_inj = injected.get("t")
+    strict, proc = truth_sets(topo, spec.get("target")) if spec.get("fault") else (set(), set())
     alerts = [
         {"member": a.member, "plugin": a.plugin, "t": a.t, "severity": a.severity, "message": a.message[:160]}
-        for a in stored
+        for a in live.stored
     ]
     after = [a for a in alerts if t_inj is not None and a["t"] >= t_inj]
-    cpu = (cpu1.user + cpu1.system) - (cpu0.user + cpu0.system)
     return {
         "spec": spec,
         "domain": domain,
         "nodes": len(topo.node_names()),
-        "t_start": t_start,
-        "t_ready": t_ready,
-        "ready_s": t_ready - t_start,
+        "t_start": live.t_start,
+        "t_ready": live.t_ready,
+        "ready_s": live.t_ready - live.t_start,
         "injected": injected,
         "truth_strict": sorted(strict),
         "truth_process": sorted(proc),
         "expand": expand,
         "rankings": rankings,
-        "ticks": ticks,
+        "ticks": live.ticks,
         "alerts": alerts,
         "baseline_flags": flags,
         "first_alert_s": (min(a["t"] for a in after) - t_inj) if after else None,
@@ -182,14 +235,14 @@ def run(spec: dict, out: Path) -> dict:
             else None
         ),
         "alerts_before_injection": sum(1 for a in alerts if t_inj is None or a["t"] < t_inj),
-        "cpu_s": cpu,
-        "wall_s": wall1 - wall0,
-        "cpu_share": cpu / (wall1 - wall0),
-        "samples": mon.samples,
-        "peak_rss_mb": max((x["rss"] for x in ticks), default=0) / 2**20,
+        "cpu_s": live.cpu_s,
+        "wall_s": live.wall_s,
+        "cpu_share": live.cpu_s / live.wall_s,
+        "samples": live.mon.samples,
+        "peak_rss_mb": max((x["rss"] for x in live.ticks), default=0) / 2**20,
         "ru_maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "loadavg": os.getloadavg(),
-        "alive_at_end": alive,
+        "alive_at_end": live.alive,
     }
 
 

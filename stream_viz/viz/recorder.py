@@ -75,6 +75,32 @@ def check_writable(path: str | Path) -> Path:
     return path
 
 
+def _check_sinks(viewer: str, save: str | Path | None) -> Path | None:
+    """Check a `Recorder`'s viewer mode and recording path before anything is opened; return the path.
+
+    Raises `ConfigError` for an unknown viewer mode, `OutputError` for a recording that cannot be
+    written or a ``spawn`` that cannot open a window.
+    """
+    if viewer not in VIEWER_MODES and not viewer.startswith(GRPC_SCHEMES):
+        raise ConfigError(
+            f"--viewer {viewer!r}: expected spawn, serve, none or a gRPC URL such as "
+            f"rerun+http://127.0.0.1:{DEFAULT_GRPC_PORT}/proxy")
+    path = check_writable(save) if save is not None else None
+    if viewer == "spawn":
+        if not has_display():
+            raise OutputError("--viewer spawn needs a display (DISPLAY/WAYLAND_DISPLAY unset); "
+                              "use --viewer serve and open the printed URL, or --save FILE.rrd")
+        if rerun_executable() is None:
+            raise OutputError("--viewer spawn: the 'rerun' viewer executable is not on PATH")
+    return path
+
+
+def _default_blueprint() -> rrb.Blueprint:
+    from stream_viz_blueprints.default import build_blueprint
+
+    return build_blueprint()
+
+
 def part_path(path: Path, n: int) -> Path:
     """Return the path of part ``n`` of a recording saved at ``path`` (part 0 is ``path`` itself)."""
     return path if n == 0 else path.with_name(f"{path.stem}_{n}{path.suffix}")
@@ -152,25 +178,10 @@ class Recorder:
         part_s: float = 0.0,
         announce: Callable[[str], None] = _stderr,
     ) -> None:
-        # Every check before anything is opened (and before monitoring starts).
-        if viewer not in VIEWER_MODES and not viewer.startswith(GRPC_SCHEMES):
-            raise ConfigError(
-                f"--viewer {viewer!r}: expected spawn, serve, none or a gRPC URL such as "
-                f"rerun+http://127.0.0.1:{DEFAULT_GRPC_PORT}/proxy")
-        self.save = check_writable(save) if save is not None else None
-        if viewer == "spawn":
-            if not has_display():
-                raise OutputError("--viewer spawn needs a display (DISPLAY/WAYLAND_DISPLAY unset); "
-                                  "use --viewer serve and open the printed URL, or --save FILE.rrd")
-            if rerun_executable() is None:
-                raise OutputError("--viewer spawn: the 'rerun' viewer executable is not on PATH")
+        self.save = _check_sinks(viewer, save)  # before anything is opened (and monitoring starts)
         disable_rerun_telemetry(telemetry)
-        if blueprint is None:
-            from stream_viz_blueprints.default import build_blueprint
-
-            blueprint = build_blueprint()
         self.viewer, self.app_id, self.url = viewer, app_id, None
-        self.blueprint = blueprint
+        self.blueprint = blueprint if blueprint is not None else _default_blueprint()
         self.parts: list[Path] = [self.save] if self.save is not None else []
         self.part_s = part_s if self.save is not None else 0.0
         self._part_t0: float | None = None
@@ -182,26 +193,31 @@ class Recorder:
         self._tree_sig: Any = None
         self._closed = False
         self.enabled = viewer != "none" or self.save is not None
-        # The viewer and the file get a stream each, of one recording id: the file's sink is
-        # swapped for the next part without touching the viewer's connection (a swap flushes the
-        # old sinks, which blocks for seconds on a viewer that went away).
-        rid = str(uuid.uuid4())
-        self._live = self._stream(rid) if viewer != "none" else None
-        self._file = self._stream(rid) if self.save is not None else None
-        # Nothing to send to: a disabled stream, so nothing is buffered for the whole run.
-        self.rec = Tee([s for s in (self._live, self._file) if s is not None]
-                       or [rr.RecordingStream(app_id, default_enabled=False)])
-        try:
-            if self._live is not None:
-                self.url = self._connect(self._live, memory_limit, web_port, grpc_port)
-            if self._file is not None:
-                self._file.set_sinks(rr.FileSink(str(self.save)), default_blueprint=blueprint)
-        except (RuntimeError, OSError, ValueError) as e:
-            raise OutputError(f"--viewer {viewer}: could not start the Rerun sink: {e}") from e
+        self._open(memory_limit, web_port, grpc_port)
         if viewer == "serve":
             announce(f"Rerun web viewer: {self.url}")
         elif viewer == "spawn":
             announce(f"Rerun viewer spawned, streaming to {self.url}")
+
+    def _open(self, memory_limit: str, web_port: int | None, grpc_port: int | None) -> None:
+        """Open the streams: one to the viewer, one to the file, both of one recording id.
+
+        The file's sink is swapped for the next part without touching the viewer's connection (a
+        swap flushes the old sinks, which blocks for seconds on a viewer that went away).
+        """
+        rid = str(uuid.uuid4())
+        self._live = self._stream(rid) if self.viewer != "none" else None
+        self._file = self._stream(rid) if self.save is not None else None
+        # Nothing to send to: a disabled stream, so nothing is buffered for the whole run.
+        self.rec = Tee([s for s in (self._live, self._file) if s is not None]
+                       or [rr.RecordingStream(self.app_id, default_enabled=False)])
+        try:
+            if self._live is not None:
+                self.url = self._connect(self._live, memory_limit, web_port, grpc_port)
+            if self._file is not None:
+                self._file.set_sinks(rr.FileSink(str(self.save)), default_blueprint=self.blueprint)
+        except (RuntimeError, OSError, ValueError) as e:
+            raise OutputError(f"--viewer {self.viewer}: could not start the Rerun sink: {e}") from e
 
     def _connect(self, live: rr.RecordingStream, memory_limit: str, web_port: int | None,
                  grpc_port: int | None) -> str:
@@ -252,15 +268,26 @@ class Recorder:
         if self.save is None or self._file is None:
             return None
         path = part_path(self.save, len(self.parts))
+        if not self._switch_file(path):
+            return None
+        self.parts.append(path)
+        self._part_t0 = t
+        self._replay(t, G)
+        return path
+
+    def _switch_file(self, path: Path) -> bool:
+        """Point the file's stream at ``path``; False (reported, no more parts) if it cannot be opened."""
         try:
             self._file.flush(timeout_sec=5.0)
             self._file.set_sinks(rr.FileSink(str(check_writable(path))), default_blueprint=self.blueprint)
         except (StreamVizError, RuntimeError, OSError, ValueError) as e:
             _stderr(f"stream-viz: recording goes on in {self.parts[-1]}; cannot start part {path}: {e}")
             self.part_s = 0.0
-            return None
-        self.parts.append(path)
-        self._part_t0 = t
+            return False
+        return True
+
+    def _replay(self, t: float, G: nx.MultiDiGraph | None) -> None:
+        """Log again what a new part must show to open on its own: the system, the last diagnosis."""
         style.forget_styled(self.rec)  # static styles are not carried over to a new sink
         if G is not None:
             self.system(G, t, force=True)
@@ -268,7 +295,6 @@ class Recorder:
             self.rca(*self._last_rca)
         if self._last_report is not None:
             self.report(*self._last_report)
-        return path
 
     # -- entities -------------------------------------------------------------------------------
     def system(self, G: nx.MultiDiGraph, t: float | None = None, gone: Collection[str] = (),

@@ -14,7 +14,8 @@ import jsonschema
 import psutil
 import pytest
 from rerun.chunk import RrdReader
-from rosenv import EXE, TALKER, wait_for
+
+from stream_viz.testing import EXE, TALKER, wait_for
 
 REPORT_SCHEMA = jsonschema.Draft202012Validator(
     json.loads((Path(__file__).resolve().parents[2] / "docs" / "report.schema.json").read_text()))

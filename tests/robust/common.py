@@ -8,7 +8,7 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
-from rosenv import EXE, TALKER  # noqa: F401 - shared with tests/cli
+from stream_viz.testing import EXE
 
 # A node that logs an ERROR on /rosout every 0.5 s (the rosout plugin alerts on it).
 ERROR_LOGGER = """

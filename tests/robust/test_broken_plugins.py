@@ -7,9 +7,9 @@ here one real monitor run loads a folder with every kind of broken plugin next t
 from __future__ import annotations
 
 import pytest
-from rosenv import wait_for
 
-from robust.common import TALKER, db_rows, monitor_cmd, report
+from stream_viz.testing import TALKER, wait_for
+from tests.robust.common import db_rows, monitor_cmd, report
 
 HEAD = """
 from __future__ import annotations

@@ -10,9 +10,9 @@ import sqlite3
 import subprocess
 
 import pytest
-from rosenv import wait_for
 
-from robust.common import ERROR_LOGGER, EXE, db_rows, error_lines, monitor_cmd, report, run
+from stream_viz.testing import EXE, wait_for
+from tests.robust.common import ERROR_LOGGER, db_rows, error_lines, monitor_cmd, report, run
 
 
 def _files(tmp):

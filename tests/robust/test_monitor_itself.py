@@ -14,12 +14,11 @@ import subprocess
 import time
 
 import pytest
-from rosenv import wait_for
 
-from robust.common import (
+from stream_viz.collect.fastdds import decode_gid
+from stream_viz.testing import EXE, TALKER, wait_for
+from tests.robust.common import (
     ERROR_LOGGER,
-    EXE,
-    TALKER,
     db_rows,
     error_lines,
     monitor_cmd,
@@ -28,7 +27,6 @@ from robust.common import (
     sample_times,
     snapshot_has,
 )
-from stream_viz.collect.fastdds import decode_gid
 
 
 def _rosout_alerts(db) -> list[tuple]:

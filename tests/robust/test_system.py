@@ -14,10 +14,10 @@ import time
 
 import psutil
 import pytest
-from rosenv import wait_for
 
-from robust.common import TALKER, db_rows, monitor_cmd, report, run, sample_times, snapshot_has
 from stream_viz.collect.processes import ProcessSampler
+from stream_viz.testing import TALKER, wait_for
+from tests.robust.common import db_rows, monitor_cmd, report, run, sample_times, snapshot_has
 
 pytestmark = pytest.mark.ros
 

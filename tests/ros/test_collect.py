@@ -7,12 +7,12 @@ import signal
 import time
 
 import pytest
-from rosenv import wait_for
 
 from stream_viz.collect.collector import Collector
 from stream_viz.model.graph import flow_edges
 from stream_viz.model.queries import predecessors
 from stream_viz.model.theta import theta_dict
+from stream_viz.testing import wait_for
 
 pytestmark = pytest.mark.ros
 

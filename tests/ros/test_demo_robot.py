@@ -13,11 +13,11 @@ import time
 
 import psutil
 import pytest
-from rosenv import wait_for
 
 from stream_viz.demo.robot import FaultSpec, Robot
 from stream_viz.demo.topology import DEMO
 from stream_viz.errors import DemoError
+from stream_viz.testing import wait_for
 
 pytestmark = pytest.mark.ros
 AT = 10.0  # fault injected this many seconds after start (start-up is slow on a loaded machine)

@@ -6,10 +6,10 @@ import os
 
 import psutil
 import pytest
-from rosenv import wait_for
 
 from stream_viz.demo.generated import generate
 from stream_viz.demo.robot import FaultSpec, Robot
+from stream_viz.testing import wait_for
 
 pytestmark = pytest.mark.ros
 

@@ -14,13 +14,13 @@ import time
 
 import numpy as np
 import pytest
-from rosenv import wait_for
 
 from stream_viz.collect.collector import Collector
 from stream_viz.detect.api import record_history
 from stream_viz.detect.registry import PluginSet
 from stream_viz.model.diff import GraphDiff
 from stream_viz.model.history import History
+from stream_viz.testing import wait_for
 
 pytestmark = pytest.mark.ros
 

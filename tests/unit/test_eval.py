@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
+import csv
+import json
 
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from bench.eval.baseline import culprits, flag_times
 from bench.eval.export import column_graph, service_name, wide_table
@@ -151,3 +149,41 @@ def test_an_alert_stamped_within_a_sample_of_the_injection_counts_as_after():
 
     assert [a["t"] for a in alerts_before(run)] == [50.0]
     assert latencies(run)["first_alert"] == 0.0
+
+
+def test_report_writes_the_results_page_and_the_data_behind_it(tmp_path):
+    from bench.eval.run import report, run_id
+
+    def recorded(run, cpu, flags):
+        return {**run, "loadavg": [0.5, 0.4, 0.3], "wall_s": 40.2, "cpu_share": cpu, "peak_rss_mb": 100.0,
+                "samples": 40, "nodes": 12, "baseline_flags": flags}
+
+    faulty = recorded(_run(), 0.02, {})
+    clean = recorded(_run(None), 0.04, {"topic:/x": 5.0})
+    clean["alerts"] = [{"t": 5.0, "member": "node:/a", "plugin": "topic_rate"}]
+    for run in (faulty, clean):
+        (tmp_path / run_id(run["spec"])).mkdir()
+        (tmp_path / run_id(run["spec"]) / "run.json").write_text(json.dumps(run))
+    (tmp_path / run_id(faulty["spec"]) / "peers.json").write_text(json.dumps({"HT": {"error": "boom"}}))
+
+    text = report(tmp_path)
+    assert (tmp_path / "results.md").read_text() == text
+    lines = text.splitlines()
+    assert lines[0].startswith("Runs: 1 with a fault, 1 fault-free; load average (1 min) during runs 0.5–0.5")
+    assert "| demo | crash | /b | 1.0 | 2.0 | 1.0 | 1.0 | – |" in lines  # first alert, top-1 per level
+    assert "| demo_nofault_b_0 | demo | 40 | 1 | node:/a (topic_rate) | 1 |" in lines
+    assert "Faulty runs with alerts before the injection: 0 of 1" in lines
+    assert "| demo | 2 | 3.0 % / 4.0 % | 100 | 40 |" in lines  # CPU mean / max, RSS, samples per run
+    assert lines[-1] == "Peers that failed on some run: HT: boom"
+
+    rows = score_run(faulty, {"HT": {"error": "boom"}})
+    with open(tmp_path / "scores.csv") as f:
+        written = list(csv.DictReader(f))
+    assert written == [{k: "" if v is None else str(v) for k, v in r.items()} for r in rows]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["rows"] == rows
+    assert summary["latency"] == [{"system": "demo", "fault": "crash", **latencies(faulty)}]
+    assert [c["cpu_share"] for c in summary["cost"]] == [0.02, 0.04]
+    lines = [json.loads(x) for x in (tmp_path / "runs.jsonl").read_text().splitlines()]
+    assert [x["latency"] is None for x in lines] == [False, True]
+    assert not any("ticks" in x or "expand" in x for x in lines)

@@ -14,7 +14,7 @@ from stream_viz.model.theta import make_theta
 from stream_viz.records import Alert
 from stream_viz.viz import paths
 from stream_viz.viz.recorder import Recorder
-from viz.rrd import rows, strings
+from tests.viz.rrd import rows, strings
 
 T0 = 1_700_000_000.0
 

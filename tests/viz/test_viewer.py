@@ -19,7 +19,7 @@ from stream_viz.viz.recorder import TELEMETRY_ENV, Recorder, disable_rerun_telem
 from stream_viz.viz.sample import demo_graph
 from stream_viz.viz.screenshot import rerun_executable, screenshot
 from stream_viz.viz.style import KIND_COLOR
-from viz.rrd import rows
+from tests.viz.rrd import rows
 
 T0 = 1_700_000_000.0
 

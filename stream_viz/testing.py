@@ -1,4 +1,12 @@
-"""Real ROS 2 processes for tests: an own ROS_DOMAIN_ID per run, children always ended."""
+"""Helpers for tests and benchmarks that start real ROS 2 processes (as ``numpy.testing`` for numpy).
+
+Not used by the monitor itself. Each run takes a ROS_DOMAIN_ID no other test or benchmark run on
+this machine holds (`claim_domain`; `ros_env` for children, `own_domain` for this process), starts
+its children in process groups of their own and always ends them (`Children`), polls for a
+condition (`wait_for`) and removes Fast DDS shared-memory files of dead participants
+(`shm_clean`). `EXE` is the installed ``stream-viz`` command beside this Python; `TALKER` a small
+system to point the monitor at.
+"""
 
 from __future__ import annotations
 
@@ -9,13 +17,14 @@ import subprocess
 import sys
 import textwrap
 import time
+from collections.abc import MutableMapping
 from pathlib import Path
 
 _LOCKS: list[int] = []
 
 
 def claim_domain() -> int:
-    """Take a ROS_DOMAIN_ID no other test run on this machine holds (flock, released on exit)."""
+    """Take a ROS_DOMAIN_ID no other test or benchmark run on this machine holds (flock, released on exit)."""
     for domain in range(11, 100):
         fd = os.open(f"/tmp/stream_viz_test_domain_{domain}.lock", os.O_CREAT | os.O_RDWR, 0o666)
         try:
@@ -29,10 +38,23 @@ def claim_domain() -> int:
 
 
 def ros_env(domain: int) -> dict[str, str]:
+    """This process's environment for ROS 2 children on ``domain`` (localhost discovery only)."""
     env = dict(os.environ)
-    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
-    env.pop("ROS_LOCALHOST_ONLY", None)
+    _set_domain(env, domain)
+    env["PYTHONUNBUFFERED"] = "1"
     return env
+
+
+def own_domain() -> int:
+    """Claim a ROS_DOMAIN_ID and make it this process's (and its children's): set in ``os.environ``."""
+    domain = claim_domain()
+    _set_domain(os.environ, domain)
+    return domain
+
+
+def _set_domain(env: MutableMapping[str, str], domain: int) -> None:
+    env.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    env.pop("ROS_LOCALHOST_ONLY", None)  # deprecated in Jazzy, replaced by the discovery range
 
 
 class Children:
@@ -48,6 +70,7 @@ class Children:
         return self.run([sys.executable, str(script), *args], name=name)
 
     def run(self, cmd: list[str], name: str = "child", env: dict[str, str] | None = None) -> subprocess.Popen:
+        """Start ``cmd`` (environment ``env`` or the run's); stdout/stderr go to a log file."""
         log = open(self.workdir / f"{name}_{len(self.procs)}.log", "w")
         p = subprocess.Popen(cmd, env=env or self.env, stdout=log, stderr=subprocess.STDOUT,
                              start_new_session=True)
@@ -55,6 +78,7 @@ class Children:
         return p
 
     def end(self, p: subprocess.Popen, sig: int = signal.SIGINT, timeout: float = 5.0) -> None:
+        """End ``p``'s process group with ``sig``, then SIGKILL if it is still there after ``timeout``."""
         if p.poll() is None:
             try:
                 os.killpg(p.pid, sig)
@@ -69,6 +93,7 @@ class Children:
             p.wait(5)
 
     def end_all(self) -> None:
+        """End every child started so far."""
         for p in self.procs:
             self.end(p)
 
