@@ -19,7 +19,7 @@ from typing import Any
 
 from stream_viz.collect.collector import Collector
 from stream_viz.config import Config, load_config
-from stream_viz.detect.registry import PluginSet
+from stream_viz.detect.plugin_set import PluginSet
 from stream_viz.detect.store import AlertStore, default_db_path
 from stream_viz.detect.watchlist import initial_watchlist, process_anomalies
 from stream_viz.live_view import LiveView

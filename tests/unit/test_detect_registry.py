@@ -1,4 +1,4 @@
-"""The plugin registry: discovery, validation, and isolation from deliberately broken plugins."""
+"""Plugin discovery, validation, the plugin set's policy, and isolation from deliberately broken plugins."""
 
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ import threading
 
 import pytest
 
-from stream_viz.detect.registry import PluginSet, discover
+from stream_viz.detect.discovery import discover
+from stream_viz.detect.plugin_set import PluginSet
 from stream_viz.errors import ConfigError
 from stream_viz.model.graph import add_member, new_graph
 from stream_viz.model.history import History
