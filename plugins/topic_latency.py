@@ -53,7 +53,7 @@ class TopicLatency(Plugin):
         seen = []  # (topic, attr, excess, fresh)
         drops_alerts = []
         floors = (("latency_ms", s["latency_min_rise_ms"]), ("jitter_ms", s["jitter_min_rise_ms"]))
-        for topic in ctx.watched("topic"):
+        for topic in ctx.watched():
             age = ctx.value(topic, "age_s")
             fresh = age != age or age < since  # a message since the last sample (age unknown: yes)
             rate = ctx.value(topic, "rate_hz")

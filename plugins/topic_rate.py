@@ -42,7 +42,7 @@ class TopicRate(Plugin):
         s = ctx.settings
         last_msg = ctx.state.setdefault("last_msg", {})
         alerting = ctx.state.setdefault("alerting", set())
-        for topic in ctx.watched("topic"):
+        for topic in ctx.watched():
             rate = ctx.value(topic, "rate_hz")
             if math.isnan(rate):
                 continue  # not measured

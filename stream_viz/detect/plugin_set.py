@@ -177,7 +177,7 @@ class PluginSet:
             if lp.disabled:
                 continue
             ctx = PluginContext(t, graph, watch, history, events, diff, lp.settings, lp.state, rates,
-                                plugin=lp.name, by_kind=by_kind)
+                                plugin=lp.name, kinds=tuple(lp.plugin.kinds), by_kind=by_kind)
             items, more, problem = lp.runner.call(ctx)
             if problem is not None:
                 problems += self._failed(lp, problem)

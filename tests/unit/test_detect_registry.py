@@ -291,3 +291,27 @@ def test_the_documented_example_plugin_works(tmp_path):
     alerts, problems = ps.run(3.0, G, G.nodes, History())
     assert problems == []
     assert alerts == [Alert("process:1", "cpu_ceiling", 3.0, "warn", "cpu 70%", {"cpu": 70.0})]
+
+
+def test_declared_kinds_are_what_the_context_yields(tmp_path):
+    _write(tmp_path / "p", "kinds", '''
+        from stream_viz.detect.api import Plugin
+        class Declared(Plugin):
+            name = "declared"
+            kinds = ("topic", "node")
+            def check(self, ctx):
+                return [ctx.alert(m, "info", "seen") for m in ctx.watched()]
+        class Undeclared(Plugin):
+            name = "undeclared"
+            kinds = ("topic",)
+            def check(self, ctx):
+                return [ctx.alert(m, "info", "seen") for m in ctx.watched("node")]
+    ''')
+    ps = PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False)
+    G = _graph()
+    add_member(G, "topic:/t")
+    alerts, problems = ps.run(1.0, G, G.nodes, History())
+    assert [a.member for a in alerts] == ["topic:/t", "node:/a", "node:/b"]
+    assert [(p.plugin, p.kind) for p in problems] == [("undeclared", "run")]
+    assert "declares kinds = ('topic',); add 'node'" in problems[0].message
+    ps.close()
