@@ -32,6 +32,7 @@ class ProcessResources(Plugin):
 
     name = "process_resources"
     kinds = ("process", "node")
+    uses = (rise,)
     settings: ClassVar[dict[str, Any]] = {
         **BASELINE_SETTINGS,
         "min_samples": 8,

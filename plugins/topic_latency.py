@@ -31,6 +31,7 @@ class TopicLatency(Plugin):
 
     name = "topic_latency"
     kinds = ("topic",)
+    uses = (excess, confirm)
     settings: ClassVar[dict[str, Any]] = {
         **BASELINE_SETTINGS,
         "k": 6.0,

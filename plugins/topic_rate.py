@@ -27,6 +27,7 @@ class TopicRate(Plugin):
 
     name = "topic_rate"
     kinds = ("topic",)
+    uses = (cached_baseline,)
     settings: ClassVar[dict[str, Any]] = {
         **BASELINE_SETTINGS,
         "drop_ratio": 0.5,
@@ -46,9 +47,7 @@ class TopicRate(Plugin):
             rate = ctx.value(topic, "rate_hz")
             if math.isnan(rate):
                 continue  # not measured
-            base = cached_baseline(ctx, topic, "rate_hz", warmup_s=s["warmup_s"],
-                                   min_samples=s["min_samples"], refresh_s=s["refresh_s"],
-                                   window=s["window"], frozen=topic in alerting)
+            base = cached_baseline(ctx, topic, "rate_hz", frozen=topic in alerting)
             fired = False
             if rate > 0:
                 last_msg[topic] = (ctx.t, rate)

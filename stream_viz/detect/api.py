@@ -9,9 +9,9 @@ questions (`PluginContext.nodes_of`, `PluginContext.publishers`, ...), and makes
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import networkx as nx
 import numpy as np
@@ -26,6 +26,7 @@ from stream_viz.model.theta import SCHEMAS
 from stream_viz.records import Alert, Event
 
 API_VERSION = 1
+F = TypeVar("F", bound=Callable[..., Any])
 _INDEX = {kind: {name: i for i, name in enumerate(names)} for kind, names in SCHEMAS.items()}
 
 
@@ -198,6 +199,10 @@ class Plugin:
         The member kinds the plugin checks: ``ctx.watched()`` yields the watched members of these.
     settings : dict
         Defaults; a configured value must have the default's type.
+    uses : tuple of functions
+        The shared helpers it calls that read ``ctx.settings`` (marked with `reads_settings`, such
+        as `stream_viz.detect.baseline.rise`): a plugin whose ``settings`` lack a key one of them
+        reads is refused when it loads, not found wanting at run time.
     api_version : int
         The plugin API it was written for (`API_VERSION`).
     """
@@ -205,11 +210,34 @@ class Plugin:
     name: ClassVar[str] = ""
     kinds: ClassVar[tuple[str, ...]] = ()
     settings: ClassVar[dict[str, Any]] = {}
+    uses: ClassVar[tuple[Callable[..., Any], ...]] = ()
     api_version: ClassVar[int] = API_VERSION
 
     def check(self, ctx: PluginContext) -> Iterable[Alert]:
         """Return (or yield) the alerts for the sample in ``ctx``."""
         raise NotImplementedError
+
+
+def reads_settings(*keys: str) -> Callable[[F], F]:
+    """Mark a shared helper with the keys of ``ctx.settings`` it reads.
+
+    A plugin that lists the helper in ``uses`` must have these keys in its ``settings``
+    (`missing_settings`, checked when the plugin loads).
+    """
+    def mark(helper: F) -> F:
+        helper.settings_read = frozenset(keys)  # type: ignore[attr-defined]
+        return helper
+    return mark
+
+
+def missing_settings(plugin: type[Plugin]) -> dict[str, list[str]]:
+    """Return setting key → the helpers in ``plugin.uses`` that read it, for the keys its
+    ``settings`` lack (empty when nothing is missing)."""
+    out: dict[str, list[str]] = {}
+    for helper in plugin.uses:
+        for key in sorted(getattr(helper, "settings_read", ()) - plugin.settings.keys()):
+            out.setdefault(key, []).append(f"{helper.__module__}.{helper.__qualname__}")
+    return out
 
 
 def watched_by_kind(G: nx.MultiDiGraph, watch: Iterable[str]) -> dict[str, list[str]]:

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from stream_viz.detect.api import API_VERSION, Plugin
+from stream_viz.detect.api import API_VERSION, Plugin, missing_settings
 from stream_viz.detect.problems import PluginProblem, describe, failing_line
 from stream_viz.model.ids import KINDS
 
@@ -213,6 +213,13 @@ def _declaration_problem(cls: type[Plugin]) -> str | None:
     for key, value in cls.settings.items():
         if not isinstance(value, _SETTING_TYPES):
             return f"setting {key!r}: default {value!r} is not bool/int/float/str/list/None"
+    if not isinstance(cls.uses, tuple | list) or not all(callable(h) for h in cls.uses):
+        return f"uses must be a tuple of helper functions, not {cls.uses!r}"
+    missing = missing_settings(cls)
+    if missing:
+        readers = sorted({h for hs in missing.values() for h in hs})
+        return (f"settings lack {', '.join(map(repr, missing))}, read by {', '.join(readers)} "
+                f"(listed in uses): add defaults for them")
     if cls.check is Plugin.check:
         return "does not implement check(ctx)"
     return None

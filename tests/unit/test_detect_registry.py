@@ -315,3 +315,62 @@ def test_declared_kinds_are_what_the_context_yields(tmp_path):
     assert [(p.plugin, p.kind) for p in problems] == [("undeclared", "run")]
     assert "declares kinds = ('topic',); add 'node'" in problems[0].message
     ps.close()
+
+
+def test_settings_the_helpers_read_are_checked_at_load(tmp_path):
+    folder = tmp_path / "p"
+    _write(folder, "good", GOOD)
+    _write(folder, "risen", '''
+        from stream_viz.detect.api import Plugin
+        from stream_viz.detect.baseline import BASELINE_SETTINGS, rise
+
+        class Risen(Plugin):
+            name = "risen"
+            kinds = ("node",)
+            uses = (rise,)
+            settings = {**BASELINE_SETTINGS, "k": 5.0}  # no "confirm", which rise reads
+
+            def check(self, ctx):
+                return []
+
+        class Whole(Plugin):
+            name = "whole"
+            kinds = ("node",)
+            uses = (rise,)
+            settings = {**BASELINE_SETTINGS, "k": 5.0, "confirm": 2}
+
+            def check(self, ctx):
+                return [ctx.alert("node:/a", "info", str(ctx.settings["confirm"]))]
+
+        class NotHelpers(Plugin):
+            name = "not_helpers"
+            kinds = ("node",)
+            uses = "rise"
+
+            def check(self, ctx):
+                return []
+    ''')
+    ps = PluginSet.load([folder], entry_points=False, cwd_plugins=False)
+    assert ps.names == ["good", "whole"]
+    by = {p.plugin: p for p in ps.load_problems}
+    assert set(by) == {"risen", "not_helpers"}
+    assert by["risen"].kind == "validate" and by["risen"].where == str(folder / "risen.py")
+    assert by["risen"].message == ("settings lack 'confirm', read by stream_viz.detect.baseline.rise "
+                                   "(listed in uses): add defaults for them")
+    assert str(by["risen"]).startswith(f"plugin 'risen' ({folder / 'risen.py'}): validate: "
+                                       "settings lack 'confirm'")
+    assert "uses must be a tuple of helper functions" in by["not_helpers"].message
+    alerts, problems = _run(ps)
+    assert problems == []
+    assert [(a.plugin, a.message) for a in alerts if a.plugin == "whole"] == [("whole", "2")]
+    ps.close()
+
+
+def test_the_builtins_declare_the_settings_their_helpers_read():
+    from stream_viz.detect.api import missing_settings
+
+    found, _, _ = discover(cwd_plugins=False)
+    uses = {n: [h.__name__ for h in type(p).uses] for p, n, _ in found if type(p).uses}
+    assert uses == {"process_resources": ["rise"], "topic_latency": ["excess", "confirm"],
+                    "topic_rate": ["cached_baseline"]}
+    assert all(missing_settings(type(p)) == {} for p, _, _ in found)
