@@ -81,6 +81,7 @@ class PluginSet:
         self.max_failures = max_failures
         self.load_problems = list(load_problems)
         self.plugins: list[LoadedPlugin] = []
+        self._settings: dict[str, dict[str, Any]] = {}  # of every plugin found, switched off too
         settings = dict(settings or {})
         where_cfg = config_path or "the configuration"
         for inst, name, where in plugins:
@@ -94,6 +95,7 @@ class PluginSet:
             runner = Runner(inst, name, where, timeout_s=timeout_s, limit=max_alerts_per_call,
                             isolate=isolate)
             self.plugins.append(LoadedPlugin(name, inst, where, merged, runner))
+            self._settings[name] = merged
 
     @classmethod
     def load(
@@ -131,8 +133,10 @@ class PluginSet:
         keep = [p for p in found if (not enable or p[1] in enable) and p[1] not in disable]
         settings = {k: v for k, v in (settings or {}).items() if k in names}
         # Validate settings of plugins switched off too, so a typo never hides.
-        cls(found, settings, config_path=config_path)
-        return cls(keep, settings, config_path=config_path, load_problems=problems, **kwargs)
+        every = cls(found, settings, config_path=config_path)
+        kept = cls(keep, settings, config_path=config_path, load_problems=problems, **kwargs)
+        kept._settings = every._settings | kept._settings
+        return kept
 
     @classmethod
     def from_config(cls, config: Any, **kwargs: Any) -> PluginSet:
@@ -140,6 +144,15 @@ class PluginSet:
         p = config.plugins
         return cls.load(p.paths, enable=p.enable, disable=p.disable, settings=p.settings,
                         config_path=str(config.path) if config.path else None, **kwargs)
+
+    def settings_of(self, name: str) -> dict[str, Any] | None:
+        """Return the settings (defaults and configured values) of the plugin ``name``, also when
+        it is switched off; None when no such plugin was found.
+
+        The monitor reads ``process_resources``'s: they also tune the process evidence
+        (`stream_viz.detect.process.process_anomalies`).
+        """
+        return self._settings.get(name)
 
     @property
     def names(self) -> list[str]:

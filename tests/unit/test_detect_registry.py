@@ -371,6 +371,6 @@ def test_the_builtins_declare_the_settings_their_helpers_read():
 
     found, _, _ = discover(cwd_plugins=False)
     uses = {n: [h.__name__ for h in type(p).uses] for p, n, _ in found if type(p).uses}
-    assert uses == {"process_resources": ["rise"], "topic_latency": ["excess", "confirm"],
+    assert uses == {"process_resources": ["symptoms"], "topic_latency": ["excess", "confirm"],
                     "topic_rate": ["cached_baseline"]}
     assert all(missing_settings(type(p)) == {} for p, _, _ in found)
