@@ -374,3 +374,32 @@ def test_the_builtins_declare_the_settings_their_helpers_read():
     assert uses == {"process_resources": ["symptoms"], "topic_latency": ["excess", "confirm"],
                     "topic_rate": ["cached_baseline"]}
     assert all(missing_settings(type(p)) == {} for p, _, _ in found)
+
+
+def test_the_documented_helper_example_works(tmp_path):
+    from pathlib import Path
+
+    from stream_viz.detect.api import record_history
+    from stream_viz.model.graph import add_tree_edge
+    from stream_viz.model.theta import make_theta
+
+    doc = (Path(__file__).parents[2] / "docs" / "plugins.md").read_text()
+    code = doc.split("```python\n")[2].split("```", 1)[0]
+    assert "class ThreadRise" in code
+    _write(tmp_path / "my_plugins", "thread_rise", code)
+    ps = PluginSet.load([tmp_path / "my_plugins"], entry_points=False, cwd_plugins=False)
+    assert ps.load_problems == []
+    G = new_graph()
+    add_member(G, "process:1")
+    add_member(G, "node:/a")
+    add_tree_edge(G, "process:1", "node:/a")
+    hist, seen = History(), []
+    for t in range(16):
+        G.nodes["process:1"]["theta"] = make_theta("process", {"threads": 4.0 if t < 13 else 40.0})
+        record_history(hist, G, float(t))
+        alerts, problems = ps.run(float(t), G, G.nodes, hist)
+        assert problems == []
+        seen += [(a.t, a.member, a.message) for a in alerts]
+    # 13 samples of 4 threads (past the 10 s warm-up), then 40: confirmed on the second sample.
+    assert seen == [(14.0, "node:/a", "40 threads, normally 4"), (15.0, "node:/a", "40 threads, normally 4")]
+    ps.close()
