@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 from stream_viz.detect.api import record_history
-from stream_viz.detect.registry import PluginSet
+from stream_viz.detect.plugin_set import PluginSet
 from stream_viz.detect.store import AlertStore
 from stream_viz.model.diff import GraphDiff
 from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph

@@ -9,7 +9,7 @@ summary per time slice (no growth = the last slice looks like the first).
 
 ``storm``: a flood plugin offering ``--rate`` alerts per second (one call per simulated second)
 for ``--seconds`` through `PluginSet` → `AlertStore` (a real SQLite file) → `RcaEngine`, every
-member watched, side by side with the registry's cap per call (default 200) and without a cap.
+member watched, side by side with the plugin set's cap per call (default 200) and without a cap.
 Counts what each stage passes on and sheds; "keeps up" means one second of alerts is handled in
 less than one second of wall time.
 
@@ -162,7 +162,7 @@ def _summary_duration(rows, what, minutes, period, csv_path, db, rrd_parts) -> N
 def run_storm(rate: int, seconds: int, members: int) -> None:
     from stream_viz.config import load_config
     from stream_viz.detect.api import Plugin
-    from stream_viz.detect.registry import PluginSet
+    from stream_viz.detect.plugin_set import PluginSet
     from stream_viz.detect.store import AlertStore
     from stream_viz.model.diff import GraphDiff
     from stream_viz.model.history import History

@@ -45,7 +45,7 @@ STAGES = [
     ("History.add", "stream_viz.model.history", "History.add"),
     ("process_anomalies", "stream_viz.monitor", "process_anomalies"),
     ("initial_watchlist", "stream_viz.monitor", "initial_watchlist"),
-    ("PluginSet.run (main thread's part)", "stream_viz.detect.registry", "PluginSet.run"),
+    ("PluginSet.run (main thread's part)", "stream_viz.detect.plugin_set", "PluginSet.run"),
     ("AlertStore.add", "stream_viz.detect.store", "AlertStore.add"),
     ("AlertStore.add_snapshot", "stream_viz.detect.store", "AlertStore.add_snapshot"),
     ("RcaEngine.update", "stream_viz.rca.engine", "RcaEngine.update"),

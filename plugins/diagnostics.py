@@ -7,13 +7,13 @@ from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.episodes import RANK
-from stream_viz.records import Alert
+from stream_viz.records import Alert, Event
 
 # DiagnosticStatus levels: OK=0, WARN=1, ERROR=2, STALE=3.
 _BY_NUMBER = {0: "ok", 1: "warn", 2: "error", 3: "stale"}
 
 
-def diag_level(event) -> str:
+def diag_level(event: Event) -> str:
     """Return ``ok``, ``warn``, ``error`` or ``stale`` for a ``diag`` event."""
     raw = event.data.get("level")
     if isinstance(raw, bytes) and len(raw) == 1:
@@ -48,18 +48,17 @@ class Diagnostics(Plugin):
                 continue
             sev = s["stale_severity"] if level == "stale" else level
             sev = sev if sev in RANK else "warn"
-            name = e.data.get("name", "")
             member = _named_node(ctx, e) or e.member
             prev_sev, texts = worst.get(member, ("info", []))
-            texts.append(f"{name}: {level.upper()} {e.text}".strip())
+            texts.append(f"{e.data.get('name', '')}: {level.upper()} {e.text}".strip())
             worst[member] = (sev if RANK[sev] > RANK[prev_sev] else prev_sev, texts)
         for member, (sev, texts) in sorted(worst.items()):
-            yield ctx.alert(member, sev, "diagnostics " + "; ".join(texts[:3])
-                            + (f" (+{len(texts) - 3} more)" if len(texts) > 3 else ""),
+            more = f" (+{len(texts) - 3} more)" if len(texts) > 3 else ""
+            yield ctx.alert(member, sev, "diagnostics " + "; ".join(texts[:3]) + more,
                             symptom="diagnostics", statuses=len(texts))
 
 
-def _named_node(ctx: PluginContext, e) -> str | None:
+def _named_node(ctx: PluginContext, e: Event) -> str | None:
     """The node a status is about when its hardware_id or name is a node of the graph.
 
     An aggregator or monitor node often publishes the statuses of others: the fault is in the
@@ -70,6 +69,6 @@ def _named_node(ctx: PluginContext, e) -> str | None:
         if not value:
             continue
         member = "node:" + (value if value.startswith("/") else "/" + value)
-        if member in ctx.graph and ctx.graph.nodes[member].get("kind") == "node":
+        if ctx.attr(member, "kind") == "node":
             return member
     return None

@@ -6,72 +6,10 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import Any, ClassVar
 
+import networkx as nx
+
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.model.graph import FLOW
-from stream_viz.model.queries import publishers, subscribers
 from stream_viz.records import Alert
-
-
-def _policy(qos: Any, key: str) -> str:
-    """Return a QoS policy: ``reliable``, ``best_effort``, ``transient_local``, ``volatile`` or ''."""
-    if not isinstance(qos, dict):
-        return ""
-    raw = qos.get(key)
-    if isinstance(raw, int) and not isinstance(raw, bool):
-        # rclpy enums: reliability RELIABLE=1, BEST_EFFORT=2; durability TRANSIENT_LOCAL=1, VOLATILE=2.
-        return {("reliability", 1): "reliable", ("reliability", 2): "best_effort",
-                ("durability", 1): "transient_local", ("durability", 2): "volatile"}.get((key, raw), "")
-    text = str(raw or "").lower()
-    for word in ("best_effort", "reliable", "transient_local", "volatile"):
-        if word in text:
-            return word
-    return ""
-
-
-def incompatible(pub_qos: Any, sub_qos: Any) -> list[str]:
-    """Return why a publisher with ``pub_qos`` cannot serve a subscriber with ``sub_qos``."""
-    why = []
-    if _policy(sub_qos, "reliability") == "reliable" and _policy(pub_qos, "reliability") == "best_effort":
-        why.append("reliable subscriber, best-effort publisher")
-    if _policy(sub_qos, "durability") == "transient_local" and _policy(pub_qos, "durability") == "volatile":
-        why.append("transient-local subscriber, volatile publisher")
-    return why
-
-
-def _endpoints(G: Any, topic: str) -> tuple[dict[str, list[Any]], dict[str, list[Any]]]:
-    """Publisher and subscriber nodes of ``topic`` with their QoS profiles.
-
-    The topic attribute ``qos`` (a list of ``{"node", "role", "reliability", "durability", …}``,
-    one per endpoint, as the collector writes it) is used when present, else an edge's ``qos``.
-    """
-    pubs: dict[str, list[Any]] = {u: [] for u in publishers(G, topic)}
-    subs: dict[str, list[Any]] = {v: [] for v in subscribers(G, topic)}
-    for q in G.nodes[topic].get("qos") or ():
-        if not isinstance(q, dict):
-            continue
-        side = pubs if q.get("role") == "pub" else subs if q.get("role") == "sub" else None
-        node = q.get("node", "")
-        member = node if str(node).startswith("node:") else f"node:{node}"
-        if side is not None and member in side:
-            side[member].append(q)
-    for u in pubs:
-        q = G.edges[u, topic, FLOW].get("qos")
-        if q is not None and not pubs[u]:
-            pubs[u].append(q)
-    for v in subs:
-        q = G.edges[topic, v, FLOW].get("qos")
-        if q is not None and not subs[v]:
-            subs[v].append(q)
-    return pubs, subs
-
-
-def discovery_burst(G: Any, added: Any, least: int, ratio: float) -> bool:
-    """Return True if the ``added`` members hold at least ``least`` nodes and ``ratio`` of the
-    nodes of ``G``: the graph is still being discovered."""
-    n = sum(1 for m in added if str(m).startswith("node:"))
-    if n < least:  # the usual sample: no need to count the graph's nodes
-        return False
-    return n >= ratio * sum(1 for _, kind in G.nodes(data="kind") if kind == "node")
 
 
 class GraphAnomalies(Plugin):
@@ -97,10 +35,9 @@ class GraphAnomalies(Plugin):
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         s = ctx.settings
-        G = ctx.graph
         if s["duplicates"]:
             for node in ctx.watched("node"):
-                n = G.nodes[node].get("instances", 1)
+                n = ctx.attr(node, "instances", 1)
                 if isinstance(n, int) and n > 1:
                     yield ctx.alert(node, "error", f"{n} nodes share this name", symptom="duplicate_name",
                                     instances=n)
@@ -108,10 +45,10 @@ class GraphAnomalies(Plugin):
         if discovery_burst(ctx.graph, ctx.diff.added_members, s["burst_min"], s["burst_ratio"]):
             ctx.state["settled_from"] = ctx.t
         settled_from = ctx.state.get("settled_from", -float("inf"))
-        current = set()
-        for topic, orphan, subs, qos_bad in self._analyse(ctx):
+        orphans = set()
+        for topic, orphan, subs, qos_bad in _analyse(ctx):
             if orphan and s["no_publisher"]:
-                current.add(topic)
+                orphans.add(topic)
                 since = max(orphan_since.setdefault(topic, ctx.t), settled_from)
                 if ctx.t - since >= s["grace_s"]:
                     for v in subs:
@@ -121,36 +58,98 @@ class GraphAnomalies(Plugin):
                 for v, bad in qos_bad:
                     yield ctx.alert(v, "error", f"QoS incompatible on {topic}: " + "; ".join(bad),
                                     symptom="qos_incompatible", topic=topic)
-        for topic in list(orphan_since):
-            if topic not in current:
-                del orphan_since[topic]
+        for topic in set(orphan_since) - orphans:
+            del orphan_since[topic]
 
-    @staticmethod
-    def _analyse(ctx: PluginContext) -> list[tuple[str, bool, list[str], list[tuple[str, list[str]]]]]:
-        """Per topic with watched subscribers: orphaned?, the subscribers, QoS mismatches.
 
-        The structure only changes with the graph, so this is redone only when the diff or the
-        watchlist changed, or every ``recheck_s``; cheap on 1,000 members.
-        """
-        s, G = ctx.settings, ctx.graph
-        cached = ctx.state.get("analysis")
-        if (cached is not None and not ctx.diff and cached[0] == ctx.watch and ctx.t < cached[1]):
-            return cached[2]
-        ignore = {t if t.startswith("topic:") else f"topic:{t}" for t in s["ignore_topics"]}
-        out = []
-        for topic, kind in G.nodes(data="kind"):
-            if kind != "topic" or topic in ignore:
-                continue
-            pubs, subs = _endpoints(G, topic)
-            subs = {v: q for v, q in subs.items() if topic in ctx.watch or v in ctx.watch}
-            if not subs:
-                continue
-            qos_bad = []
-            for v in sorted(subs):
-                bad = sorted({f"{u}: {w}" for u, pqs in pubs.items() for pq in pqs
-                              for sq in subs[v] for w in incompatible(pq, sq)})
-                if bad:
-                    qos_bad.append((v, bad))
-            out.append((topic, not pubs, sorted(subs), qos_bad))
-        ctx.state["analysis"] = (ctx.watch, ctx.t + s["recheck_s"], out)
-        return out
+def _analyse(ctx: PluginContext) -> list[tuple[str, bool, list[str], list[tuple[str, list[str]]]]]:
+    """Per topic with watched subscribers: orphaned?, the subscribers, QoS mismatches.
+
+    The structure only changes with the graph, so this is redone only when the diff or the
+    watchlist changed, or every ``recheck_s``; cheap on 1,000 members.
+    """
+    cached = ctx.state.get("analysis")
+    if cached is not None and not ctx.diff and cached[0] == ctx.watch and ctx.t < cached[1]:
+        return cached[2]
+    ignore = {t if t.startswith("topic:") else f"topic:{t}" for t in ctx.settings["ignore_topics"]}
+    out = []
+    for topic in ctx.members("topic"):
+        if topic in ignore:
+            continue
+        pubs, subs = _endpoints(ctx, topic)
+        subs = {v: q for v, q in subs.items() if topic in ctx.watch or v in ctx.watch}
+        if not subs:
+            continue
+        qos_bad = []
+        for v in sorted(subs):
+            bad = sorted({f"{u}: {w}" for u, pqs in pubs.items() for pq in pqs
+                          for sq in subs[v] for w in incompatible(pq, sq)})
+            if bad:
+                qos_bad.append((v, bad))
+        out.append((topic, not pubs, sorted(subs), qos_bad))
+    ctx.state["analysis"] = (ctx.watch, ctx.t + ctx.settings["recheck_s"], out)
+    return out
+
+
+def _endpoints(ctx: PluginContext, topic: str) -> tuple[dict[str, list[Any]], dict[str, list[Any]]]:
+    """Publisher and subscriber nodes of ``topic`` with their QoS profiles.
+
+    The topic attribute ``qos`` (a list of ``{"node", "role", "reliability", "durability", …}``,
+    one per endpoint, as the collector writes it) is used when present, else an edge's ``qos``.
+    """
+    pubs: dict[str, list[Any]] = {u: [] for u in ctx.publishers(topic)}
+    subs: dict[str, list[Any]] = {v: [] for v in ctx.subscribers(topic)}
+    for q in ctx.attr(topic, "qos") or ():
+        if not isinstance(q, dict):
+            continue
+        side = pubs if q.get("role") == "pub" else subs if q.get("role") == "sub" else None
+        node = q.get("node", "")
+        member = node if str(node).startswith("node:") else f"node:{node}"
+        if side is not None and member in side:
+            side[member].append(q)
+    for u in pubs:
+        pubs[u] = pubs[u] or _edge_qos(ctx, u, topic)
+    for v in subs:
+        subs[v] = subs[v] or _edge_qos(ctx, topic, v)
+    return pubs, subs
+
+
+def _edge_qos(ctx: PluginContext, source: str, target: str) -> list[Any]:
+    """The QoS profile on the data-flow edge ``source → target``, as a list of none or one."""
+    q = ctx.flow_edge(source, target).get("qos")
+    return [] if q is None else [q]
+
+
+def incompatible(pub_qos: Any, sub_qos: Any) -> list[str]:
+    """Return why a publisher with ``pub_qos`` cannot serve a subscriber with ``sub_qos``."""
+    why = []
+    if _policy(sub_qos, "reliability") == "reliable" and _policy(pub_qos, "reliability") == "best_effort":
+        why.append("reliable subscriber, best-effort publisher")
+    if _policy(sub_qos, "durability") == "transient_local" and _policy(pub_qos, "durability") == "volatile":
+        why.append("transient-local subscriber, volatile publisher")
+    return why
+
+
+def _policy(qos: Any, key: str) -> str:
+    """Return a QoS policy: ``reliable``, ``best_effort``, ``transient_local``, ``volatile`` or ''."""
+    if not isinstance(qos, dict):
+        return ""
+    raw = qos.get(key)
+    if isinstance(raw, int) and not isinstance(raw, bool):
+        # rclpy enums: reliability RELIABLE=1, BEST_EFFORT=2; durability TRANSIENT_LOCAL=1, VOLATILE=2.
+        return {("reliability", 1): "reliable", ("reliability", 2): "best_effort",
+                ("durability", 1): "transient_local", ("durability", 2): "volatile"}.get((key, raw), "")
+    text = str(raw or "").lower()
+    for word in ("best_effort", "reliable", "transient_local", "volatile"):
+        if word in text:
+            return word
+    return ""
+
+
+def discovery_burst(G: nx.MultiDiGraph, added: Any, least: int, ratio: float) -> bool:
+    """Return True if the ``added`` members hold at least ``least`` nodes and ``ratio`` of the
+    nodes of ``G``: the graph is still being discovered."""
+    n = sum(1 for m in added if str(m).startswith("node:"))
+    if n < least:  # the usual sample: no need to count the graph's nodes
+        return False
+    return n >= ratio * sum(1 for _, kind in G.nodes(data="kind") if kind == "node")

@@ -6,8 +6,6 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.model.ids import kind_of
-from stream_viz.model.queries import nodes_of_process
 from stream_viz.records import Alert
 
 
@@ -26,28 +24,20 @@ class MemberGone(Plugin):
     settings: ClassVar[dict[str, Any]] = {"left_severity": "warn", "watched_only": False}
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
-        s = ctx.settings
         exited = ctx.state.setdefault("exited", set())
 
         def ok(m: str) -> bool:
-            return not s["watched_only"] or m in ctx.watch
+            return not ctx.settings["watched_only"] or m in ctx.watch
 
         said: set[str] = set()
         for e in ctx.events:
             if e.kind == "exit":
-                # The collector sends one exit event per node of the process and one for the
-                # process; a process with nodes is reported on its nodes.
-                targets = [e.member]
-                if kind_of(e.member) == "process":
-                    nodes = set(nodes_of_process(ctx.graph, e.member, by_pid=True))
-                    nodes |= set(e.data.get("nodes", ()))
-                    targets = sorted(nodes) or [e.member]
-                for m in targets:
+                for m in _exited_members(ctx, e):
                     exited.add(m)
                     if m in said or not ok(m):
                         continue
                     said.add(m)
-                    sev = "error" if kind_of(m) == "node" else e.level
+                    sev = "error" if ctx.kind(m) == "node" else e.level
                     yield ctx.alert(m, sev, f"process died: {e.text or 'exited'}", symptom="exit",
                                     process=e.data.get("process", e.member),
                                     clean=not e.data.get("still_listed", ()))
@@ -55,10 +45,20 @@ class MemberGone(Plugin):
                 yield ctx.alert(e.member, "warn", f"restarted: {e.text or 'new process'}", symptom="restart",
                                 **e.data)
         for m in sorted(ctx.diff.removed_members):
-            if kind_of(m) == "node" and m not in exited and ok(m):
-                yield ctx.alert(m, s["left_severity"], "left the graph", symptom="left")
-        for m in sorted(ctx.diff.added_members):
-            exited.discard(m)  # back again: a later departure is news
-        for m, d in ctx.graph.nodes(data=True):
-            if d.get("kind") == "node" and d.get("alive") is False and m not in said and ok(m):
+            if ctx.kind(m) == "node" and m not in exited and ok(m):
+                yield ctx.alert(m, ctx.settings["left_severity"], "left the graph", symptom="left")
+        exited.difference_update(ctx.diff.added_members)  # back again: a later departure is news
+        for m in ctx.members("node"):
+            if ctx.attr(m, "alive") is False and m not in said and ok(m):
                 yield ctx.alert(m, "error", "not alive", symptom="not_alive")
+
+
+def _exited_members(ctx: PluginContext, e: Any) -> list[str]:
+    """The members an ``exit`` event is reported on: a process's nodes, else the member itself.
+
+    The collector sends one exit event per node of the process and one for the process.
+    """
+    if ctx.kind(e.member) != "process":
+        return [e.member]
+    nodes = set(ctx.nodes_of(e.member, by_pid=True)) | set(e.data.get("nodes", ()))
+    return sorted(nodes) or [e.member]

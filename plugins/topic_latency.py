@@ -31,6 +31,7 @@ class TopicLatency(Plugin):
 
     name = "topic_latency"
     kinds = ("topic",)
+    uses = (excess, confirm)
     settings: ClassVar[dict[str, Any]] = {
         **BASELINE_SETTINGS,
         "k": 6.0,
@@ -51,26 +52,15 @@ class TopicLatency(Plugin):
         since = ctx.t - ctx.state.get("t_prev", -math.inf)
         ctx.state["t_prev"] = ctx.t
         seen = []  # (topic, attr, excess, fresh)
-        drops_alerts = []
-        floors = (("latency_ms", s["latency_min_rise_ms"]), ("jitter_ms", s["jitter_min_rise_ms"]))
-        for topic in ctx.watched("topic"):
+        drops = []
+        for topic in ctx.watched():
             age = ctx.value(topic, "age_s")
             fresh = age != age or age < since  # a message since the last sample (age unknown: yes)
             rate = ctx.value(topic, "rate_hz")
-            for attr, floor in floors:
-                if rate > 0:
-                    # Scheduling noise on a busy host scales with the period: a 20 Hz topic's
-                    # jitter must rise by half its 50 ms period before it counts; latency by a
-                    # tenth (30 ms more on a 1 Hz topic is 3 % of the data's age, on 100 Hz 3 periods).
-                    ratio = s["jitter_period_ratio"] if attr == "jitter_ms" else s["latency_period_ratio"]
-                    floor = max(floor, ratio * 1000.0 / rate)
-                seen.append((topic, attr, excess(ctx, topic, attr, floor, alerting), fresh))
-            drops = ctx.value(topic, "drops_per_s")
-            if not math.isnan(drops):
-                limit = max(s["drops_min_per_s"], s["drops_ratio"] * (0.0 if math.isnan(rate) else rate))
-                if streak(ctx.state, (topic, "drops"), drops >= limit, fresh) >= s["confirm"]:
-                    drops_alerts.append(ctx.alert(topic, "warn", f"{drops:.3g} messages/s dropped",
-                                                  symptom="drops", drops_per_s=drops))
+            for attr in ("latency_ms", "jitter_ms"):
+                ex = excess(ctx, topic, attr, _least_rise(s, attr, rate), alerting)
+                seen.append((topic, attr, ex, fresh))
+            drops += _drops(ctx, topic, rate, fresh)
         stall = common_mode(seen, s["common_mode_min"], s["common_mode_ratio"])
         if stall:
             ctx.state["common_mode"] = ctx.state.get("common_mode", 0) + 1
@@ -81,7 +71,33 @@ class TopicLatency(Plugin):
                 what = attr.removesuffix("_ms")
                 yield ctx.alert(topic, "warn", f"{what} {value:.1f} ms, normally {med:.1f} ms",
                                 symptom=f"{what}_rise", value_ms=value, baseline_ms=med)
-        yield from drops_alerts
+        yield from drops
+
+
+def _least_rise(s: dict[str, Any], attr: str, rate: float) -> float:
+    """The least rise of ``latency_ms`` / ``jitter_ms`` that counts on a topic of ``rate`` Hz.
+
+    Scheduling noise on a busy host scales with the period: a 20 Hz topic's jitter must rise by
+    half its 50 ms period before it counts; latency by a tenth (30 ms more on a 1 Hz topic is
+    3 % of the data's age, on 100 Hz 3 periods).
+    """
+    what = attr.removesuffix("_ms")
+    floor = s[f"{what}_min_rise_ms"]
+    if rate > 0:
+        floor = max(floor, s[f"{what}_period_ratio"] * 1000.0 / rate)
+    return floor
+
+
+def _drops(ctx: PluginContext, topic: str, rate: float, fresh: bool) -> list[Alert]:
+    """``drops_per_s ≥ max(drops_min_per_s, drops_ratio × rate)`` for ``confirm`` fresh samples."""
+    s = ctx.settings
+    drops = ctx.value(topic, "drops_per_s")
+    if math.isnan(drops):
+        return []
+    limit = max(s["drops_min_per_s"], s["drops_ratio"] * (0.0 if math.isnan(rate) else rate))
+    if streak(ctx.state, (topic, "drops"), drops >= limit, fresh) < s["confirm"]:
+        return []
+    return [ctx.alert(topic, "warn", f"{drops:.3g} messages/s dropped", symptom="drops", drops_per_s=drops)]
 
 
 def common_mode(seen: list[tuple[str, str, tuple[float, float, bool] | None, bool]], least: int,

@@ -19,9 +19,10 @@ from typing import Any
 
 from stream_viz.collect.collector import Collector
 from stream_viz.config import Config, load_config
-from stream_viz.detect.registry import PluginSet
+from stream_viz.detect.plugin_set import PluginSet
+from stream_viz.detect.process import process_anomalies
 from stream_viz.detect.store import AlertStore, default_db_path
-from stream_viz.detect.watchlist import initial_watchlist, process_anomalies
+from stream_viz.detect.watchlist import initial_watchlist
 from stream_viz.live_view import LiveView
 from stream_viz.model.graph import new_graph
 from stream_viz.model.history import History
@@ -97,7 +98,9 @@ class Monitor:
         if fresh:
             self.store.add_unreadable(t, fresh)
         self._unreadable = dict(sample.unreadable)
-        anomalous = process_anomalies(sample.graph, self.history) if self.samples > 1 else set()
+        # [plugins.process_resources] tunes this evidence and the plugin alike (detect/process.py).
+        rule = self.plugins.settings_of("process_resources")
+        anomalous = process_anomalies(sample.graph, self.history, rule) if self.samples > 1 else set()
         anomalous.discard(self.own_process)
         added = self._watch_additions(sample.graph, anomalous) - self.external_watch
         if added:

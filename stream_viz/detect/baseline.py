@@ -3,6 +3,13 @@
 Pure functions over numpy arrays, plus `cached_baseline`, which keeps a baseline in a plugin's
 private state and refreshes it only every ``refresh_s`` and never while the member is alerting,
 so an ongoing fault does not become the new normal and 1,000 members stay cheap.
+
+The helpers that take a plugin's ``ctx`` read their parameters from ``ctx.settings``; each is
+marked with the keys it reads (`stream_viz.detect.api.reads_settings`), and a plugin lists the
+ones it calls in ``uses``, so a missing key is a load problem, not a run-time KeyError::
+
+    uses = (rise,)
+    settings = {**BASELINE_SETTINGS, "k": 5.0, "confirm": 2}
 """
 
 from __future__ import annotations
@@ -11,11 +18,13 @@ from typing import Any
 
 import numpy as np
 
+from stream_viz.detect.api import reads_settings
+
 MAD_TO_SIGMA = 1.4826
 
 
-# The settings every plugin that uses `cached_baseline` / `rise` takes (its own defaults
-# override these): how long to learn, how many samples, how often to refresh, over how many.
+# The settings `cached_baseline` reads, with defaults a plugin may override: how long to learn,
+# how many samples, how often to refresh, over how many.
 BASELINE_SETTINGS: dict[str, float | int] = {
     "warmup_s": 10.0, "min_samples": 5, "refresh_s": 10.0, "window": 120,
 }
@@ -43,31 +52,20 @@ def slope(times: np.ndarray, values: np.ndarray) -> float:
     return float(np.dot(t, v - v.mean()) / np.dot(t, t))
 
 
-def cached_baseline(
-    ctx: Any,
-    member: str,
-    attr: str,
-    *,
-    warmup_s: float,
-    min_samples: int,
-    refresh_s: float,
-    window: int,
-    frozen: bool = False,
-) -> tuple[float, float, int] | None:
+@reads_settings(*BASELINE_SETTINGS)
+def cached_baseline(ctx: Any, member: str, attr: str, *,
+                    frozen: bool = False) -> tuple[float, float, int] | None:
     """Return ``(median, sigma, n)`` of ``member``'s own past ``attr``, or None while warming up.
 
     Parameters
     ----------
     ctx : PluginContext
-        The call's context (its ``state`` holds the cache).
+        The call's context: its ``state`` holds the cache, its ``settings`` give ``warmup_s``
+        and ``min_samples`` (no baseline before the member has been seen this long with this
+        many finite samples), ``refresh_s`` (recompute at most this often) and ``window`` (use
+        the last this many samples).
     member, attr : str
         The member and θ attribute.
-    warmup_s, min_samples : float, int
-        No baseline before the member has been seen this long with this many finite samples.
-    refresh_s : float
-        Recompute at most this often.
-    window : int
-        Use the last this many samples.
     frozen : bool
         Keep the cached value (the member is alerting: do not learn the fault).
     """
@@ -76,6 +74,8 @@ def cached_baseline(
     hit = cache.get(key)  # (next refresh time, baseline or None)
     if hit is not None and (ctx.t < hit[0] or (frozen and hit[1] is not None)):
         return hit[1]
+    s = ctx.settings
+    warmup_s, min_samples, refresh_s, window = s["warmup_s"], s["min_samples"], s["refresh_s"], s["window"]
     times, values = ctx.past(member, attr, last=window)
     if len(times) == 0 or ctx.t - times[0] < warmup_s:
         # Warming up: look again when the warm-up can be over, not on every call.
@@ -88,6 +88,7 @@ def cached_baseline(
         return cache[key][1]
     cache[key] = (ctx.t + refresh_s, (med, sigma, n))
     return med, sigma, n
+
 
 def streak(state: dict[str, Any], key: Any, condition: bool, fresh: bool = True) -> int:
     """Count consecutive calls with ``condition`` true for ``key`` (0 once it is false).
@@ -104,6 +105,7 @@ def streak(state: dict[str, Any], key: Any, condition: bool, fresh: bool = True)
     return 0
 
 
+@reads_settings("k", *BASELINE_SETTINGS)
 def excess(ctx: Any, member: str, attr: str, floor: float, alerting: set) -> tuple[float, float, bool] | None:
     """Return ``(value, median, exceeded)`` of ``member``'s ``attr`` against its own baseline.
 
@@ -112,18 +114,22 @@ def excess(ctx: Any, member: str, attr: str, floor: float, alerting: set) -> tup
     ``refresh_s``, ``window``) is frozen while ``(member, attr)`` is in ``alerting``. None while
     warming up or when the value is missing (NaN).
     """
-    s = ctx.settings
     value = ctx.value(member, attr)
     if value != value:  # NaN: not measured this sample
         return None
-    base = cached_baseline(ctx, member, attr, warmup_s=s["warmup_s"], min_samples=s["min_samples"],
-                           refresh_s=s["refresh_s"], window=s["window"], frozen=(member, attr) in alerting)
+    base = cached_baseline(ctx, member, attr, frozen=(member, attr) in alerting)
     if base is None:
         return None
     med, sigma, _ = base
-    return value, med, value - med >= max(s["k"] * sigma, floor)
+    return value, med, exceeds(value, med, sigma, ctx.settings["k"], floor)
 
 
+def exceeds(value: float, median: float, sigma: float, k: float, floor: float) -> bool:
+    """Return True if ``value`` is risen above a baseline: ``value - median ≥ max(k·σ, floor)``."""
+    return value - median >= max(k * sigma, floor)
+
+
+@reads_settings("confirm")
 def confirm(ctx: Any, member: str, attr: str, seen: tuple[float, float, bool] | None, alerting: set,
             fresh: bool = True) -> tuple[float, float] | None:
     """Return ``(value, median)`` once `excess` ``seen`` has held for ``confirm`` fresh samples in a
@@ -141,6 +147,7 @@ def confirm(ctx: Any, member: str, attr: str, seen: tuple[float, float, bool] | 
     return None
 
 
+@reads_settings("k", "confirm", *BASELINE_SETTINGS)
 def rise(ctx: Any, member: str, attr: str, floor: float, alerting: set,
          fresh: bool = True) -> tuple[float, float] | None:
     """Return ``(value, median)`` while ``member``'s ``attr`` stays risen above its own baseline:

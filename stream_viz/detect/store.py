@@ -199,7 +199,7 @@ class AlertStore:
         return stored
 
     def add_problems(self, problems: Iterable[Any], t: float | None = None) -> None:
-        """Store plugin problems (`stream_viz.detect.registry.PluginProblem`), one commit."""
+        """Store plugin problems (`stream_viz.detect.problems.PluginProblem`), one commit."""
         with self._db as db:
             db.executemany(
                 "INSERT INTO problems (t, plugin, kind, place, message, line, count) VALUES (?,?,?,?,?,?,?)",

@@ -10,20 +10,15 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 import networkx as nx
-import numpy as np
 
-from stream_viz.detect.baseline import robust, slope
+from stream_viz.detect.process import process_anomalies  # the rule lives there; also imported from here
 from stream_viz.model.history import History
 from stream_viz.model.ids import kind_of
-from stream_viz.model.queries import nodes_of_process
-from stream_viz.model.theta import SCHEMAS
 
 # `auto` watches every member up to here: the plugins cost ~44 ms a sample for 1,000 watched
 # members inline under a load of 54 (docs/plugins.md), small beside a 500-node system's ~250 ms
 # sample; a 300 limit left a 500-node system's topics unwatched, so a hang there raised nothing.
 AUTO_LIMIT = 2000
-_CPU = SCHEMAS["process"].index("cpu_percent")
-_RSS = SCHEMAS["process"].index("rss_mb")
 
 
 def match_members(G: nx.MultiDiGraph, patterns: Iterable[str]) -> set[str]:
@@ -40,90 +35,6 @@ def match_members(G: nx.MultiDiGraph, patterns: Iterable[str]) -> set[str]:
             out.update(fnmatch.filter(members, pat))
         else:
             out.update(m for m in members if fnmatch.fnmatchcase(m.partition(":")[2], pat))
-    return out
-
-
-def process_anomaly(
-    times: np.ndarray,
-    values: np.ndarray,
-    now: float,
-    *,
-    k: float = 5.0,
-    cpu_min_rise: float = 25.0,
-    rss_min_rise_mb: float = 100.0,
-    growth_mb_per_s: float = 1.0,
-    growth_min_mb: float = 20.0,
-    trend_s: float = 30.0,
-    warmup: int = 10,
-) -> list[str]:
-    """Return what is anomalous in a process's last sample vs its own earlier samples.
-
-    Parameters
-    ----------
-    times : (n,) array
-        Sample times, the last one being the present.
-    values : (n, dim) array
-        θ of the process (schema ``SCHEMAS["process"]``).
-    now : float
-        The present (samples after it are ignored).
-
-    Returns
-    -------
-    list of str
-        Subset of ``["cpu", "memory", "memory_growth"]``.
-    """
-    if len(times) and times[-1] > now:  # samples after `now` (a replay): left out
-        keep = times <= now
-        times, values = times[keep], values[keep]
-    if len(times) < warmup + 1:
-        return []
-    past, cur = values[:-1], values[-1]
-    out = []
-    for col, floor, what in ((_CPU, cpu_min_rise, "cpu"), (_RSS, rss_min_rise_mb, "memory")):
-        # The median is at least the minimum: a value not `floor` above the minimum cannot be
-        # `floor` above the median, so the healthy case needs no median (called every sample).
-        # fmin/fmax skip NaN (an unread sample) as nanmin/nanmax do, in one ufunc call each.
-        if not np.isfinite(cur[col]) or not cur[col] - np.fmin.reduce(past[:, col], initial=np.inf) >= floor:
-            continue
-        med, sigma, _ = robust(past[:, col])
-        if np.isfinite(med) and cur[col] - med >= max(k * sigma, floor):
-            out.append(what)
-    recent = times >= now - trend_s
-    span = values[recent, _RSS]
-    grew = np.fmax.reduce(span, initial=-np.inf) - np.fmin.reduce(span, initial=np.inf)
-    if recent.sum() >= 5 and grew >= growth_min_mb:
-        s = slope(times[recent], span)
-        if np.isfinite(s) and s >= growth_mb_per_s:
-            out.append("memory_growth")
-    return out
-
-
-def process_anomalies(G: nx.MultiDiGraph, history: History, now: float | None = None,
-                      window: int = 120, **kw: Any) -> set[str]:
-    """Return processes whose metrics are anomalous vs their own past, and the nodes they host.
-
-    Parameters
-    ----------
-    G : MultiDiGraph
-        The model (process tree on layer 1: process → node).
-    history : History
-        θ history; the last sample of each process is the present.
-    now : float, optional
-        The present (default: each process's last sample).
-    window : int
-        Samples per process compared (the present and its past): bounds the cost per call
-        whatever the history length.
-    **kw
-        Thresholds of `process_anomaly`.
-    """
-    out: set[str] = set()
-    for m, kind in G.nodes(data="kind"):
-        if kind != "process" or m not in history:
-            continue
-        times, values = history.series(m, window)
-        if process_anomaly(times, values, times[-1] if now is None else now, **kw):
-            out.add(m)
-            out.update(nodes_of_process(G, m))
     return out
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from stream_viz.cli import build_parser
 from stream_viz.config import load_config
-from stream_viz.detect.registry import PluginSet
+from stream_viz.detect.plugin_set import PluginSet
 
 ROOT = Path(__file__).resolve().parents[2]
 README = (ROOT / "README.md").read_text()

@@ -17,7 +17,7 @@ import pytest
 
 from stream_viz.collect.collector import Collector
 from stream_viz.detect.api import record_history
-from stream_viz.detect.registry import PluginSet
+from stream_viz.detect.plugin_set import PluginSet
 from stream_viz.model.diff import GraphDiff
 from stream_viz.model.history import History
 from stream_viz.testing import wait_for

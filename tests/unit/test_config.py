@@ -8,7 +8,7 @@ import textwrap
 import pytest
 
 from stream_viz.config import Config, load_config
-from stream_viz.detect.registry import PluginSet
+from stream_viz.detect.plugin_set import PluginSet
 from stream_viz.errors import ConfigError
 
 FULL = """

@@ -1,4 +1,4 @@
-"""The plugin registry: discovery, validation, and isolation from deliberately broken plugins."""
+"""Plugin discovery, validation, the plugin set's policy, and isolation from deliberately broken plugins."""
 
 from __future__ import annotations
 
@@ -7,7 +7,8 @@ import threading
 
 import pytest
 
-from stream_viz.detect.registry import PluginSet, discover
+from stream_viz.detect.discovery import discover
+from stream_viz.detect.plugin_set import PluginSet
 from stream_viz.errors import ConfigError
 from stream_viz.model.graph import add_member, new_graph
 from stream_viz.model.history import History
@@ -290,3 +291,115 @@ def test_the_documented_example_plugin_works(tmp_path):
     alerts, problems = ps.run(3.0, G, G.nodes, History())
     assert problems == []
     assert alerts == [Alert("process:1", "cpu_ceiling", 3.0, "warn", "cpu 70%", {"cpu": 70.0})]
+
+
+def test_declared_kinds_are_what_the_context_yields(tmp_path):
+    _write(tmp_path / "p", "kinds", '''
+        from stream_viz.detect.api import Plugin
+        class Declared(Plugin):
+            name = "declared"
+            kinds = ("topic", "node")
+            def check(self, ctx):
+                return [ctx.alert(m, "info", "seen") for m in ctx.watched()]
+        class Undeclared(Plugin):
+            name = "undeclared"
+            kinds = ("topic",)
+            def check(self, ctx):
+                return [ctx.alert(m, "info", "seen") for m in ctx.watched("node")]
+    ''')
+    ps = PluginSet.load([tmp_path / "p"], entry_points=False, cwd_plugins=False)
+    G = _graph()
+    add_member(G, "topic:/t")
+    alerts, problems = ps.run(1.0, G, G.nodes, History())
+    assert [a.member for a in alerts] == ["topic:/t", "node:/a", "node:/b"]
+    assert [(p.plugin, p.kind) for p in problems] == [("undeclared", "run")]
+    assert "declares kinds = ('topic',); add 'node'" in problems[0].message
+    ps.close()
+
+
+def test_settings_the_helpers_read_are_checked_at_load(tmp_path):
+    folder = tmp_path / "p"
+    _write(folder, "good", GOOD)
+    _write(folder, "risen", '''
+        from stream_viz.detect.api import Plugin
+        from stream_viz.detect.baseline import BASELINE_SETTINGS, rise
+
+        class Risen(Plugin):
+            name = "risen"
+            kinds = ("node",)
+            uses = (rise,)
+            settings = {**BASELINE_SETTINGS, "k": 5.0}  # no "confirm", which rise reads
+
+            def check(self, ctx):
+                return []
+
+        class Whole(Plugin):
+            name = "whole"
+            kinds = ("node",)
+            uses = (rise,)
+            settings = {**BASELINE_SETTINGS, "k": 5.0, "confirm": 2}
+
+            def check(self, ctx):
+                return [ctx.alert("node:/a", "info", str(ctx.settings["confirm"]))]
+
+        class NotHelpers(Plugin):
+            name = "not_helpers"
+            kinds = ("node",)
+            uses = "rise"
+
+            def check(self, ctx):
+                return []
+    ''')
+    ps = PluginSet.load([folder], entry_points=False, cwd_plugins=False)
+    assert ps.names == ["good", "whole"]
+    by = {p.plugin: p for p in ps.load_problems}
+    assert set(by) == {"risen", "not_helpers"}
+    assert by["risen"].kind == "validate" and by["risen"].where == str(folder / "risen.py")
+    assert by["risen"].message == ("settings lack 'confirm', read by stream_viz.detect.baseline.rise "
+                                   "(listed in uses): add defaults for them")
+    assert str(by["risen"]).startswith(f"plugin 'risen' ({folder / 'risen.py'}): validate: "
+                                       "settings lack 'confirm'")
+    assert "uses must be a tuple of helper functions" in by["not_helpers"].message
+    alerts, problems = _run(ps)
+    assert problems == []
+    assert [(a.plugin, a.message) for a in alerts if a.plugin == "whole"] == [("whole", "2")]
+    ps.close()
+
+
+def test_the_builtins_declare_the_settings_their_helpers_read():
+    from stream_viz.detect.api import missing_settings
+
+    found, _, _ = discover(cwd_plugins=False)
+    uses = {n: [h.__name__ for h in type(p).uses] for p, n, _ in found if type(p).uses}
+    assert uses == {"process_resources": ["symptoms"], "topic_latency": ["excess", "confirm"],
+                    "topic_rate": ["cached_baseline"]}
+    assert all(missing_settings(type(p)) == {} for p, _, _ in found)
+
+
+def test_the_documented_helper_example_works(tmp_path):
+    from pathlib import Path
+
+    from stream_viz.detect.api import record_history
+    from stream_viz.model.graph import add_tree_edge
+    from stream_viz.model.theta import make_theta
+
+    doc = (Path(__file__).parents[2] / "docs" / "plugins.md").read_text()
+    code = doc.split("```python\n")[2].split("```", 1)[0]
+    assert "class ThreadRise" in code
+    _write(tmp_path / "my_plugins", "thread_rise", code)
+    ps = PluginSet.load([tmp_path / "my_plugins"], entry_points=False, cwd_plugins=False)
+    assert ps.load_problems == []
+    G = new_graph()
+    add_member(G, "process:1")
+    add_member(G, "node:/a")
+    add_tree_edge(G, "process:1", "node:/a")
+    hist, seen = History(), []
+    for t in range(16):
+        G.nodes["process:1"]["theta"] = make_theta("process", {"threads": 4.0 if t < 13 else 40.0})
+        record_history(hist, G, float(t))
+        alerts, problems = ps.run(float(t), G, G.nodes, hist)
+        assert problems == []
+        seen += [(a.t, a.member, a.message) for a in alerts]
+    # 13 samples of 4 threads (past the 10 s warm-up), then 40: confirmed on the second sample.
+    assert seen == [(14.0, "node:/a", "40 threads, normally 4"), (15.0, "node:/a", "40 threads, normally 4")]
+    ps.close()

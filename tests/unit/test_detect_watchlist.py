@@ -6,7 +6,8 @@ import numpy as np
 
 from stream_viz.config import WatchlistConfig
 from stream_viz.detect.baseline import robust, slope
-from stream_viz.detect.watchlist import initial_watchlist, match_members, process_anomalies
+from stream_viz.detect.process import process_anomalies
+from stream_viz.detect.watchlist import initial_watchlist, match_members
 from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.model.history import History
 from stream_viz.model.theta import make_theta
@@ -51,7 +52,7 @@ def test_process_anomalies_flag_the_process_and_its_nodes():
     assert process_anomalies(G, _history(6.0)) == set()
     assert process_anomalies(G, _history(90.0)) == {"process:2", "node:/planner"}
     # compared with the last `window` samples only: 5 are too few to judge (warm-up 10)
-    assert process_anomalies(G, _history(90.0), window=5) == set()
+    assert process_anomalies(G, _history(90.0), {"window": 5}) == set()
 
 
 def test_history_keeps_maxlen_and_reads_the_last_samples():
@@ -116,7 +117,7 @@ def test_history_ring_matches_a_plain_bounded_queue():
 def _process_anomaly_by_definition(times, values, now, k=5.0, cpu_min_rise=25.0, rss_min_rise_mb=100.0,
                                    growth_mb_per_s=1.0, growth_min_mb=20.0, trend_s=30.0, warmup=10):
     """The definition, with no shortcut: medians always computed."""
-    from stream_viz.detect.watchlist import _CPU, _RSS
+    from stream_viz.detect.process import _CPU, _RSS
 
     keep = times <= now
     times, values = times[keep], values[keep]
@@ -139,7 +140,7 @@ def _process_anomaly_by_definition(times, values, now, k=5.0, cpu_min_rise=25.0,
 def test_process_anomaly_shortcut_agrees_with_the_definition():
     # The healthy-case shortcut (no median unless the value clears the floor above the minimum)
     # must never change the answer: random healthy, spiking, leaking and gappy series.
-    from stream_viz.detect.watchlist import _CPU, _RSS, process_anomaly
+    from stream_viz.detect.process import _CPU, _RSS, process_anomaly
 
     rng = np.random.default_rng(7)
     dim = len(make_theta("process", {}))

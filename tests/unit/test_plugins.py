@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from stream_viz.detect.api import record_history
-from stream_viz.detect.registry import PluginSet
+from stream_viz.detect.plugin_set import PluginSet
 from stream_viz.model.diff import diff
 from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.model.history import History

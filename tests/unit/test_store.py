@@ -12,7 +12,7 @@ import textwrap
 import numpy as np
 import pytest
 
-from stream_viz.detect.registry import PluginProblem
+from stream_viz.detect.problems import PluginProblem
 from stream_viz.detect.store import APP, MIGRATIONS, SCHEMA_VERSION, AlertStore, default_db_path
 from stream_viz.errors import StoreError
 from stream_viz.model.graph import add_flow_edge, add_member, new_graph

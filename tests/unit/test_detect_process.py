@@ -1,0 +1,65 @@
+"""The process-anomaly rule in one place: the plugin and the evidence read one settings table."""
+
+from __future__ import annotations
+
+from stream_viz.detect.plugin_set import PluginSet
+from stream_viz.detect.process import SETTINGS, EvidenceRule, evidence_rule, process_anomalies
+from stream_viz.model.graph import add_member, add_tree_edge, new_graph
+from stream_viz.model.history import History
+from stream_viz.model.theta import make_theta
+
+
+def test_the_evidence_parameters_derive_from_the_plugin_settings():
+    # The defaults give exactly the evidence's documented parameters.
+    assert evidence_rule() == evidence_rule(SETTINGS) == EvidenceRule(
+        k=5.0, cpu_min_rise=25.0, rss_min_rise_mb=100.0, growth_mb_per_s=1.0, growth_min_mb=20.0,
+        trend_s=30.0, growth_samples=5, warmup=10, window=120)
+    tuned = evidence_rule({"k": 7.0, "cpu_min_rise": 40.0, "trend_s": 120.0, "warmup_s": 20.0,
+                           "growth_min_samples": 6, "window": 60})
+    assert (tuned.k, tuned.cpu_min_rise, tuned.trend_s, tuned.warmup, tuned.growth_samples, tuned.window) == (
+        7.0, 40.0, 60.0, 20, 7, 60)
+
+
+def _graph():
+    G = new_graph()
+    add_member(G, "process:2", pid=2)
+    add_member(G, "node:/planner", pid=2)
+    add_tree_edge(G, "process:2", "node:/planner")
+    return G
+
+
+def _run(cpus, settings):
+    """Feed ``cpus`` (one a second) to the evidence and the plugin with the same settings."""
+    G, h = _graph(), History()
+    ps = PluginSet.load(enable=["process_resources"], cwd_plugins=False,
+                        settings={"process_resources": settings}, isolate=False)
+    evidence, alerts = [], []
+    for t, cpu in enumerate(cpus):
+        G.nodes["process:2"]["theta"] = make_theta("process", {"cpu_percent": cpu, "rss_mb": 50.0})
+        h.add("process:2", float(t), G.nodes["process:2"]["theta"])
+        evidence.append(sorted(process_anomalies(G, h, ps.settings_of("process_resources"))))
+        fired, problems = ps.run(float(t), G, G.nodes, h)
+        assert problems == []
+        alerts += [(a.t, a.member) for a in fired]
+    return evidence, alerts
+
+
+def test_tuning_the_plugin_tunes_the_evidence():
+    cpus = [5.0 + t % 3 for t in range(20)] + [60.0, 60.0, 60.0]
+    evidence, alerts = _run(cpus, {})
+    # The evidence speaks on the first risen sample; the plugin confirms it over 2.
+    assert evidence[19:] == [[], ["node:/planner", "process:2"], ["node:/planner", "process:2"],
+                             ["node:/planner", "process:2"]]
+    assert alerts == [(21.0, "node:/planner"), (22.0, "node:/planner")]
+    # A floor above the rise silences both.
+    evidence, alerts = _run(cpus, {"cpu_min_rise": 70.0})
+    assert evidence == [[]] * len(cpus) and alerts == []
+
+
+def test_settings_of_a_plugin_switched_off():
+    ps = PluginSet.load(cwd_plugins=False, disable=["process_resources"],
+                        settings={"process_resources": {"k": 6}, "rosout": {"min_level": "warn"}})
+    assert "process_resources" not in ps.names
+    assert ps.settings_of("process_resources") == {**SETTINGS, "k": 6.0, "alert_on": "nodes"}
+    assert ps.settings_of("rosout") == {"min_level": "warn", "watched_only": False}
+    assert ps.settings_of("nope") is None
