@@ -8,7 +8,6 @@ is reported as a `PluginProblem` naming it and where, and the others and the cal
 
 from __future__ import annotations
 
-import copy
 import hashlib
 import importlib
 import importlib.metadata
@@ -30,12 +29,13 @@ from typing import Any
 
 import networkx as nx
 
-from stream_viz.detect.api import API_VERSION, Plugin, PluginContext, settings_types_ok, watched_by_kind
+from stream_viz.detect.api import API_VERSION, Plugin, PluginContext, watched_by_kind
 from stream_viz.errors import ConfigError
 from stream_viz.model.diff import GraphDiff
 from stream_viz.model.history import History
 from stream_viz.model.ids import KINDS
 from stream_viz.records import SEVERITIES, Alert, Event
+from stream_viz.settings import check_plugin_settings
 
 GROUP = "stream_viz.plugins"
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*$")
@@ -352,13 +352,8 @@ class PluginSet:
         settings = dict(settings or {})
         where_cfg = config_path or "the configuration"
         for inst, name, where in plugins:
-            given = dict(settings.get(name, {}))
-            bad = settings_types_ok(type(inst).settings, given)
-            if bad:
-                raise ConfigError(f"{where_cfg}: [plugins.{name}]: " + "; ".join(bad))
-            merged = copy.deepcopy(type(inst).settings)
-            for k, v in given.items():
-                merged[k] = float(v) if isinstance(merged[k], float) else v
+            merged = check_plugin_settings(type(inst).settings, settings.get(name, {}), where_cfg,
+                                           f"plugins.{name}")
             self.plugins.append(LoadedPlugin(name, inst, where, merged))
 
     @classmethod
