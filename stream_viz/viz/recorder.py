@@ -24,7 +24,7 @@ import rerun.blueprint as rrb
 
 from stream_viz.errors import ConfigError, OutputError, StreamVizError
 from stream_viz.model.graph import FLOW, flow_edges
-from stream_viz.records import Alert
+from stream_viz.records import SEVERITY_RANK, Alert
 from stream_viz.viz import paths, style
 from stream_viz.viz.alerts import log_alerts
 from stream_viz.viz.layout import Layout
@@ -299,7 +299,7 @@ class Recorder:
     def alerts(self, alerts: Sequence[Alert]) -> int:
         """Log alerts (text log + markers); alerted members get their severity's colour in ``/system``."""
         for a in sorted(alerts, key=lambda a: a.t):
-            if style.SEVERITY_RANK.get(a.severity, 0) >= style.SEVERITY_RANK["warn"]:
+            if SEVERITY_RANK.get(a.severity, -1) >= SEVERITY_RANK["warn"]:
                 self.status[a.member] = a.severity
         return log_alerts(self.rec, alerts)
 

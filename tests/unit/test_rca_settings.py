@@ -8,7 +8,6 @@ import pytest
 
 from stream_viz.errors import ConfigError
 from stream_viz.rca.settings import RcaSettings
-from stream_viz.records import SEVERITIES
 
 
 def test_defaults_and_partial_tables():
@@ -55,10 +54,6 @@ def test_bad_values_name_file_section_key_and_value(d, message):
     with pytest.raises(ConfigError) as err:
         RcaSettings.from_dict(d, "cfg.toml")
     assert str(err.value) == f"cfg.toml: {message}"
-
-
-def test_severity_weights_are_keyed_by_the_one_scale():
-    assert tuple(RcaSettings().severity) == SEVERITIES
 
 
 def test_not_a_table():
