@@ -78,15 +78,12 @@ class Key:
         return f"{what}, {self.rule[1]}" if self.rule else what
 
     def _bounds(self) -> str:
-        low = f"({self.gt}" if self.gt is not None else f"[{self.ge}" if self.ge is not None else ""
-        high = f"{self.lt})" if self.lt is not None else f"{self.le}]" if self.le is not None else ""
-        if low and high:
+        if (self.gt, self.ge) != (None, None) and (self.lt, self.le) != (None, None):
+            low = f"({self.gt}" if self.gt is not None else f"[{self.ge}"
+            high = f"{self.lt})" if self.lt is not None else f"{self.le}]"
             return f" in {low}, {high}"
-        if low:
-            return f" {'>' if low[0] == '(' else '>='} {low[1:]}"
-        if high:
-            return f" {'<' if high[-1] == ')' else '<='} {high[:-1]}"
-        return ""
+        bounds = ((">", self.gt), (">=", self.ge), ("<", self.lt), ("<=", self.le))
+        return "".join(f" {op} {v}" for op, v in bounds if v is not None)
 
     def item_fits(self, value: Any) -> bool:
         """True when ``value`` is a valid scalar (an item or entry for a list or table)."""
@@ -235,17 +232,16 @@ def expect_table(value: Any, where: str, section: str) -> dict[str, Any]:
 # --------------------------------------------------------------------------- checks
 
 
-def check_value(key: Key, value: Any, where: str, section: str, name: str) -> Any:
+def _check_value(key: Key, value: Any, where: str, section: str, name: str) -> Any:
     """Return ``value`` checked against ``key`` and normalised (named ``name`` in ``[section]``).
 
     A table is checked entry by entry (errors name ``[section.name] entry``) and merged into
     the key's default; a list becomes the key's container type.
     """
     if key.container is dict:
-        given = expect_table(value, where, f"{section}.{toml_key(name)}")
-        merged = dict(key.default)
         sub = f"{section}.{toml_key(name)}"
-        for k, v in given.items():
+        merged = dict(key.default)
+        for k, v in expect_table(value, where, sub).items():
             if k not in key.default:
                 raise unknown_key(where, sub, k, key.default)
             if not key.item_fits(v):
@@ -290,7 +286,7 @@ def check_table(keys: Mapping[str, Key], table: Any, where: str, section: str) -
     for name, value in table.items():
         if name not in keys:
             raise unknown_key(where, section, name, keys)
-        out[name] = check_value(keys[name], value, where, section, name)
+        out[name] = _check_value(keys[name], value, where, section, name)
     return out
 
 
