@@ -6,7 +6,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.episodes import RANK
+from stream_viz.records import SEVERITY_RANK as RANK
 from stream_viz.records import Alert
 
 

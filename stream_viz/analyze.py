@@ -11,8 +11,9 @@ from typing import Any
 from stream_viz.config import load_config
 from stream_viz.detect.store import AlertStore
 from stream_viz.errors import StoreError
+from stream_viz.output import check_writable
 from stream_viz.rca.engine import analyze
-from stream_viz.report import build_report, check_writable, write_report
+from stream_viz.report import build_report, write_report
 
 
 def run_analyze(args: argparse.Namespace) -> dict[str, Any]:

@@ -27,9 +27,10 @@ from stream_viz.live_view import LiveView
 from stream_viz.model.graph import new_graph
 from stream_viz.model.history import History
 from stream_viz.model.seen import drop_gone, remember
+from stream_viz.output import check_writable
 from stream_viz.progress import Progress
 from stream_viz.rca.engine import RcaEngine
-from stream_viz.report import build_report, check_writable, write_report
+from stream_viz.report import build_report, write_report
 
 
 class Monitor:

@@ -9,7 +9,10 @@ import networkx as nx
 
 from stream_viz.model.diff import GraphDiff
 
+# The one severity scale, least to most severe: alerts, log and diagnostic levels, episodes, the
+# viewer's colours and the RCA's weights all use it.
 SEVERITIES = ("info", "warn", "error", "fatal")
+SEVERITY_RANK = {s: i for i, s in enumerate(SEVERITIES)}
 
 
 @dataclass(frozen=True)

@@ -71,19 +71,6 @@ def build_report(
     return report
 
 
-def check_writable(path: Path, what: str) -> Path:
-    """Fail early, before monitoring starts, when ``path`` cannot be written (names it and why)."""
-    path = Path(path)
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise OutputError(f"{what} {path}: folder {parent} does not exist")
-    if path.is_dir():
-        raise OutputError(f"{what} {path}: is a folder")
-    if not os.access(parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        raise OutputError(f"{what} {path}: not writable")
-    return path
-
-
 def write_report(path: Path, report: Mapping[str, Any]) -> None:
     """Write ``report`` as JSON to ``path`` via a temporary file, so a reader never sees half a file."""
     path = Path(path)

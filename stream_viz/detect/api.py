@@ -1,7 +1,8 @@
 """The symptom plugin API (version 1): what a plugin is, and what it sees on each call.
 
 A plugin is a subclass of `Plugin` with a ``name``, the member ``kinds`` it looks at, default
-``settings`` (the type of each default is the type a config value must have) and a ``check``
+``settings`` (the type of each default is the type a config value must have; checked by
+`stream_viz.settings.check_plugin_settings`) and a ``check``
 method that yields `stream_viz.records.Alert` objects for one sample. The `PluginContext` it is
 called with answers what a check asks: the watched members, θ now and in the past, the graph
 questions (`PluginContext.nodes_of`, `PluginContext.publishers`, ...), and makes the alerts.
@@ -9,7 +10,7 @@ questions (`PluginContext.nodes_of`, `PluginContext.publishers`, ...), and makes
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeVar
 
@@ -255,29 +256,3 @@ def record_history(history: History, G: nx.MultiDiGraph, t: float) -> None:
     for m, theta in G.nodes(data="theta"):
         if theta is not None:
             history.add(m, t, np.asarray(theta, dtype=float))
-
-
-def settings_types_ok(defaults: Mapping[str, Any], values: Mapping[str, Any]) -> list[str]:
-    """Return one message per key of ``values`` that is unknown or of the wrong type."""
-    bad = []
-    for key, value in values.items():
-        if key not in defaults:
-            bad.append(f"unknown setting {key!r} (known: {', '.join(sorted(defaults)) or 'none'})")
-            continue
-        if not value_fits(defaults[key], value):
-            bad.append(f"setting {key!r} must be {type(defaults[key]).__name__}, "
-                       f"not {type(value).__name__} ({value!r})")
-    return bad
-
-
-def value_fits(default: Any, value: Any) -> bool:
-    """True when ``value`` may replace ``default`` (an int may stand for a float; bool is strict)."""
-    if default is None:
-        return True
-    if isinstance(default, bool) or isinstance(value, bool):
-        return isinstance(default, bool) and isinstance(value, bool)
-    if isinstance(default, float):
-        return isinstance(value, int | float)
-    if isinstance(default, list | tuple):
-        return isinstance(value, list | tuple)
-    return isinstance(value, type(default))

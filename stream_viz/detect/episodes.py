@@ -11,9 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from stream_viz.records import SEVERITIES, Alert
-
-RANK = {s: i for i, s in enumerate(SEVERITIES)}
+from stream_viz.records import SEVERITY_RANK, Alert
 
 
 @dataclass
@@ -57,10 +55,10 @@ class EpisodeTracker:
             return True, ep, True
         ep.end = max(ep.end, alert.t)
         ep.count += 1
-        if RANK[alert.severity] > RANK[ep.max_severity]:
+        if SEVERITY_RANK[alert.severity] > SEVERITY_RANK[ep.max_severity]:
             ep.max_severity = alert.severity
         store = (alert.t - ep.last_stored_t >= self.repeat_s
-                 or RANK[alert.severity] > RANK[ep.last_stored_severity])
+                 or SEVERITY_RANK[alert.severity] > SEVERITY_RANK[ep.last_stored_severity])
         if store:
             ep.last_stored_t, ep.last_stored_severity = alert.t, alert.severity
         return store, ep, False

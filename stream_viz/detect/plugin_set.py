@@ -9,7 +9,6 @@ calls in a row.
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,7 +16,7 @@ from typing import Any
 
 import networkx as nx
 
-from stream_viz.detect.api import Plugin, PluginContext, settings_types_ok, watched_by_kind
+from stream_viz.detect.api import Plugin, PluginContext, watched_by_kind
 from stream_viz.detect.discovery import discover
 from stream_viz.detect.isolation import Runner, screen
 from stream_viz.detect.problems import PluginProblem
@@ -25,6 +24,7 @@ from stream_viz.errors import ConfigError
 from stream_viz.model.diff import GraphDiff
 from stream_viz.model.history import History
 from stream_viz.records import Alert, Event
+from stream_viz.settings import check_plugin_settings
 
 
 @dataclass
@@ -85,13 +85,8 @@ class PluginSet:
         settings = dict(settings or {})
         where_cfg = config_path or "the configuration"
         for inst, name, where in plugins:
-            given = dict(settings.get(name, {}))
-            bad = settings_types_ok(type(inst).settings, given)
-            if bad:
-                raise ConfigError(f"{where_cfg}: [plugins.{name}]: " + "; ".join(bad))
-            merged = copy.deepcopy(type(inst).settings)
-            for k, v in given.items():
-                merged[k] = float(v) if isinstance(merged[k], float) else v
+            merged = check_plugin_settings(type(inst).settings, settings.get(name, {}), where_cfg,
+                                           f"plugins.{name}")
             runner = Runner(inst, name, where, timeout_s=timeout_s, limit=max_alerts_per_call,
                             isolate=isolate)
             self.plugins.append(LoadedPlugin(name, inst, where, merged, runner))

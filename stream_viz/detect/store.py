@@ -25,6 +25,7 @@ import numpy as np
 from stream_viz.detect.episodes import Episode, EpisodeTracker
 from stream_viz.errors import StoreError
 from stream_viz.model.serialize import from_data, to_data
+from stream_viz.output import check_writable
 from stream_viz.records import Alert
 
 APP = "stream-viz.alerts"
@@ -100,11 +101,13 @@ class AlertStore:
     StoreError
         The file is not an SQLite database, is corrupt, is another program's database, or was
         written by a newer stream-viz.
+    OutputError
+        The file cannot be written (not ``readonly``).
     """
 
     def __init__(self, path: str | Path, *, repeat_s: float = 5.0, gap_s: float = 3.0,
                  readonly: bool = False) -> None:
-        self.path = Path(path)
+        self.path = Path(path) if readonly else check_writable(path, "alert database")
         self.readonly = readonly
         self._tracker = EpisodeTracker(repeat_s, gap_s)
         self._last_structure: tuple[frozenset[str], frozenset[tuple[str, str, int]]] | None = None

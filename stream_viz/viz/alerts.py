@@ -8,7 +8,7 @@ import numpy as np
 import rerun as rr
 
 from stream_viz.errors import ModelError
-from stream_viz.records import Alert
+from stream_viz.records import SEVERITY_RANK, Alert
 from stream_viz.viz import paths, style
 
 
@@ -22,7 +22,7 @@ def marker_value(alert: Alert) -> float:
     value = alert.data.get("value") if alert.data else None
     if isinstance(value, int | float) and np.isfinite(value):
         return float(value)
-    return float(style.SEVERITY_RANK.get(alert.severity, 0))
+    return float(SEVERITY_RANK.get(alert.severity, -1) + 1)
 
 
 def log_alerts(rec: rr.RecordingStream, alerts: Sequence[Alert] | Iterable[Alert]) -> int:

@@ -24,7 +24,8 @@ import rerun.blueprint as rrb
 
 from stream_viz.errors import ConfigError, OutputError, StreamVizError
 from stream_viz.model.graph import FLOW, flow_edges
-from stream_viz.records import Alert
+from stream_viz.output import check_writable
+from stream_viz.records import SEVERITY_RANK, Alert
 from stream_viz.viz import paths, style
 from stream_viz.viz.alerts import log_alerts
 from stream_viz.viz.layout import Layout
@@ -57,24 +58,6 @@ def disable_rerun_telemetry(enabled: bool | None = None) -> bool:
     return enabled
 
 
-def check_writable(path: str | Path) -> Path:
-    """Return ``path`` if a recording can be written there, else raise `OutputError` naming it."""
-    path = Path(path)
-    if path.is_dir():
-        raise OutputError(f"cannot write recording {path}: it is a directory")
-    if not path.parent.is_dir():
-        raise OutputError(f"cannot write recording {path}: directory {path.parent} does not exist")
-    existed = path.exists()
-    try:
-        with open(path, "ab"):
-            pass
-    except OSError as e:
-        raise OutputError(f"cannot write recording {path}: {e.strerror or e}") from e
-    if not existed:
-        path.unlink(missing_ok=True)
-    return path
-
-
 def _check_sinks(viewer: str, save: str | Path | None) -> Path | None:
     """Check a `Recorder`'s viewer mode and recording path before anything is opened; return the path.
 
@@ -85,7 +68,7 @@ def _check_sinks(viewer: str, save: str | Path | None) -> Path | None:
         raise ConfigError(
             f"--viewer {viewer!r}: expected spawn, serve, none or a gRPC URL such as "
             f"rerun+http://127.0.0.1:{DEFAULT_GRPC_PORT}/proxy")
-    path = check_writable(save) if save is not None else None
+    path = check_writable(save, "recording") if save is not None else None
     if viewer == "spawn":
         if not has_display():
             raise OutputError("--viewer spawn needs a display (DISPLAY/WAYLAND_DISPLAY unset); "
@@ -279,7 +262,8 @@ class Recorder:
         """Point the file's stream at ``path``; False (reported, no more parts) if it cannot be opened."""
         try:
             self._file.flush(timeout_sec=5.0)
-            self._file.set_sinks(rr.FileSink(str(check_writable(path))), default_blueprint=self.blueprint)
+            sink = rr.FileSink(str(check_writable(path, "recording")))
+            self._file.set_sinks(sink, default_blueprint=self.blueprint)
         except (StreamVizError, RuntimeError, OSError, ValueError) as e:
             _stderr(f"stream-viz: recording goes on in {self.parts[-1]}; cannot start part {path}: {e}")
             self.part_s = 0.0
@@ -325,7 +309,7 @@ class Recorder:
     def alerts(self, alerts: Sequence[Alert]) -> int:
         """Log alerts (text log + markers); alerted members get their severity's colour in ``/system``."""
         for a in sorted(alerts, key=lambda a: a.t):
-            if style.SEVERITY_RANK.get(a.severity, 0) >= style.SEVERITY_RANK["warn"]:
+            if SEVERITY_RANK.get(a.severity, -1) >= SEVERITY_RANK["warn"]:
                 self.status[a.member] = a.severity
         return log_alerts(self.rec, alerts)
 

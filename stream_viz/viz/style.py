@@ -5,6 +5,8 @@ from __future__ import annotations
 import weakref
 from typing import Any
 
+from stream_viz.records import SEVERITIES
+
 # RGB; active members (ROS nodes) are big blue discs, distributors smaller and warm/green.
 KIND_COLOR = {
     "node": (66, 133, 244),
@@ -20,15 +22,11 @@ KIND_RADIUS = {"node": 16.0, "topic": 9.0, "service": 8.0, "action": 9.0,
 GONE_COLOR = (150, 150, 150)
 GONE_SUFFIX = " (gone)"
 
-SEVERITY_COLOR = {
-    "info": (120, 180, 255),
-    "warn": (255, 200, 0),
-    "error": (230, 57, 53),
-    "fatal": (150, 0, 20),
-}
+# Per severity of the one scale, least to most severe (info, warn, error, fatal).
+SEVERITY_COLOR = dict(zip(SEVERITIES, ((120, 180, 255), (255, 200, 0), (230, 57, 53), (150, 0, 20)),
+                          strict=True))
 # Rerun's TextLog levels (the viewer colours and filters by these).
-SEVERITY_LEVEL = {"info": "INFO", "warn": "WARN", "error": "ERROR", "fatal": "CRITICAL"}
-SEVERITY_RANK = {"info": 1, "warn": 2, "error": 3, "fatal": 4}
+SEVERITY_LEVEL = dict(zip(SEVERITIES, ("INFO", "WARN", "ERROR", "CRITICAL"), strict=True))
 
 # RCA overlays, drawn over /system at the same positions.
 SUBGRAPH_COLOR = (230, 57, 53)  # members of G_j

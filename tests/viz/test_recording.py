@@ -137,7 +137,7 @@ def test_rca_overlays_per_iteration(tmp_path):
 def test_unwritable_path_and_bad_viewer_fail_before_anything(tmp_path):
     with pytest.raises(OutputError, match="nope"):
         Recorder(save=tmp_path / "nope" / "x.rrd")
-    with pytest.raises(OutputError, match="is a directory"):
+    with pytest.raises(OutputError, match=f"^recording {tmp_path}: is a folder$"):
         Recorder(save=tmp_path)
     with pytest.raises(ConfigError, match="--viewer 'firefox'"):
         Recorder(viewer="firefox")
