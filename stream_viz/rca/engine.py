@@ -155,7 +155,9 @@ class RcaEngine:
             self.state = watch(self.state, G.nodes)
         if self._outside:  # members watched from outside since: their kept alerts first
             for m in [m for m in self._outside if m in self.state.watchlist]:
-                for k in self._outside.pop(m):
+                # An earlier member's replay may have replayed this one's already (its iteration
+                # records every pending addition).
+                for k in self._outside.pop(m, ()):
                     self._feed(G, k)
         for a in new:
             self._feed(G, a)

@@ -202,6 +202,15 @@ def test_outside_watch_and_evidence_updates(G):
     assert top(res).member == PERC
 
 
+def test_members_watched_together_replay_their_kept_alerts_once(G):
+    eng = RcaEngine(RcaSettings(), watchlist=set())
+    eng.update(G, [al(CTRL, "rosout", 1), al(PLAN, "rosout", 2)])  # both kept: nothing watched
+    eng.watch({CTRL, PLAN})
+    res = eng.update(G, [])  # the first replay records both additions and replays the planner's too
+    assert res.state.members == frozenset({CTRL, PLAN})
+    assert [it.alert_member for it in res.iterations] == [None, CTRL, PLAN]
+
+
 def test_report_contract(G):
     r = analyze(G, crash(), RcaSettings(top_k=2), {CMD})
     rep = json.loads(json.dumps(r.to_report()))
