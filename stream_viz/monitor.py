@@ -21,7 +21,13 @@ from stream_viz.collect.collector import Collector
 from stream_viz.config import Config, load_config
 from stream_viz.detect.registry import PluginSet
 from stream_viz.detect.store import AlertStore, default_db_path
-from stream_viz.detect.watchlist import initial_watchlist, process_anomalies
+from stream_viz.detect.watchlist import (
+    CONFIGURED,
+    PROCESS_ANOMALY,
+    Watchlist,
+    initial_watchlist,
+    process_anomalies,
+)
 from stream_viz.live_view import LiveView
 from stream_viz.model.graph import new_graph
 from stream_viz.model.history import History
@@ -61,9 +67,9 @@ class Monitor:
         self.store.add_problems(self.plugins.load_problems, t=self.started_at)
         self.view = LiveView(viewer=viewer, save=save, part_s=60.0 * config.monitor.recording_part_minutes)
         self.history = History(maxlen=config.monitor.history)
-        self.engine = RcaEngine(config.rca, watchlist=set())
+        self.watchlist = Watchlist()
+        self.engine = RcaEngine(config.rca, watchlist=self.watchlist)
         self.seen = new_graph()
-        self.external_watch: set[str] = set()
         self._unreadable: dict[str, str] = {}
         self._evidence: dict[str, float] = {}
         self.own_process = f"process:{os.getpid()}"
@@ -99,12 +105,12 @@ class Monitor:
         self._unreadable = dict(sample.unreadable)
         anomalous = process_anomalies(sample.graph, self.history) if self.samples > 1 else set()
         anomalous.discard(self.own_process)
-        added = self._watch_additions(sample.graph, anomalous) - self.external_watch
-        if added:
-            self.external_watch |= added
-            self.engine.watch(added)
+        # W_0 as the paper says: configured members and process monitoring; "auto"/"all" modes
+        # keep adding members as they appear.
+        self.watchlist.add(initial_watchlist(sample.graph, self.config.watchlist, None), CONFIGURED)
+        self.watchlist.add(anomalous, PROCESS_ANOMALY)
         fired, problems = self.plugins.run(
-            t, sample.graph, self.engine.watchlist, self.history, sample.events, sample.diff,
+            t, sample.graph, self.watchlist, self.history, sample.events, sample.diff,
             self.config.expected_rates,
         )
         # The store rate-limits an ongoing symptom (episodes); the RCA sees what the database
@@ -132,12 +138,7 @@ class Monitor:
         gone = drop_gone(self.seen, t, self.config.monitor.forget_gone_s)
         if gone:
             self.history.forget(set(self.seen))
-            self.external_watch.difference_update(gone)
-
-    def _watch_additions(self, G, anomalous: set[str]) -> set[str]:
-        # W_0 as the paper says: configured members and process monitoring; "auto"/"all" modes
-        # keep adding members as they appear.
-        return anomalous | initial_watchlist(G, self.config.watchlist, None)
+            self.watchlist.forget(gone)
 
     def _status(self, t: float, result) -> str:
         kinds: dict[str, int] = {}
@@ -190,7 +191,7 @@ class Monitor:
 
         def commit() -> None:
             self.store.set_meta("ended_at", ended_at)
-            self.store.set_meta("watchlist", sorted(self.external_watch))
+            self.store.set_meta("watchlist", sorted(self.watchlist.external))
             if self.injected:
                 self.store.set_meta("injected", dict(self.injected))
             self.store.close()

@@ -121,7 +121,7 @@ def run(spec: dict, out: Path) -> dict:
         for method in METHODS:
             s = dataclasses.replace(config.rca, policy=policy, method=method, top_k=30)
             t0 = time.perf_counter()
-            res = analyze(mon.seen, stored, s, set(mon.external_watch), evidence or None)
+            res = analyze(mon.seen, stored, s, set(mon.watchlist.external), evidence or None)
             rankings[f"{policy}/{method}"] = [rc.member for rc in res.root_causes]
             rankings.setdefault("_cost_ms", {})[f"{policy}/{method}"] = 1e3 * (time.perf_counter() - t0)
             # W_0 as `auto` builds it above its member limit (processes, process anomalies, the
