@@ -56,7 +56,7 @@ def one(nodes: int, minutes: float, policy: tuple[float, float], rrd: Path) -> d
             gc.collect()
             curve.append((i / 60, me.memory_info().rss / 2**20))
     view.close()
-    parts = view.rec.parts
+    parts = view.recording_parts
     return {"curve": curve, "rrd_mb": sum(p.stat().st_size for p in parts) / 2**20, "parts": len(parts)}
 
 

@@ -80,7 +80,7 @@ def run(spec: dict, out: Path) -> dict:
         def on_tick() -> None:
             if mon.injected is None and fault:
                 mon.injected = robot.injected() or None
-            anomalous.update(getattr(mon, "_evidence", {}))
+            anomalous.update(mon.evidence)
             top = mon.engine.result().root_causes
             ticks.append(
                 {
@@ -115,7 +115,7 @@ def run(spec: dict, out: Path) -> dict:
 
     # Our rankings: live (what the user saw) and offline re-ranks of the same alerts.
     rankings = {"live": [rc["member"] for rc in report["root_causes"]]}
-    evidence = {m: 1.0 for m in getattr(mon, "_evidence", {})}
+    evidence = {m: 1.0 for m in mon.evidence}
     w0 = {m for m, k in mon.seen.nodes(data="kind") if k == "process"} | anomalous | sink_watchlist(topo)
     for policy in POLICIES:
         for method in METHODS:

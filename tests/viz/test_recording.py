@@ -181,7 +181,7 @@ def test_a_long_recording_is_saved_in_parts_that_each_open_alone(tmp_path):
         view.update(T0 + i, Sample(T0 + i, G.copy()), G, [], result)
     view.close()
     parts = [rrd, tmp_path / "long_1.rrd", tmp_path / "long_2.rrd"]
-    assert view.rec.parts == parts
+    assert view.recording_parts == parts
     times = []
     for p in parts:
         data = rows(p)
