@@ -50,7 +50,7 @@ STAGES = [
     ("AlertStore.add", "stream_viz.detect.store", "AlertStore.add"),
     ("AlertStore.add_snapshot", "stream_viz.detect.store", "AlertStore.add_snapshot"),
     ("RcaEngine.update", "stream_viz.rca.engine", "RcaEngine.update"),
-    ("LiveView.update (Rerun)", "stream_viz.live_view", "LiveView.update"),
+    ("LiveView.update (Rerun)", "stream_viz.viz.live", "LiveView.update"),
     ("Monitor._status", "stream_viz.monitor", "Monitor._status"),
 ]
 

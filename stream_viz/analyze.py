@@ -49,7 +49,7 @@ def run_analyze(args: argparse.Namespace) -> dict[str, Any]:
         write_report(args.report, report)
         print(f"report: {args.report}")
     if args.save:
-        from stream_viz.live_view import save_diagnosis
+        from stream_viz.viz.live import save_diagnosis
 
         save_diagnosis(args.save, G, alerts, result)
         print(f"recording: {args.save}")

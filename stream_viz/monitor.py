@@ -27,12 +27,12 @@ from stream_viz.detect.detector import Detector
 from stream_viz.detect.registry import PluginSet
 from stream_viz.detect.store import AlertStore, default_db_path
 from stream_viz.detect.watchlist import Watchlist
-from stream_viz.live_view import LiveView
 from stream_viz.model.history import History
 from stream_viz.model.shadow import Shadow
 from stream_viz.progress import Progress
 from stream_viz.rca.engine import RcaEngine, RcaResult
 from stream_viz.report import build_report, check_writable, write_report
+from stream_viz.viz.live import LiveView
 
 
 class Monitor:
