@@ -9,10 +9,7 @@ way loses nothing already collected.
 
 from __future__ import annotations
 
-import argparse
 import gc
-import signal
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
@@ -22,7 +19,7 @@ from typing import Any
 import networkx as nx
 
 from stream_viz.collect.collector import Collector
-from stream_viz.config import Config, load_config
+from stream_viz.config import Config
 from stream_viz.detect.detector import Detector
 from stream_viz.detect.registry import PluginSet
 from stream_viz.detect.store import AlertStore, default_db_path
@@ -205,56 +202,3 @@ class Monitor:
             raise first
         return report
 
-
-def install_stop_handlers(stop: threading.Event) -> None:
-    """SIGINT and SIGTERM end the run cleanly (the report is written, exit code 0)."""
-
-    def handler(signum, frame) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
-
-
-def run_monitor(args: argparse.Namespace) -> dict[str, Any]:
-    """``stream-viz monitor``: attach to the system on ROS_DOMAIN_ID until --duration or a signal."""
-    config = load_config(args.config)
-    stop = threading.Event()
-    install_stop_handlers(stop)
-    viewer = args.viewer or "none"
-    mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=viewer)
-    mon.progress.say(f"alert database: {mon.db_path}")
-    try:
-        mon.run(args.duration, stop)
-    finally:
-        report = mon.close(keep_view=viewer == "serve")
-    _print_outputs(mon, args)
-    linger(mon, viewer)
-    return report
-
-
-def linger(mon: Monitor, viewer: str) -> None:
-    """A served web viewer dies with this process: on a terminal, keep it up until Ctrl-C."""
-    try:
-        if viewer == "serve" and sys.stdin.isatty():
-            done = threading.Event()
-            install_stop_handlers(done)
-            mon.progress.say(f"the web viewer keeps serving at {mon.view.url} — Ctrl-C to exit")
-            done.wait()
-    finally:
-        mon.view.close()
-
-
-def say_recording(mon: Monitor) -> None:
-    """Tell where the recording went (all its file parts) and how to open it."""
-    parts = mon.recording_parts
-    files = " ".join(str(p) for p in parts)
-    more = f" in {len(parts)} parts" if len(parts) > 1 else ""
-    mon.progress.say(f"recording{more}: {files}  (open with: rerun {files})")
-
-
-def _print_outputs(mon: Monitor, args: argparse.Namespace) -> None:
-    if args.save:
-        say_recording(mon)
-    if args.report:
-        mon.progress.say(f"report: {args.report}")
