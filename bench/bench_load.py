@@ -110,7 +110,7 @@ def run_duration(nodes: int, minutes: float, domain: int, period: float, save: b
     print(f"[monitor] history = {cfg.monitor.history} samples per member")
     what = f"{nodes}-node generated system (rates {rate[0]}-{rate[1]} Hz, {per_process} nodes per process)" \
         if nodes else "demo robot, fault-free"
-    _summary_duration(rows, what, minutes, period, csv_path, db, mon.view.rec.parts)
+    _summary_duration(rows, what, minutes, period, csv_path, db, mon.recording_parts)
 
 
 def _cpu(procs: list[psutil.Process]) -> float:

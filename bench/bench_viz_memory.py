@@ -9,7 +9,7 @@ topic each, 50 processes) for ``--minutes`` simulated minutes at 1 Hz, θ changi
 once per policy, each in its own process so RSS is its own, side by side in one run:
 
 - ``fixed``: a batch every 5 s whatever the size (``max_chunks_per_s = 0``, the old behaviour);
-- ``bounded``: at most 20 metric chunks per second (`stream_viz.live_view.metrics_batch_s`);
+- ``bounded``: at most 20 metric chunks per second (`stream_viz.viz.live.metrics_batch_s`);
 - ``parts``: bounded, and a new file part every 10 minutes (the default
   ``[monitor] recording_part_minutes``), which frees the index of the closed part.
 
@@ -35,10 +35,10 @@ def one(nodes: int, minutes: float, policy: tuple[float, float], rrd: Path) -> d
     import numpy as np
     import psutil
 
-    from stream_viz.live_view import LiveView
     from stream_viz.rca.engine import RcaEngine
     from stream_viz.rca.settings import RcaSettings
     from stream_viz.records import Sample
+    from stream_viz.viz.live import LiveView
     from stream_viz.viz.sample import chain_graph, set_theta
 
     me = psutil.Process()
@@ -56,7 +56,7 @@ def one(nodes: int, minutes: float, policy: tuple[float, float], rrd: Path) -> d
             gc.collect()
             curve.append((i / 60, me.memory_info().rss / 2**20))
     view.close()
-    parts = view.rec.parts
+    parts = view.recording_parts
     return {"curve": curve, "rrd_mb": sum(p.stat().st_size for p in parts) / 2**20, "parts": len(parts)}
 
 

@@ -1,40 +1,52 @@
-"""The live pipeline: collect → detect → diagnose → show, one sample per period.
+"""The live pipeline, one tick per period: sample → record → detect → store → diagnose → show.
 
-Everything the run produces is kept as it arrives (alerts committed to the database per sample,
-recording streamed), so ending the run any way loses nothing already collected.
+Each step has one owner: the `Collector` samples the system, the `Shadow` records what was seen
+and its θ history, the `Detector` finds symptoms on the `Watchlist`, the `AlertStore` keeps them,
+the `RcaEngine` diagnoses, the `LiveView` shows. Everything the run produces is kept as it
+arrives (alerts committed to the database per sample, recording streamed), so ending the run any
+way loses nothing already collected.
 """
 
 from __future__ import annotations
 
-import argparse
 import gc
-import os
-import signal
-import sys
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+import networkx as nx
+
 from stream_viz.collect.collector import Collector
-from stream_viz.config import Config, load_config
+from stream_viz.config import Config
+from stream_viz.detect.detector import Detector
 from stream_viz.detect.plugin_set import PluginSet
-from stream_viz.detect.process import process_anomalies
 from stream_viz.detect.store import AlertStore, default_db_path
-from stream_viz.detect.watchlist import initial_watchlist
-from stream_viz.live_view import LiveView
-from stream_viz.model.graph import new_graph
+from stream_viz.detect.watchlist import Watchlist
 from stream_viz.model.history import History
-from stream_viz.model.seen import drop_gone, remember
+from stream_viz.model.shadow import Shadow
 from stream_viz.output import check_writable
 from stream_viz.progress import Progress
-from stream_viz.rca.engine import RcaEngine
+from stream_viz.rca.engine import RcaEngine, RcaResult
 from stream_viz.report import build_report, write_report
+from stream_viz.viz.live import LiveView
 
 
 class Monitor:
-    """One monitoring run: owns the collector, plugins, alert store, RCA engine and the view."""
+    """One monitoring run: the owner of each step of the tick, and the run's outputs.
+
+    Attributes
+    ----------
+    watchlist : Watchlist
+        ``W_j``: what the plugins watch and the RCA grows from.
+    evidence : dict
+        The last sample's metric evidence (process monitoring's anomalous members).
+    recording_parts : list of Path
+        The files of the recording so far (empty without ``save``).
+    seen, history
+        Every member seen (vanished ones kept until forgotten) and their θ history.
+    """
 
     def __init__(
         self,
@@ -58,17 +70,13 @@ class Monitor:
         self.started_at = time.time()
         self.store.set_meta("started_at", self.started_at)
         self.plugins = PluginSet.from_config(config)
-        for problem in self.plugins.load_problems:
-            self.progress.say(f"plugin problem: {problem}")
+        self._say_problems(self.plugins.load_problems)
         self.store.add_problems(self.plugins.load_problems, t=self.started_at)
         self.view = LiveView(viewer=viewer, save=save, part_s=60.0 * config.monitor.recording_part_minutes)
-        self.history = History(maxlen=config.monitor.history)
-        self.engine = RcaEngine(config.rca, watchlist=set())
-        self.seen = new_graph()
-        self.external_watch: set[str] = set()
-        self._unreadable: dict[str, str] = {}
-        self._evidence: dict[str, float] = {}
-        self.own_process = f"process:{os.getpid()}"
+        self.shadow = Shadow(history=config.monitor.history, forget_gone_s=config.monitor.forget_gone_s)
+        self.watchlist = Watchlist()
+        self.detector = Detector(self.plugins, self.watchlist, config.watchlist, config.expected_rates)
+        self.engine = RcaEngine(config.rca, watchlist=self.watchlist)
         self.n_alerts = 0  # the alerts themselves live in the database, not in memory
         self.samples = 0
         self.injected: Mapping[str, Any] | None = None
@@ -83,67 +91,50 @@ class Monitor:
 
     # -- one tick ---------------------------------------------------------------------------
     def step(self) -> None:
-        """Take one sample and push it through detection, the RCA and the view."""
+        """One tick: sample → record → detect → store → diagnose → show."""
         sample = self.collector.sample()
-        t = sample.t
         self.samples += 1
-        self.seen = remember(self.seen, sample.graph, t)
-        self._forget(t)
-        for m, theta in sample.graph.nodes(data="theta"):
-            if theta is not None:
-                self.history.add(m, t, theta)
-        if sample.diff or self.samples == 1:
-            self.store.add_snapshot(t, self.seen)
-        # A member we may not read stays unreadable: record it when that changes, not every tick.
-        fresh = {m: why for m, why in sample.unreadable.items() if self._unreadable.get(m) != why}
-        if fresh:
-            self.store.add_unreadable(t, fresh)
-        self._unreadable = dict(sample.unreadable)
-        # [plugins.process_resources] tunes this evidence and the plugin alike (detect/process.py).
-        rule = self.plugins.settings_of("process_resources")
-        anomalous = process_anomalies(sample.graph, self.history, rule) if self.samples > 1 else set()
-        anomalous.discard(self.own_process)
-        added = self._watch_additions(sample.graph, anomalous) - self.external_watch
-        if added:
-            self.external_watch |= added
-            self.engine.watch(added)
-        fired, problems = self.plugins.run(
-            t, sample.graph, self.engine.watchlist, self.history, sample.events, sample.diff,
-            self.config.expected_rates,
-        )
+        forgotten = self.shadow.record(sample.graph, sample.t)
+        self.watchlist.forget(forgotten)
+        found = self.detector.detect(sample, self.shadow.history)
         # The store rate-limits an ongoing symptom (episodes); the RCA sees what the database
         # keeps, so `analyze` on the file reproduces the live diagnosis.
-        # The monitor is an ancestor of what it starts (the demo): its own footprint is no symptom.
-        alerts = self.store.add([a for a in fired if a.member != self.own_process])
-        if problems:
-            self.store.add_problems(problems, t=t)
-            for p in problems:
-                self.progress.say(f"plugin problem: {p}")
+        alerts = self.store.add_sample(sample, self.shadow.seen, found.alerts, found.problems)
+        result = self.engine.update(self.shadow.seen, alerts, found.new_evidence)
+        self.view.update(sample.t, sample, self.shadow.seen, alerts, result)
+        self._tell(sample.t, alerts, found.problems, result)
+
+    # -- what the run has so far (public: the evaluation reads it) -------------------------------
+    @property
+    def seen(self) -> nx.MultiDiGraph:
+        """Every member seen so far, vanished ones marked gone (until forgotten)."""
+        return self.shadow.seen
+
+    @property
+    def history(self) -> History:
+        """θ history per member."""
+        return self.shadow.history
+
+    @property
+    def evidence(self) -> dict[str, float]:
+        """The last sample's metric evidence (member → strength in [0, 1])."""
+        return self.detector.evidence
+
+    @property
+    def recording_parts(self) -> list[Path]:
+        """The recording's files so far (``run.rrd``, ``run_1.rrd``, …; empty without ``save``)."""
+        return self.view.recording_parts
+
+    def _tell(self, t: float, alerts: list, problems: list, result: RcaResult) -> None:
         self.n_alerts += len(alerts)
-        # Process-metric anomalies count as evidence too, not only as watchlist entries.
-        # Passed only when it changed: an unchanged sample with no alerts costs no rerank.
-        evidence = {m: 1.0 for m in anomalous}
-        changed = evidence != self._evidence
-        self._evidence = evidence
-        result = self.engine.update(self.seen, alerts, evidence if changed else None)
-        self.view.update(t, sample, self.seen, alerts, result)
+        self._say_problems(problems)
         self.progress.update(self._status(t, result))
 
-    def _forget(self, t: float) -> None:
-        # Long after a member vanished (longer than the RCA window by default) it can no longer
-        # be a cause: drop it and its history, so a churning system does not grow the run.
-        # The database keeps it (snapshots, alerts) for `analyze`.
-        gone = drop_gone(self.seen, t, self.config.monitor.forget_gone_s)
-        if gone:
-            self.history.forget(set(self.seen))
-            self.external_watch.difference_update(gone)
+    def _say_problems(self, problems: Iterable[Any]) -> None:
+        for p in problems:
+            self.progress.say(f"plugin problem: {p}")
 
-    def _watch_additions(self, G, anomalous: set[str]) -> set[str]:
-        # W_0 as the paper says: configured members and process monitoring; "auto"/"all" modes
-        # keep adding members as they appear.
-        return anomalous | initial_watchlist(G, self.config.watchlist, None)
-
-    def _status(self, t: float, result) -> str:
+    def _status(self, t: float, result: RcaResult) -> str:
         kinds: dict[str, int] = {}
         for _, k in self.seen.nodes(data="kind"):
             kinds[k] = kinds.get(k, 0) + 1
@@ -194,7 +185,7 @@ class Monitor:
 
         def commit() -> None:
             self.store.set_meta("ended_at", ended_at)
-            self.store.set_meta("watchlist", sorted(self.external_watch))
+            self.store.set_meta("watchlist", sorted(self.watchlist.external))
             if self.injected:
                 self.store.set_meta("injected", dict(self.injected))
             self.store.close()
@@ -212,56 +203,3 @@ class Monitor:
             raise first
         return report
 
-
-def install_stop_handlers(stop: threading.Event) -> None:
-    """SIGINT and SIGTERM end the run cleanly (the report is written, exit code 0)."""
-
-    def handler(signum, frame) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
-
-
-def run_monitor(args: argparse.Namespace) -> dict[str, Any]:
-    """``stream-viz monitor``: attach to the system on ROS_DOMAIN_ID until --duration or a signal."""
-    config = load_config(args.config)
-    stop = threading.Event()
-    install_stop_handlers(stop)
-    viewer = args.viewer or "none"
-    mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=viewer)
-    mon.progress.say(f"alert database: {mon.db_path}")
-    try:
-        mon.run(args.duration, stop)
-    finally:
-        report = mon.close(keep_view=viewer == "serve")
-    _print_outputs(mon, args)
-    linger(mon, viewer)
-    return report
-
-
-def linger(mon: Monitor, viewer: str) -> None:
-    """A served web viewer dies with this process: on a terminal, keep it up until Ctrl-C."""
-    try:
-        if viewer == "serve" and sys.stdin.isatty():
-            done = threading.Event()
-            install_stop_handlers(done)
-            mon.progress.say(f"the web viewer keeps serving at {mon.view.url} — Ctrl-C to exit")
-            done.wait()
-    finally:
-        mon.view.close()
-
-
-def say_recording(mon: Monitor) -> None:
-    """Tell where the recording went (all its file parts) and how to open it."""
-    parts = mon.view.rec.parts
-    files = " ".join(str(p) for p in parts)
-    more = f" in {len(parts)} parts" if len(parts) > 1 else ""
-    mon.progress.say(f"recording{more}: {files}  (open with: rerun {files})")
-
-
-def _print_outputs(mon: Monitor, args: argparse.Namespace) -> None:
-    if args.save:
-        say_recording(mon)
-    if args.report:
-        mon.progress.say(f"report: {args.report}")

@@ -106,7 +106,7 @@ def _live(spec: dict, topo: Topology, config: Config, domain: int, out: Path) ->
         def on_tick() -> None:
             if mon.injected is None and fault:
                 mon.injected = robot.injected() or None
-            anomalous.update(getattr(mon, "_evidence", {}))
+            anomalous.update(mon.evidence)
             top = mon.engine.result().root_causes
             ticks.append(
                 {
@@ -147,13 +147,13 @@ def _rerank(mon: Monitor, stored: list[Alert], report: dict, anomalous: set[str]
 
     # Our rankings: live (what the user saw) and offline re-ranks of the same alerts.
     rankings = {"live": [rc["member"] for rc in report["root_causes"]]}
-    evidence = {m: 1.0 for m in getattr(mon, "_evidence", {})}
+    evidence = {m: 1.0 for m in mon.evidence}
     w0 = {m for m, k in mon.seen.nodes(data="kind") if k == "process"} | anomalous | sink_watchlist(topo)
     for policy in POLICIES:
         for method in METHODS:
             s = dataclasses.replace(config.rca, policy=policy, method=method, top_k=30)
             t0 = time.perf_counter()
-            res = analyze(mon.seen, stored, s, set(mon.external_watch), evidence or None)
+            res = analyze(mon.seen, stored, s, set(mon.watchlist.external), evidence or None)
             rankings[f"{policy}/{method}"] = [rc.member for rc in res.root_causes]
             rankings.setdefault("_cost_ms", {})[f"{policy}/{method}"] = 1e3 * (time.perf_counter() - t0)
             # W_0 as `auto` builds it above its member limit (processes, process anomalies, the

@@ -26,7 +26,7 @@ from stream_viz.detect.episodes import Episode, EpisodeTracker
 from stream_viz.errors import StoreError
 from stream_viz.model.serialize import from_data, to_data
 from stream_viz.output import check_writable
-from stream_viz.records import Alert
+from stream_viz.records import Alert, Sample
 
 APP = "stream-viz.alerts"
 
@@ -111,6 +111,7 @@ class AlertStore:
         self.readonly = readonly
         self._tracker = EpisodeTracker(repeat_s, gap_s)
         self._last_structure: tuple[frozenset[str], frozenset[tuple[str, str, int]]] | None = None
+        self._unreadable: dict[str, str] = {}  # member → why, as last recorded by `add_sample`
         self._db: sqlite3.Connection | None = None
         try:
             if readonly:
@@ -199,6 +200,28 @@ class AlertStore:
             for ep in touched.values():
                 db.execute("UPDATE episodes SET end = ?, count = ?, max_severity = ? WHERE id = ?",
                            (ep.end, ep.count, ep.max_severity, ep.id))
+        return stored
+
+    def add_sample(self, sample: Sample, seen: nx.MultiDiGraph, alerts: Iterable[Alert] = (),
+                   problems: Iterable[Any] = ()) -> list[Alert]:
+        """Store what one monitor tick changed; return the alerts that became rows (`add`).
+
+        The model ``seen`` (everything seen, vanished members kept) when its structure changed,
+        the members that became unreadable (or for another reason), the alerts, the plugin
+        problems (`add_problems`).
+        """
+        # Comparing structures walks the model: only when the sample says it changed.
+        if sample.diff or self._last_structure is None:
+            self.add_snapshot(sample.t, seen)
+        # A member we may not read stays unreadable: record it when that changes, not every tick.
+        fresh = {m: why for m, why in sample.unreadable.items() if self._unreadable.get(m) != why}
+        if fresh:
+            self.add_unreadable(sample.t, fresh)
+        self._unreadable = dict(sample.unreadable)
+        stored = self.add(alerts)
+        problems = list(problems)
+        if problems:
+            self.add_problems(problems, t=sample.t)
         return stored
 
     def add_problems(self, problems: Iterable[Any], t: float | None = None) -> None:

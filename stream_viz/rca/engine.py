@@ -9,9 +9,10 @@ from typing import Any
 
 import networkx as nx
 
+from stream_viz.detect.watchlist import CONFIGURED, Watchlist
 from stream_viz.rca.pagerank import rank_pagerank
 from stream_viz.rca.settings import RcaSettings
-from stream_viz.rca.subgraph import Iteration, SubgraphState, grow, initial_state, watch
+from stream_viz.rca.subgraph import Iteration, SubgraphState, grow, initial_state
 from stream_viz.rca.trajectories import (
     Context,
     RootCause,
@@ -41,7 +42,7 @@ class RcaResult:
     root_causes : list of RootCause
         Ranked, best first (at most ``top_k``).
     state : SubgraphState
-        The current ``G_j`` and ``W_j``.
+        The current ``G_j`` (``W_j``: the engine's `RcaEngine.watchlist`).
     alerts : int
         Alerts seen so far; ``kept`` of them did not grow the subgraph.
     kept : int
@@ -99,15 +100,18 @@ class RcaEngine:
     ----------
     settings : RcaSettings
         Policy, method, weights …
-    watchlist : set of str, optional
-        ``W_0`` (from the configuration and process monitoring). None watches every member of
-        the graph passed to `update` (offline analysis without a recorded watchlist).
+    watchlist : Watchlist or set of str, optional
+        ``W_0``. A `Watchlist` is the run's: others add to it (the detector: the configuration
+        and process monitoring), the engine grows it. None watches every member of the graph
+        passed to `update` (offline analysis without a recorded watchlist).
     """
 
-    def __init__(self, settings: RcaSettings, watchlist: Iterable[str] | None = None) -> None:
+    def __init__(self, settings: RcaSettings, watchlist: Watchlist | Iterable[str] | None = None) -> None:
         self.settings = settings
         self._watch_all = watchlist is None
-        self.state = initial_state(watchlist or ())
+        self.watchlist = watchlist if isinstance(watchlist, Watchlist) else Watchlist(watchlist or ())
+        self.state = initial_state(self.watchlist)
+        self.watchlist.commit()  # iteration 0 holds everything watched so far
         self._iterations: list[Iteration] = [self.state.last]
         self._alerts: list[Alert] = []
         self._kept = 0
@@ -117,18 +121,9 @@ class RcaEngine:
         self._result = self._make_result([])
 
     @property
-    def watchlist(self) -> frozenset[str]:
-        """The current watchlist ``W_j``."""
-        return self.state.watchlist
-
-    @property
     def iterations(self) -> list[Iteration]:
         """All iterations so far."""
         return list(self._iterations)
-
-    def watch(self, members: Iterable[str]) -> None:
-        """Add members to the watchlist from outside (configuration, process anomalies)."""
-        self.state = watch(self.state, members)
 
     def result(self) -> RcaResult:
         """The result of the last update."""
@@ -151,11 +146,13 @@ class RcaEngine:
         """
         new = sorted(alerts, key=lambda a: a.t)
         before = self.state.last
-        if self._watch_all and len(self.state.watchlist) != G.number_of_nodes():
-            self.state = watch(self.state, G.nodes)
+        if self._watch_all and len(self.watchlist) != G.number_of_nodes():
+            self.watchlist.add(G.nodes, CONFIGURED)
         if self._outside:  # members watched from outside since: their kept alerts first
-            for m in [m for m in self._outside if m in self.state.watchlist]:
-                for k in self._outside.pop(m):
+            for m in [m for m in self._outside if m in self.watchlist]:
+                # An earlier member's replay may have replayed this one's already (its iteration
+                # records every pending addition).
+                for k in self._outside.pop(m, ()):
                     self._feed(G, k)
         for a in new:
             self._feed(G, a)
@@ -177,15 +174,17 @@ class RcaEngine:
         queue = deque([alert])
         while queue:
             a = queue.popleft()
-            before = self.state
-            if a.member not in before.watchlist:
+            if a.member not in self.watchlist:
                 self._kept += 1
                 if self.settings.replay:
                     self._outside.setdefault(a.member, []).append(a)
                 continue
-            self.state = grow(G, before, a, self.settings.policy)
-            if self.state.last is before.last:
+            w = self.watchlist
+            state, added = grow(G, self.state, a, w, self.settings.policy, w.pending)
+            if state is self.state:
                 continue
+            self.state = state
+            self.watchlist.commit(added)
             self._iterations.append(self.state.last)
             for m in self.state.last.added_watch:
                 # Replayed at the current time so iteration times stay in order.

@@ -16,11 +16,14 @@ Alerts for members outside ``W_j`` leave the subgraph as it is (the caller keeps
 does an alert that would change nothing: only alerts that change ``M``, ``E`` or ``W`` make a new
 iteration. Iterations store what they added and point to the previous one, so a long run costs
 memory in proportion to the subgraph, not to the number of iterations times its size.
+
+``W_j`` itself is the run's `stream_viz.detect.watchlist.Watchlist` (other parts add to it too):
+`grow` reads it and returns what to add.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Set
 from dataclasses import dataclass, field
 
 import networkx as nx
@@ -74,17 +77,11 @@ class Iteration:
 
 @dataclass(frozen=True)
 class SubgraphState:
-    """The current ``G_j`` and ``W_j``; ``last`` is iteration ``j`` (earlier ones via ``prev``).
-
-    ``pending`` holds watchlist additions made from outside since iteration ``j``; the next
-    iteration records them.
-    """
+    """The current ``G_j``; ``last`` is iteration ``j`` (earlier ones via ``prev``)."""
 
     members: frozenset[str]
     edges: frozenset[Edge]
-    watchlist: frozenset[str]
     last: Iteration
-    pending: frozenset[str] = frozenset()
 
     @property
     def j(self) -> int:
@@ -102,8 +99,8 @@ class SubgraphState:
 
 def initial_state(watchlist: Iterable[str], t: float = 0.0) -> SubgraphState:
     """Return iteration 0: empty subgraph, watchlist ``W_0``."""
-    w0 = frozenset(watchlist)
-    return SubgraphState(frozenset(), frozenset(), w0, Iteration(0, t, None, None, added_watch=w0))
+    it = Iteration(0, t, None, None, added_watch=frozenset(watchlist))
+    return SubgraphState(frozenset(), frozenset(), it)
 
 
 def upstream_of(G: nx.MultiDiGraph, m: str) -> set[str]:
@@ -120,32 +117,43 @@ def upstream_of(G: nx.MultiDiGraph, m: str) -> set[str]:
     return parents
 
 
-def watch(state: SubgraphState, members: Iterable[str]) -> SubgraphState:
-    """Return ``state`` with ``members`` added to the current watchlist (from outside: config,
-    process monitoring); no new iteration, the next one records them."""
-    new = frozenset(members) - state.watchlist
-    if not new:
-        return state
-    return SubgraphState(state.members, state.edges, state.watchlist | new, state.last, state.pending | new)
-
-
-def grow(G: nx.MultiDiGraph, state: SubgraphState, alert: Alert, policy: str = "downstream") -> SubgraphState:
-    """Return the state after ``alert`` (``state`` itself when the alert changes nothing).
+def grow(
+    G: nx.MultiDiGraph,
+    state: SubgraphState,
+    alert: Alert,
+    watchlist: Set[str],
+    policy: str = "downstream",
+    pending: Set[str] = frozenset(),
+) -> tuple[SubgraphState, frozenset[str]]:
+    """Return the state after ``alert`` and the members it adds to the watchlist
+    (``state`` itself and nothing when the alert changes nothing).
 
     Parameters
     ----------
     G : MultiDiGraph
         The full model; only layer-0 edges are used.
     state : SubgraphState
-        ``G_j`` and ``W_j``.
+        ``G_j``.
     alert : Alert
         The alert; only its member matters for the growth.
+    watchlist : set of str
+        ``W_j``.
     policy : {"downstream", "upstream", "both"}
         Which neighbours of the alerting member join the watchlist (module docstring).
+    pending : set of str
+        Members of ``W_j`` added from outside since iteration ``j``: a new iteration records
+        them with what it adds.
+
+    Returns
+    -------
+    state : SubgraphState
+        ``G_{j+1}``; its ``last`` is the new iteration.
+    added : frozenset of str
+        The members ``W_{j+1}`` has and ``W_j`` lacks.
     """
     m = alert.member
-    if m not in state.watchlist:
-        return state
+    if m not in watchlist:
+        return state, frozenset()
     add_m = frozenset() if m in state.members else frozenset({m})
     new_edges = {(x, m) for x in flow_predecessors(G, m) if x in state.members}
     watch_add: set[str] = set()
@@ -155,13 +163,15 @@ def grow(G: nx.MultiDiGraph, state: SubgraphState, alert: Alert, policy: str = "
         watch_add |= upstream_of(G, m)
         new_edges |= {(m, x) for x in flow_successors(G, m) if x in state.members}
     add_e = frozenset(new_edges - state.edges)
-    add_w = frozenset(watch_add - state.watchlist)
+    add_w = frozenset(x for x in watch_add if x not in watchlist)
     if not (add_m or add_e or add_w):
-        return state
-    it = Iteration(state.j + 1, alert.t, m, alert.plugin, add_m, add_e, add_w | state.pending, state.last)
-    return SubgraphState(
+        return state, frozenset()
+    # The new iteration records the outside additions since the last one as its own.
+    watched = add_w | frozenset(pending)
+    it = Iteration(state.j + 1, alert.t, m, alert.plugin, add_m, add_e, watched, state.last)
+    grown = SubgraphState(
         state.members | add_m if add_m else state.members,
         state.edges | add_e if add_e else state.edges,
-        state.watchlist | add_w if add_w else state.watchlist,
         it,
     )
+    return grown, add_w

@@ -7,7 +7,14 @@ import numpy as np
 from stream_viz.config import WatchlistConfig
 from stream_viz.detect.baseline import robust, slope
 from stream_viz.detect.process import process_anomalies
-from stream_viz.detect.watchlist import initial_watchlist, match_members
+from stream_viz.detect.watchlist import (
+    CONFIGURED,
+    GROWTH,
+    PROCESS_ANOMALY,
+    Watchlist,
+    initial_watchlist,
+    match_members,
+)
 from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.model.history import History
 from stream_viz.model.theta import make_theta
@@ -80,6 +87,28 @@ def test_initial_watchlist_modes():
     assert initial_watchlist(big, cfg, _history(90.0)) == {"node:/camera_left", "process:1", "process:2",
                                                            "node:/planner"}
     assert initial_watchlist(small, {"mode": "config", "members": []}, None) == {"process:1", "process:2"}
+
+
+def test_watchlist_keeps_its_members_their_sources_and_the_pending_additions():
+    w = Watchlist({"node:/a"})  # W_0: iteration 0 records it, so nothing is pending
+    assert w == {"node:/a"} and w.pending == frozenset() and w.sources("node:/a") == {CONFIGURED}
+    assert w.add({"node:/a", "node:/b"}, CONFIGURED) == {"node:/b"}
+    assert w.add({"process:1", "node:/b"}, PROCESS_ANOMALY) == {"process:1"}
+    assert w == {"node:/a", "node:/b", "process:1"} and w.pending == {"node:/b", "process:1"}
+    assert w.sources("node:/b") == {CONFIGURED, PROCESS_ANOMALY}
+    w.commit({"topic:/t", "node:/a"})  # an RCA iteration recorded the pending additions
+    assert w.pending == frozenset() and w.sources("topic:/t") == {GROWTH}
+    assert w.sources("node:/a") == {CONFIGURED}  # already watched: not counted as grown
+    assert w.external == {"node:/a", "node:/b", "process:1"}
+    assert w.add({"topic:/t"}, CONFIGURED) == frozenset()  # watched already: not pending
+    assert w.external == {"node:/a", "node:/b", "process:1", "topic:/t"}
+    # Forgetting drops where a member came from, not the member (W_j only grows).
+    w.forget({"process:1", "topic:/t"})
+    assert "process:1" in w and w.sources("process:1") == frozenset()
+    assert w.external == {"node:/a", "node:/b"}
+    assert w.add({"process:1"}, PROCESS_ANOMALY) == frozenset()  # back: watched from outside again
+    assert w.external == {"node:/a", "node:/b", "process:1"}
+    assert w | {"x"} == {"node:/a", "node:/b", "process:1", "topic:/t", "x"}
 
 
 def test_robust_and_slope():

@@ -226,3 +226,23 @@ def test_drop_gone_forgets_members_vanished_longer_than_the_retention():
     assert drop_gone(seen, 700.0, 600.0) == ["node:/camera"]
     assert "node:/camera" not in seen and not seen.has_edge("node:/camera", "topic:/image")
     assert set(seen.nodes) == set(b.nodes)
+
+
+def test_shadow_records_members_and_theta_and_forgets_the_long_gone():
+    from stream_viz.model.shadow import Shadow
+
+    sh = Shadow(history=3, forget_gone_s=10.0)
+    a = robot()
+    a.nodes["node:/camera"]["theta"] = np.array([1.0])
+    a.nodes["topic:/image"]["theta"] = np.array([5.0, 0.0])
+    assert sh.record(a, 1.0) == []
+    b = robot()
+    b.remove_node("node:/camera")
+    b.nodes["topic:/image"]["theta"] = np.array([6.0, 0.0])
+    for t in (2.0, 3.0, 4.0, 12.0):
+        assert sh.record(b, t) == []  # gone at 2.0: kept 10 s
+    assert sh.seen.nodes["node:/camera"]["gone"] is True and "node:/camera" in sh.history
+    assert list(sh.history.times("topic:/image")) == [3.0, 4.0, 12.0]  # the last 3 samples
+    assert sh.record(b, 12.5) == ["node:/camera"]  # 10.5 s gone: forgotten, with its history
+    assert "node:/camera" not in sh.seen and "node:/camera" not in sh.history
+    assert set(sh.seen) == set(b.nodes) and set(sh.history) == {"topic:/image"}

@@ -8,6 +8,7 @@ import networkx as nx
 import numpy as np
 import pytest
 
+from stream_viz.detect.watchlist import Watchlist
 from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.rca import RcaEngine, RcaSettings, analyze
 from stream_viz.rca.pagerank import personalized_pagerank
@@ -193,13 +194,24 @@ def test_alerts_outside_the_watchlist_are_kept_not_grown(G):
 
 
 def test_outside_watch_and_evidence_updates(G):
-    eng = RcaEngine(RcaSettings(), watchlist=set())
+    watchlist = Watchlist()  # the run's: the detector adds to it from outside the RCA
+    eng = RcaEngine(RcaSettings(), watchlist=watchlist)
     assert eng.update(G, [al(CTRL, "rosout", 1)]).root_causes == []  # nothing watched yet
-    eng.watch({CTRL})
+    watchlist.add({CTRL})
     res = eng.update(G, [])  # the kept alert is replayed once its member is watched
     assert [rc.member for rc in res.root_causes] == [CTRL]
     res = eng.update(G, [], evidence={"process:42": 1.0})
     assert top(res).member == PERC
+
+
+def test_members_watched_together_replay_their_kept_alerts_once(G):
+    watchlist = Watchlist()
+    eng = RcaEngine(RcaSettings(), watchlist=watchlist)
+    eng.update(G, [al(CTRL, "rosout", 1), al(PLAN, "rosout", 2)])  # both kept: nothing watched
+    watchlist.add({CTRL, PLAN})
+    res = eng.update(G, [])  # the first replay records both additions and replays the planner's too
+    assert res.state.members == frozenset({CTRL, PLAN})
+    assert [it.alert_member for it in res.iterations] == [None, CTRL, PLAN]
 
 
 def test_report_contract(G):

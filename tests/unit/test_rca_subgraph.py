@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import pytest
 
 from stream_viz.model.graph import add_flow_edge, add_member, new_graph
-from stream_viz.rca.subgraph import grow, initial_state, watch
+from stream_viz.rca.subgraph import SubgraphState, grow, initial_state
 from stream_viz.records import Alert
 
 A, D, B, C, P, S = "node:/a", "node:/d", "node:/b", "node:/c", "node:/p", "node:/s"
@@ -33,25 +35,50 @@ def al(member: str, t: float) -> Alert:
     return Alert(member, "test", t, "error", "x")
 
 
-def sets(state):
-    return set(state.members), set(state.edges), set(state.watchlist)
+@dataclass(frozen=True)
+class Run:
+    """``G_j`` with ``W_j`` beside it, grown as the RCA engine grows them."""
+
+    state: SubgraphState
+    watchlist: frozenset[str]
+
+    members = property(lambda self: self.state.members)
+    edges = property(lambda self: self.state.edges)
+    j = property(lambda self: self.state.j)
+    last = property(lambda self: self.state.last)
+
+    def iterations(self):
+        return self.state.iterations()
+
+
+def start(w0):
+    return Run(initial_state(w0), frozenset(w0))
+
+
+def step(G, run, alert, policy):
+    state, added = grow(G, run.state, alert, run.watchlist, policy)
+    return run if state is run.state else Run(state, run.watchlist | added)
+
+
+def sets(run):
+    return set(run.members), set(run.edges), set(run.watchlist)
 
 
 def test_downstream_is_the_papers_rule(G):
-    st = initial_state({T1})
+    st = start({T1})
     assert st.j == 0 and sets(st) == (set(), set(), {T1})
-    st = grow(G, st, al(T1, 1), "downstream")
+    st = step(G, st, al(T1, 1), "downstream")
     assert st.j == 1 and sets(st) == ({T1}, set(), {T1, B})
-    same = grow(G, st, al(C, 2), "downstream")  # c is not watched: no growth
+    same = step(G, st, al(C, 2), "downstream")  # c is not watched: no growth
     assert same is st
-    st = grow(G, st, al(B, 3), "downstream")
+    st = step(G, st, al(B, 3), "downstream")
     assert sets(st) == ({T1, B}, {(T1, B)}, {T1, B, T2})
-    assert grow(G, st, al(A, 4), "downstream") is st  # a is upstream, never watched downstream
-    st = grow(G, st, al(T2, 5), "downstream")
+    assert step(G, st, al(A, 4), "downstream") is st  # a is upstream, never watched downstream
+    st = step(G, st, al(T2, 5), "downstream")
     assert sets(st) == ({T1, B, T2}, {(T1, B), (B, T2)}, {T1, B, T2, C})
-    st = grow(G, st, al(C, 6), "downstream")
+    st = step(G, st, al(C, 6), "downstream")
     assert sets(st) == ({T1, B, T2, C}, {(T1, B), (B, T2), (T2, C)}, {T1, B, T2, C})
-    assert grow(G, st, al(C, 7), "downstream") is st  # changes nothing: no new iteration
+    assert step(G, st, al(C, 7), "downstream") is st  # changes nothing: no new iteration
     its = st.iterations()
     assert [it.j for it in its] == [0, 1, 2, 3, 4]
     assert [it.alert_member for it in its] == [None, T1, B, T2, C]
@@ -63,50 +90,51 @@ def test_downstream_is_the_papers_rule(G):
 
 def test_downstream_adds_only_incoming_edges(G):
     # b alerts first, then /t1: the paper adds ((x, m), 0) with x ∈ M_j only, so (/t1, b) is missing.
-    st = grow(G, initial_state({B, T1}), al(B, 1), "downstream")
-    st = grow(G, st, al(T1, 2), "downstream")
+    st = step(G, start({B, T1}), al(B, 1), "downstream")
+    st = step(G, st, al(T1, 2), "downstream")
     assert set(st.edges) == set()
     # upstream/both also add the outgoing edge of the new member to the subgraph
-    st2 = grow(G, grow(G, initial_state({B, T1}), al(B, 1), "both"), al(T1, 2), "both")
+    st2 = step(G, step(G, start({B, T1}), al(B, 1), "both"), al(T1, 2), "both")
     assert set(st2.edges) == {(T1, B)}
 
 
 def test_upstream_walks_against_data_flow_through_a_silent_publisher(G):
-    st = grow(G, initial_state({C}), al(C, 1), "upstream")
+    st = step(G, start({C}), al(C, 1), "upstream")
     assert sets(st) == ({C}, set(), {C, T2})
-    st = grow(G, st, al(T2, 2), "upstream")
+    st = step(G, st, al(T2, 2), "upstream")
     # /t2 is passive: its publisher b and b's input /t1 are watched (b may be silent: hung)
     assert sets(st) == ({C, T2}, {(T2, C)}, {C, T2, B, T1})
-    st = grow(G, st, al(T1, 3), "upstream")
+    st = step(G, st, al(T1, 3), "upstream")
     assert sets(st) == ({C, T2, T1}, {(T2, C)}, {C, T2, B, T1, A, D})
-    st = grow(G, st, al(B, 4), "upstream")
+    st = step(G, st, al(B, 4), "upstream")
     assert sets(st) == ({C, T2, T1, B}, {(T2, C), (T1, B), (B, T2)}, {C, T2, B, T1, A, D})
     # the paper's downstream rule never leaves c here
-    down = grow(G, initial_state({C}), al(C, 1), "downstream")
+    down = step(G, start({C}), al(C, 1), "downstream")
     assert sets(down) == ({C}, set(), {C})
-    assert grow(G, down, al(T2, 2), "downstream") is down
+    assert step(G, down, al(T2, 2), "downstream") is down
 
 
 def test_both_and_service_direction(G):
-    st = grow(G, initial_state({T1}), al(T1, 1), "both")
+    st = step(G, start({T1}), al(T1, 1), "both")
     assert sets(st) == ({T1}, set(), {T1, B, A, D})
     # a client's cause is its server (the reply flows back); downstream follows the send edge too
-    up = grow(G, initial_state({P}), al(P, 1), "upstream")
+    up = step(G, start({P}), al(P, 1), "upstream")
     assert set(up.watchlist) == {P, S}
-    down = grow(G, initial_state({P}), al(P, 1), "downstream")
+    down = step(G, start({P}), al(P, 1), "downstream")
     assert set(down.watchlist) == {P, S}
-    srv = grow(G, initial_state({S}), al(S, 1), "upstream")
+    srv = step(G, start({S}), al(S, 1), "upstream")
     assert set(srv.watchlist) == {S}
 
 
 def test_outside_watch_additions_are_recorded_by_the_next_iteration(G):
-    st = watch(initial_state({T1}), {C})
+    st = Run(initial_state({T1}), frozenset({T1, C}))  # C watched from outside after iteration 0
     assert set(st.watchlist) == {T1, C} and st.j == 0
-    st = grow(G, st, al(C, 1), "downstream")
+    state, added = grow(G, st.state, al(C, 1), st.watchlist, "downstream", pending={C})
+    st = Run(state, st.watchlist | added)
     assert st.j == 1 and st.last.watchlist == frozenset({T1, C})
     assert st.last.added_watch == frozenset({C})
 
 
 def test_unknown_member_grows_without_edges(G):
-    st = grow(G, initial_state({"node:/ghost"}), al("node:/ghost", 1), "both")
+    st = step(G, start({"node:/ghost"}), al("node:/ghost", 1), "both")
     assert sets(st) == ({"node:/ghost"}, set(), {"node:/ghost"})

@@ -108,6 +108,26 @@ def test_runs_problems_and_unreadable(tmp_path):
              "line": "", "count": 0}]
 
 
+def test_a_monitor_tick_stores_what_changed(tmp_path):
+    from stream_viz.model.diff import GraphDiff
+    from stream_viz.records import Sample
+
+    G, G2 = _graph(), _graph(extra=True)
+    changed = GraphDiff(added_members=frozenset({"node:/det"}))
+    problem = PluginProblem("bad", "/x/bad.py", "run", "ValueError: no")
+    with AlertStore(tmp_path / "t.sqlite") as st:
+        # The first tick keeps the model; later ones only when the sample's structure changed.
+        alert, denied = Alert("node:/cam", "rosout", 1.0, "error", "boom"), {"process:42": "AccessDenied"}
+        assert st.add_sample(Sample(1.0, G, unreadable=denied), G, [alert]) == [alert]
+        assert st.add_sample(Sample(2.0, G, unreadable=denied), G, [], [problem]) == []  # same: once
+        st.add_sample(Sample(3.0, G2, diff=changed, unreadable={"process:42": "gone"}), G2)
+        st.add_sample(Sample(4.0, G2), G2)
+        assert [t for t, _ in st.snapshots()] == [1.0, 3.0]
+        assert [(p["t"], p["kind"], p["message"]) for p in st.problems()] == [
+            (1.0, "unreadable", "AccessDenied"), (2.0, "run", "ValueError: no"), (3.0, "unreadable", "gone")]
+        assert st.alerts() == [alert]
+
+
 def test_foreign_sqlite_file_is_refused(tmp_path):
     path = tmp_path / "foreign.sqlite"
     db = sqlite3.connect(path)

@@ -108,7 +108,7 @@ def test_services_named_as_the_collector_names_them_sit_beside_their_server():
 
 
 def test_metrics_batch_grows_with_the_members_to_bound_chunks_per_second():
-    from stream_viz.live_view import metrics_batch_s
+    from stream_viz.viz.live import metrics_batch_s
     from stream_viz.viz.metrics import MetricBatch
 
     assert metrics_batch_s(25, 5.0, 20.0) == 5.0  # the demo: every 5 s

@@ -168,10 +168,10 @@ def test_nan_theta_rows_are_left_out(tmp_path):
 
 
 def test_a_long_recording_is_saved_in_parts_that_each_open_alone(tmp_path):
-    from stream_viz.live_view import LiveView
     from stream_viz.rca.engine import RcaEngine
     from stream_viz.rca.settings import RcaSettings
     from stream_viz.records import Sample
+    from stream_viz.viz.live import LiveView
 
     rrd = tmp_path / "long.rrd"
     G = robot()
@@ -181,7 +181,7 @@ def test_a_long_recording_is_saved_in_parts_that_each_open_alone(tmp_path):
         view.update(T0 + i, Sample(T0 + i, G.copy()), G, [], result)
     view.close()
     parts = [rrd, tmp_path / "long_1.rrd", tmp_path / "long_2.rrd"]
-    assert view.rec.parts == parts
+    assert view.recording_parts == parts
     times = []
     for p in parts:
         data = rows(p)

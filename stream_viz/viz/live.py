@@ -42,7 +42,13 @@ class LiveView:
 
     @property
     def url(self) -> str | None:
+        """The served web viewer's address (``serve``), else None."""
         return self.rec.url
+
+    @property
+    def recording_parts(self) -> list[Path]:
+        """The recording's files so far (``run.rrd``, ``run_1.rrd``, …; empty without ``save``)."""
+        return list(self.rec.parts)
 
     def update(
         self, t: float, sample: Sample, seen: nx.MultiDiGraph, alerts: list[Alert], result: Any

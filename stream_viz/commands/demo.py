@@ -7,13 +7,29 @@ import os
 import threading
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from stream_viz.config import load_config
-from stream_viz.demo.robot import FaultSpec, Robot
-from stream_viz.monitor import Monitor, install_stop_handlers, linger, say_recording
+from stream_viz.commands.monitor import add_outputs, install_stop_handlers, linger, say_recording
+from stream_viz.demo.faults import FAULTS
 
+if TYPE_CHECKING:
+    from stream_viz.monitor import Monitor
+
+NAME = "demo"
+HELP = "start a simulated robot, inject a fault, diagnose it, show it"
 DEFAULT_RECORDING = Path("stream_viz_demo.rrd")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--fault", choices=(*FAULTS, "none"), default="crash",
+                   help="what to inject ('none': a healthy run, to see what a calm robot looks like)")
+    p.add_argument("--target", default="/lidar_driver", metavar="NODE", help="node to fault")
+    p.add_argument("--at", type=float, default=12.0, metavar="SECONDS",
+                   help="inject this long after the robot is up")
+    p.add_argument("--duration", type=float, default=30.0, metavar="SECONDS",
+                   help="length of the run, from when the robot is up")
+    p.add_argument("--domain", type=int, default=42, metavar="ID", help="ROS_DOMAIN_ID of the demo robot")
+    add_outputs(p)
 
 
 def default_viewer() -> str:
@@ -28,8 +44,12 @@ def demo_env(domain: int) -> dict[str, str]:
     return dict(os.environ)
 
 
-def run_demo(args: argparse.Namespace) -> dict[str, Any]:
+def run(args: argparse.Namespace) -> int:
     """Start the robot, monitor it with a fault injected at ``--at`` s, print the diagnosis."""
+    from stream_viz.config import load_config
+    from stream_viz.demo.robot import FaultSpec, Robot
+    from stream_viz.monitor import Monitor
+
     config = load_config(args.config)
     fault = None if args.fault == "none" else FaultSpec(args.fault, args.target, args.at)
     save = args.save or DEFAULT_RECORDING
@@ -67,7 +87,7 @@ def run_demo(args: argparse.Namespace) -> dict[str, Any]:
             robot.stop()
     _print_diagnosis(report, mon)
     linger(mon, viewer)
-    return report
+    return 0
 
 
 def _print_diagnosis(report: dict[str, Any], mon: Monitor) -> None:

@@ -1,0 +1,90 @@
+"""``stream-viz monitor``: attach to the system on ROS_DOMAIN_ID until --duration or a signal.
+
+Also the command-line pieces ``demo`` shares: the output options, the stop signals, the
+served viewer kept up at the end, where the recording went.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from stream_viz.monitor import Monitor
+
+NAME = "monitor"
+HELP = "attach to the running system, detect, diagnose, stream to Rerun"
+
+
+def add_outputs(p: argparse.ArgumentParser) -> None:
+    """The options of a live run's outputs (``monitor`` and ``demo``)."""
+    p.add_argument("--save", type=Path, metavar="FILE.rrd", help="also write the Rerun recording here")
+    p.add_argument("--db", type=Path, metavar="FILE.sqlite", help="keep the alert database here")
+    p.add_argument("--report", type=Path, metavar="FILE.json", help="write the JSON report here at the end")
+    p.add_argument("--config", type=Path, metavar="FILE.toml", help="settings (plugins, watchlist, rca)")
+    p.add_argument(
+        "--viewer", default=None, metavar="spawn|serve|none|URL",
+        help="spawn a native viewer, serve a web viewer on localhost, none, or a rerun+http:// URL",
+    )
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--duration", type=float, metavar="SECONDS", help="stop after this long (else SIGINT)")
+    add_outputs(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Monitor until ``--duration`` passed or SIGINT/SIGTERM; write the outputs asked for."""
+    from stream_viz.config import load_config
+    from stream_viz.monitor import Monitor
+
+    config = load_config(args.config)
+    stop = threading.Event()
+    install_stop_handlers(stop)
+    viewer = args.viewer or "none"
+    mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=viewer)
+    mon.progress.say(f"alert database: {mon.db_path}")
+    try:
+        mon.run(args.duration, stop)
+    finally:
+        mon.close(keep_view=viewer == "serve")
+    if args.save:
+        say_recording(mon)
+    if args.report:
+        mon.progress.say(f"report: {args.report}")
+    linger(mon, viewer)
+    return 0
+
+
+def install_stop_handlers(stop: threading.Event) -> None:
+    """SIGINT and SIGTERM end the run cleanly (the report is written, exit code 0)."""
+
+    def handler(signum, frame) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+
+
+def linger(mon: Monitor, viewer: str) -> None:
+    """A served web viewer dies with this process: on a terminal, keep it up until Ctrl-C."""
+    try:
+        if viewer == "serve" and sys.stdin.isatty():
+            done = threading.Event()
+            install_stop_handlers(done)
+            mon.progress.say(f"the web viewer keeps serving at {mon.view.url} — Ctrl-C to exit")
+            done.wait()
+    finally:
+        mon.view.close()
+
+
+def say_recording(mon: Monitor) -> None:
+    """Tell where the recording went (all its file parts) and how to open it."""
+    parts = mon.recording_parts
+    files = " ".join(str(p) for p in parts)
+    more = f" in {len(parts)} parts" if len(parts) > 1 else ""
+    mon.progress.say(f"recording{more}: {files}  (open with: rerun {files})")

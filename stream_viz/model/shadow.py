@@ -1,0 +1,42 @@
+"""The record step of the tick: the run's shadow of the system — every member seen and θ history."""
+
+from __future__ import annotations
+
+import networkx as nx
+
+from stream_viz.model.graph import new_graph
+from stream_viz.model.history import History
+from stream_viz.model.seen import drop_gone, remember
+
+
+class Shadow:
+    """Everything a run has seen: the union of the live models (vanished members kept, marked
+    gone) and the θ history of each member, both bounded.
+
+    Parameters
+    ----------
+    history : int
+        Samples of θ kept per member.
+    forget_gone_s : float
+        Seconds a vanished member stays (<= 0: the whole run).
+    """
+
+    def __init__(self, history: int = 600, forget_gone_s: float = 600.0) -> None:
+        self.seen: nx.MultiDiGraph = new_graph()
+        self.history = History(maxlen=history)
+        self.forget_gone_s = forget_gone_s
+
+    def record(self, G: nx.MultiDiGraph, t: float) -> list[str]:
+        """Add the live model ``G`` at ``t`` (its members, its θ); return the members forgotten
+        (sorted)."""
+        self.seen = remember(self.seen, G, t)
+        # Long after a member vanished (longer than the RCA window by default) it can no longer
+        # be a cause: drop it and its history, so a churning system does not grow the run.
+        # The database keeps it (snapshots, alerts) for `analyze`.
+        gone = drop_gone(self.seen, t, self.forget_gone_s)
+        if gone:
+            self.history.forget(set(self.seen))
+        for m, theta in G.nodes(data="theta"):
+            if theta is not None:
+                self.history.add(m, t, theta)
+        return gone
