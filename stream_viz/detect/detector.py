@@ -89,7 +89,7 @@ class Detector:
         )
         alerts = [a for a in fired if a.member != self.own_process]
         # Process-metric anomalies count as evidence too, not only as watchlist entries.
-        evidence = {m: 1.0 for m in anomalous}
+        evidence = {m: 1.0 for m in sorted(anomalous)}
         changed = evidence != self.evidence
         self.evidence = evidence
         return Detection(alerts, problems, evidence, changed)

@@ -186,7 +186,7 @@ class RcaEngine:
             self.state = state
             self.watchlist.commit(added)
             self._iterations.append(self.state.last)
-            for m in self.state.last.added_watch:
+            for m in sorted(self.state.last.added_watch):  # a set's order would vary between runs
                 # Replayed at the current time so iteration times stay in order.
                 queue.extend(replace(k, t=max(k.t, a.t)) for k in self._outside.pop(m, ()))
 
