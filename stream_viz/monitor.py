@@ -82,10 +82,9 @@ class Monitor:
         self.injected: Mapping[str, Any] | None = None
         self.collector = Collector(domain_id, topic_metrics=config.monitor.topic_metrics)
         self.collector.start()
-        # Everything loaded so far (rclpy, numpy, networkx, Rerun, plugins: ~10^5 objects) lives
-        # as long as the process: out of the collector's sight, a full collection no longer walks
-        # it each time (40 ms vs 0.4 ms frozen on the demo, bench/bench_monitor_cpu.py). Garbage first,
-        # so none is frozen; `close` unfreezes.
+        # Everything loaded so far (rclpy, numpy, networkx, Rerun, plugins) lives as long as the
+        # process: frozen, a full collection no longer walks it each time (cost in
+        # docs/evaluation.md, "Cost"). Garbage first, so none is frozen; `close` unfreezes.
         gc.collect()
         gc.freeze()
 

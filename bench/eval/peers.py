@@ -78,7 +78,7 @@ def parents_frame(cols: list[str], service_edges: list[list[str]]) -> pd.DataFra
     return adj
 
 
-EPS_MAX_COLUMNS = 300  # ε-Diagnosis above this: minutes per run (measured at 587 columns)
+EPS_MAX_COLUMNS = 300  # ε-Diagnosis above this takes minutes per run (docs/evaluation.md)
 
 
 def run_peers(run_dir: Path) -> dict:

@@ -17,9 +17,9 @@ from stream_viz.detect.process import process_anomalies
 from stream_viz.model.history import History
 from stream_viz.model.ids import kind_of
 
-# `auto` watches every member up to here: the plugins cost ~44 ms a sample for 1,000 watched
-# members inline under a load of 54 (docs/plugins.md), small beside a 500-node system's ~250 ms
-# sample; a 300 limit left a 500-node system's topics unwatched, so a hang there raised nothing.
+# `auto` watches every member up to here: the plugins' cost for 1,000 watched members is small
+# beside a 500-node system's sample (docs/plugins.md, docs/robustness.md); a lower limit left a
+# 500-node system's topics unwatched, so a hang there raised nothing.
 AUTO_LIMIT = 2000
 
 

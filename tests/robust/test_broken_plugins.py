@@ -1,6 +1,6 @@
 """Broken user plugins through the real ``stream-viz monitor``: isolated, named, the run goes on.
 
-The pure parts (each failure kind, disabling, the flood cap) are in tests/unit/test_detect_registry.py;
+The pure parts (each failure kind, disabling, the flood cap) are in tests/unit/test_plugin_set.py;
 here one real monitor run loads a folder with every kind of broken plugin next to a good one.
 """
 
