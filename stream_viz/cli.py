@@ -6,9 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
+from stream_viz.demo.faults import FAULTS
+from stream_viz.demo.robots import ROBOTS
 from stream_viz.errors import StreamVizError
-
-FAULTS = ("crash", "hang", "degrade", "cpu", "leak", "delay", "errlog", "diag")
 
 
 def _add_outputs(p: argparse.ArgumentParser) -> None:
@@ -40,9 +40,11 @@ def build_parser() -> argparse.ArgumentParser:
     m.set_defaults(func=_monitor)
 
     d = sub.add_parser("demo", help="start a simulated robot, inject a fault, diagnose it, show it")
+    d.add_argument("--robot", choices=ROBOTS, default="demo",
+                   help="which robot: the demo robot, or the warehouse AMR (see docs/demo.md)")
     d.add_argument("--fault", choices=(*FAULTS, "none"), default="crash",
                    help="what to inject ('none': a healthy run, to see what a calm robot looks like)")
-    d.add_argument("--target", default="/lidar_driver", metavar="NODE", help="node to fault")
+    d.add_argument("--target", metavar="NODE", help="node to fault (default: the robot's usual one)")
     d.add_argument("--at", type=float, default=12.0, metavar="SECONDS",
                    help="inject this long after the robot is up")
     d.add_argument("--duration", type=float, default=30.0, metavar="SECONDS",

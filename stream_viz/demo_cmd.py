@@ -11,6 +11,7 @@ from typing import Any
 
 from stream_viz.config import load_config
 from stream_viz.demo.robot import FaultSpec, Robot
+from stream_viz.demo.robots import default_target, robot_topology
 from stream_viz.monitor import Monitor, install_stop_handlers, linger, say_recording
 
 DEFAULT_RECORDING = Path("stream_viz_demo.rrd")
@@ -31,15 +32,17 @@ def demo_env(domain: int) -> dict[str, str]:
 def run_demo(args: argparse.Namespace) -> dict[str, Any]:
     """Start the robot, monitor it with a fault injected at ``--at`` s, print the diagnosis."""
     config = load_config(args.config)
-    fault = None if args.fault == "none" else FaultSpec(args.fault, args.target, args.at)
+    robot_name = getattr(args, "robot", "demo")
+    fault = None if args.fault == "none" else \
+        FaultSpec(args.fault, args.target or default_target(robot_name, args.fault), args.at)
     save = args.save or DEFAULT_RECORDING
     viewer = args.viewer or default_viewer()
     stop = threading.Event()
     install_stop_handlers(stop)
     env = demo_env(args.domain)
-    robot = Robot(env=env)
+    robot = Robot(env=env, topology=robot_topology(robot_name))
     if fault is not None:
-        fault.check(robot.topology.node_names())
+        robot.topology.check_fault(fault)
     # The monitor checks its outputs before any robot process starts: a bad path costs nothing.
     mon = Monitor(config, db=args.db, save=save, report=args.report, viewer=viewer, domain_id=args.domain)
     try:
