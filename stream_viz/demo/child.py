@@ -14,9 +14,12 @@ import hashlib
 import json
 import os
 import signal
+import sys
 import threading
 import time
+from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import Any, NoReturn
 
 from stream_viz.demo.faults import FAULTS, STOP
 
@@ -103,3 +106,33 @@ def spin(executor) -> None:
         executor.spin()
     except Exception:  # shutdown races end the spin; the process is ending anyway
         pass
+
+
+def errlog(logger: Any, stop: threading.Event, text: str) -> None:
+    """Log ``text`` (``{n}``: a counter) at ERROR every 0.5 s until ``stop``: the ``errlog`` fault."""
+    n = 0
+    while not stop.wait(0.5):
+        n += 1
+        logger.error(text.format(n=n))
+
+
+def end_process(executors: list, spinners: list[threading.Thread], destroy: Iterable[Callable[[], None]],
+                context: Any, code: int = 0) -> NoReturn:
+    """Shut the executors down, destroy the nodes and the DDS participant, exit with ``code``.
+
+    A clean shutdown can hang (an executor busy in a callback, DDS teardown): a watchdog exits
+    regardless after 5 s. Destroying the participant makes peers see the nodes leave at once.
+    """
+    watchdog = threading.Timer(5.0, os._exit, args=(code,))
+    watchdog.daemon = True
+    watchdog.start()
+    for ex in executors:
+        ex.shutdown(timeout_sec=1.0)
+    for t in spinners:  # a node still in use by a spinning executor would not really be destroyed
+        t.join(2.0)
+    for fn in destroy:
+        fn()
+    context.try_shutdown()
+    context.destroy()
+    sys.stdout.flush()
+    os._exit(code)  # skip joining stuck executor threads

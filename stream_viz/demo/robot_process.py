@@ -17,6 +17,8 @@ from pathlib import Path
 from stream_viz.demo.child import (
     burn,
     end_on_signals,
+    end_process,
+    errlog,
     leak,
     next_fault,
     parser,
@@ -26,13 +28,6 @@ from stream_viz.demo.child import (
 )
 from stream_viz.demo.faults import STOP
 from stream_viz.demo.topology import DEMO, Topology
-
-
-def _errlog(sim, stop: threading.Event) -> None:
-    n = 0
-    while not stop.wait(0.5):
-        n += 1
-        sim.log.error(f"injected error #{n}: sensor read failed")
 
 
 def _inject(fault: str, target: str, at: float, sims: dict, run_dir: Path, stop: threading.Event) -> None:
@@ -55,8 +50,8 @@ def _inject(fault: str, target: str, at: float, sims: dict, run_dir: Path, stop:
         monitor.diag_errors.add(target)
     else:
         work = {"cpu": burn, "leak": leak}.get(fault)
-        args = (stop,) if work else (sim, stop)
-        threading.Thread(target=work or _errlog, args=args, daemon=True, name=f"fault-{fault}").start()
+        args = (stop,) if work else (sim.log, stop, "injected error #{n}: sensor read failed")
+        threading.Thread(target=work or errlog, args=args, daemon=True, name=f"fault-{fault}").start()
 
 
 def _injector(args, sims: dict, run_dir: Path) -> None:
@@ -100,21 +95,7 @@ def main(argv: list[str] | None = None) -> int:
 
     while not STOP.wait(0.5):  # a timeout keeps the main thread responsive to signals
         pass
-    # A clean shutdown can hang (an executor busy in a callback, DDS teardown): end regardless.
-    watchdog = threading.Timer(5.0, os._exit, args=(0,))
-    watchdog.daemon = True
-    watchdog.start()
-    for ex in executors:
-        ex.shutdown(timeout_sec=1.0)
-    for t in spinners:  # a node still in use by a spinning executor would not really be destroyed
-        t.join(2.0)
-    for s in sims.values():
-        s.destroy()
-    ctx.try_shutdown()
-    ctx.destroy()  # deletes the DDS participant: peers see the nodes leave at once
-    sys.stdout.flush()
-    os._exit(0)  # skip joining stuck executor threads
-
+    end_process(executors, spinners, [s.destroy for s in sims.values()], ctx)
 
 if __name__ == "__main__":
     sys.exit(main())

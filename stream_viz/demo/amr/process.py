@@ -19,6 +19,8 @@ from stream_viz.demo.amr.topology import AMR, PROCESSES
 from stream_viz.demo.child import (
     burn,
     end_on_signals,
+    end_process,
+    errlog,
     leak,
     next_fault,
     parser,
@@ -30,15 +32,9 @@ from stream_viz.demo.faults import STOP
 from stream_viz.demo.topology import Topology
 
 RESTART_AFTER = 3.0  # the "restart" fault: the target's nodes live this long in each process, then it exits 1
+ERRLOG = "failed to compute a result (error #{n}): internal exception"
 NODE_FAULTS = ("hang", "degrade", "delay", "flap", "slow_service", "qos", "diag")
 _exit_code = 0
-
-
-def _errlog(behaviour, stop: threading.Event) -> None:
-    n = 0
-    while not stop.wait(0.5):
-        n += 1
-        behaviour.log.error(f"failed to compute a result (error #{n}): internal exception")
 
 
 def _inject(fault: str, target: str, at: float, nodes: dict, run_dir: Path, up: float) -> None:
@@ -64,8 +60,8 @@ def _inject(fault: str, target: str, at: float, nodes: dict, run_dir: Path, up: 
         behaviour.set_fault(fault)
     else:
         work = {"cpu": burn, "leak": leak}.get(fault)
-        args = (STOP,) if work else (behaviour, STOP)
-        threading.Thread(target=work or _errlog, args=args, daemon=True, name=f"fault-{fault}").start()
+        args = (STOP,) if work else (behaviour.log, STOP, ERRLOG)
+        threading.Thread(target=work or errlog, args=args, daemon=True, name=f"fault-{fault}").start()
 
 
 def _injector(args, nodes: dict, run_dir: Path, up: float) -> None:
@@ -134,21 +130,7 @@ def main(argv: list[str] | None = None) -> int:
         for b in nodes.values():
             b.finish()
         STOP.set()
-    # A clean shutdown can hang (an executor busy in a callback, DDS teardown): end regardless.
-    watchdog = threading.Timer(5.0, os._exit, args=(_exit_code,))
-    watchdog.daemon = True
-    watchdog.start()
-    for ex in executors:
-        ex.shutdown(timeout_sec=1.0)
-    for t in spinners:
-        t.join(2.0)
-    for b in nodes.values():
-        b.destroy()
-    ctx.try_shutdown()
-    ctx.destroy()  # deletes the DDS participant: peers see the nodes leave at once
-    sys.stdout.flush()
-    os._exit(_exit_code)
-
+    end_process(executors, spinners, [b.destroy for b in nodes.values()], ctx, _exit_code)
 
 if __name__ == "__main__":
     sys.exit(main())
