@@ -13,9 +13,13 @@ LARGE = 300
 
 
 def system_topology(name: str, seed: int = 0) -> Topology:
-    """``demo`` or ``gen<N>`` (a generated layered system of N nodes, seeded)."""
+    """``demo``, ``amr`` (the warehouse AMR) or ``gen<N>`` (a generated layered system of N nodes, seeded)."""
     if name == "demo":
         return DEMO
+    if name == "amr":
+        from stream_viz.demo.amr.topology import AMR
+
+        return AMR
     if name.startswith("gen"):
         from stream_viz.demo.generated import generate
 
@@ -23,7 +27,7 @@ def system_topology(name: str, seed: int = 0) -> Topology:
         if n >= LARGE:
             return generate(n, seed=seed, rate=(0.5, 1.0), nodes_per_process=25)
         return generate(n, seed=seed)
-    raise ValueError(f"unknown system {name!r}: demo or gen<N>")
+    raise ValueError(f"unknown system {name!r}: demo, amr or gen<N>")
 
 
 def expand_map(topo: Topology, process_names: Mapping[str, str]) -> dict[str, list[str]]:

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 from stream_viz.commands.monitor import add_outputs, install_stop_handlers, linger, say_recording
 from stream_viz.demo.faults import FAULTS
+from stream_viz.demo.robots import ROBOTS
 
 if TYPE_CHECKING:
     from stream_viz.monitor import Monitor
@@ -21,9 +22,11 @@ DEFAULT_RECORDING = Path("stream_viz_demo.rrd")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--robot", choices=ROBOTS, default="demo",
+                   help="which robot: the demo robot, or the warehouse AMR (see docs/demo.md)")
     p.add_argument("--fault", choices=(*FAULTS, "none"), default="crash",
                    help="what to inject ('none': a healthy run, to see what a calm robot looks like)")
-    p.add_argument("--target", default="/lidar_driver", metavar="NODE", help="node to fault")
+    p.add_argument("--target", metavar="NODE", help="node to fault (default: the robot's usual one)")
     p.add_argument("--at", type=float, default=12.0, metavar="SECONDS",
                    help="inject this long after the robot is up")
     p.add_argument("--duration", type=float, default=30.0, metavar="SECONDS",
@@ -48,18 +51,21 @@ def run(args: argparse.Namespace) -> int:
     """Start the robot, monitor it with a fault injected at ``--at`` s, print the diagnosis."""
     from stream_viz.config import load_config
     from stream_viz.demo.robot import FaultSpec, Robot
+    from stream_viz.demo.robots import default_target, robot_topology
     from stream_viz.monitor import Monitor
 
     config = load_config(args.config)
-    fault = None if args.fault == "none" else FaultSpec(args.fault, args.target, args.at)
+    robot_name = args.robot
+    fault = None if args.fault == "none" else \
+        FaultSpec(args.fault, args.target or default_target(robot_name, args.fault), args.at)
     save = args.save or DEFAULT_RECORDING
     viewer = args.viewer or default_viewer()
     stop = threading.Event()
     install_stop_handlers(stop)
     env = demo_env(args.domain)
-    robot = Robot(env=env)
+    robot = Robot(env=env, topology=robot_topology(robot_name))
     if fault is not None:
-        fault.check(robot.topology.node_names())
+        robot.topology.check_fault(fault)
     # The monitor checks its outputs before any robot process starts: a bad path costs nothing.
     mon = Monitor(config, db=args.db, save=save, report=args.report, viewer=viewer, domain_id=args.domain)
     try:

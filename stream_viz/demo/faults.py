@@ -18,7 +18,13 @@ FAULTS: dict[str, str] = {
     "delay": "every callback of the target sleeps 50-400 ms: its rate drops, its jitter rises",
     "errlog": "the target logs an ERROR line every 0.5 s (to /rosout)",
     "diag": "/diagnostics reports ERROR for the target (status name and hardware_id = its fqn)",
+    # Kinds that need structures the first demo does not have (the warehouse AMR, ``demo/amr``).
+    "slow_service": "the target's service callbacks take 5 s: its clients time out and stall",
+    "qos": "the target re-creates its best-effort subscriptions as reliable: they receive nothing",
+    "restart": "the target's process exits (code 1) ~3 s after each start; its launcher respawns it",
+    "flap": "the target's publishers drop out for 4 s every 8 s (an intermittent device connection)",
 }
+BASIC_FAULTS = ("crash", "hang", "degrade", "cpu", "leak", "delay", "errlog", "diag")  # every robot has these
 
 
 @dataclass(frozen=True)

@@ -10,14 +10,17 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
 from stream_viz.demo.faults import FAULTS, FaultSpec
-from stream_viz.demo.topology import DEMO, Topology
+from stream_viz.demo.topology import DEMO, GroupSpec, Topology
 from stream_viz.errors import DemoError
 
 __all__ = ["FAULTS", "FaultSpec", "Robot", "shm_clean"]
+
+RESPAWN_DELAY = 1.0  # s between a respawning group's exit and its new process (launch's respawn_delay)
 
 
 def shm_clean() -> None:
@@ -48,7 +51,7 @@ class Robot:
     def __init__(self, env: dict | None = None, fault: FaultSpec | None = None,
                  topology: Topology = DEMO, run_dir: str | Path | None = None) -> None:
         if fault is not None:
-            fault.check(topology.node_names())
+            topology.check_fault(fault)
         self.env = dict(os.environ if env is None else env)
         self.fault, self.topology = fault, topology
         self._own_dir = run_dir is None
@@ -57,6 +60,10 @@ class Robot:
         self.started_at: float | None = None
         self.fault_at: float | None = None
         self._injected: dict = {}
+        self._cmd: list[str] = []
+        self._stopping = threading.Event()
+        self._supervisor: threading.Thread | None = None
+        self.pid_history: dict[str, list[int]] = {}  # group -> every pid it ran as (respawns add more)
 
     # -- life cycle -------------------------------------------------------------------------
     def start(self) -> Robot:
@@ -73,26 +80,46 @@ class Robot:
             self.fault_at = self.started_at + self.fault.at
             cmd_fault = ["--fault", self.fault.fault, "--target", self.fault.target,
                          "--at", repr(self.fault_at)]
+        self._cmd = [sys.executable, "-m", self.topology.entry, "--topology", str(topo_file),
+                     "--run-dir", str(self.run_dir), *cmd_fault]
         atexit.register(self.stop)
         try:
             for g in self.topology.groups:
-                log = open(self.run_dir / f"{g.name}.log", "w")
-                cmd = [sys.executable, "-m", "stream_viz.demo.robot_process", "--group", g.name,
-                       "--topology", str(topo_file), "--run-dir", str(self.run_dir), *cmd_fault]
-                self.procs[g.name] = subprocess.Popen(cmd, env=self.env, stdout=log, stderr=subprocess.STDOUT,
-                                                      stdin=subprocess.DEVNULL, start_new_session=True)
-                log.close()
+                self._spawn(g)
         except OSError as exc:
             self.stop()
             raise DemoError(f"cannot start group {g.name!r}: {exc}") from exc
+        if any(g.respawn for g in self.topology.groups):
+            self._supervisor = threading.Thread(target=self._respawn, daemon=True, name="respawn")
+            self._supervisor.start()
         return self
+
+    def _spawn(self, g: GroupSpec) -> None:
+        """Start (or restart) the process of group ``g``; its output is appended to ``<group>.log``."""
+        with open(self.run_dir / f"{g.name}.log", "a") as log:
+            p = subprocess.Popen([*self._cmd, "--group", g.name], env=self.env, stdout=log,
+                                 stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
+        self.procs[g.name] = p
+        self.pid_history.setdefault(g.name, []).append(p.pid)
+
+    def _respawn(self) -> None:
+        """Restart every ``respawn`` group whose process has exited, until :meth:`stop`."""
+        while not self._stopping.wait(0.2):
+            for g in self.topology.groups:
+                if g.respawn and self.procs[g.name].poll() is not None:
+                    if self._stopping.wait(RESPAWN_DELAY):
+                        return
+                    try:
+                        self._spawn(g)
+                    except OSError:
+                        pass  # tried again on the next round
 
     def inject(self, fault: FaultSpec) -> float:
         """Inject ``fault`` ``fault.at`` s from now into the running system; returns that unix time.
 
         One fault per run: DemoError if one was given to the constructor or injected already.
         """
-        fault.check(self.topology.node_names())
+        self.topology.check_fault(fault)
         if not self.procs or self.run_dir is None:
             raise DemoError("start the robot before injecting a fault")
         if self.fault is not None:
@@ -122,6 +149,9 @@ class Robot:
     def stop(self, timeout: float = 5.0) -> None:
         """SIGINT every process group, SIGKILL what is left after ``timeout``, clean DDS shared memory."""
         atexit.unregister(self.stop)
+        self._stopping.set()
+        if self._supervisor is not None:
+            self._supervisor.join()
         live = [p for p in self.procs.values() if p.poll() is None]
         for p in live:
             _killpg(p.pid, signal.SIGINT)

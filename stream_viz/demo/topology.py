@@ -2,7 +2,8 @@
 
 A :class:`Topology` is the ground truth the tests and the evaluation compare against: which
 processes (groups) exist, which nodes each hosts, and which topics, services and edges they have.
-The same data drives :mod:`stream_viz.demo.robot_process`, so what runs is what is described.
+The same data drives the process entry (``Topology.entry``: :mod:`stream_viz.demo.robot_process` for
+the demo robot and generated systems), so what runs is what is described.
 """
 
 from __future__ import annotations
@@ -11,8 +12,11 @@ import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from stream_viz.demo.faults import BASIC_FAULTS, FaultSpec
 from stream_viz.errors import DemoError
 from stream_viz.model.ids import make_id
+
+ENTRY = "stream_viz.demo.robot_process"
 
 
 @dataclass(frozen=True)
@@ -73,18 +77,25 @@ class NodeSpec:
 
 @dataclass(frozen=True)
 class GroupSpec:
-    """One OS process hosting ``nodes`` on a multi-threaded executor."""
+    """One OS process hosting ``nodes``; ``respawn``: restart it whenever it exits (launch's respawn)."""
 
     name: str
     nodes: tuple[NodeSpec, ...]
+    respawn: bool = False
 
 
 @dataclass(frozen=True)
 class Topology:
-    """A whole system: named groups (processes) of nodes."""
+    """A whole system: named groups (processes) of nodes.
+
+    ``entry`` is the module run once per group (``python -m ENTRY --group NAME ...``); ``faults`` the
+    fault kinds that entry can inject, each with the nodes it applies to (empty: every node).
+    """
 
     name: str
     groups: tuple[GroupSpec, ...] = field(default_factory=tuple)
+    entry: str = ENTRY
+    faults: tuple[tuple[str, tuple[str, ...]], ...] = tuple((k, ()) for k in BASIC_FAULTS)
 
     # -- lookups ---------------------------------------------------------------------------
     def nodes(self) -> list[NodeSpec]:
@@ -110,6 +121,13 @@ class Topology:
                 return g.name
         raise DemoError(f"unknown node {node!r} in topology {self.name!r}; "
                         f"nodes: {', '.join(self.node_names())}")
+
+    def check_fault(self, fault: FaultSpec) -> None:
+        """Raise DemoError unless this system can inject ``fault`` (its kind, into its target)."""
+        kinds = dict(self.faults)
+        if fault.fault not in kinds:
+            raise DemoError(f"{self.name} cannot inject {fault.fault!r}; its faults: {', '.join(kinds)}")
+        fault.check(list(kinds[fault.fault]) or self.node_names())
 
     def diag_monitor(self) -> str | None:
         """Fqn of the node publishing per-node diagnostics, if any."""
@@ -166,11 +184,12 @@ class Topology:
                         services=tuple(ServiceSpec(**s) for s in n.get("services", ())),
                         clients=tuple(ClientSpec(**c) for c in n.get("clients", ())),
                         diag_monitor=bool(n.get("diag_monitor", False)),
-                    ) for n in g["nodes"]))
+                    ) for n in g["nodes"]), bool(g.get("respawn", False)))
                 for g in data["groups"])
-        except (KeyError, TypeError) as exc:
+            faults = tuple((k, tuple(ts)) for k, ts in data.get("faults", Topology.faults))
+        except (KeyError, TypeError, ValueError) as exc:
             raise DemoError(f"malformed topology data: {exc}") from exc
-        return Topology(data.get("name", "topology"), groups)
+        return Topology(data.get("name", "topology"), groups, data.get("entry", ENTRY), faults)
 
     def save(self, path: str | Path) -> Path:
         """Write the topology as JSON to ``path``."""

@@ -1,0 +1,138 @@
+"""What every robot process does, whatever nodes it runs: its arguments, its end, readiness, the fault.
+
+A process entry (``Topology.entry``) parses :func:`parser`'s arguments, calls :func:`end_on_signals`
+first, writes ``<run-dir>/<group>.ready`` with :func:`write_json` once its nodes spin, and waits for
+its fault with :func:`next_fault` (from the command line, or ``<run-dir>/fault.json`` that
+``Robot.inject`` writes). :func:`record_injection` writes ``injected.json`` once per run, so a
+respawned process does not inject a one-off fault again. The process-wide faults are here too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any, NoReturn
+
+from stream_viz.demo.faults import FAULTS, STOP
+
+LEAK_RATE = 20 * 2**20  # bytes per second
+LEAK_CAP = 1536 * 2**20
+
+
+def parser(prog: str, description: str) -> argparse.ArgumentParser:
+    """The arguments ``Robot`` gives every process entry."""
+    ap = argparse.ArgumentParser(prog=prog, description=description)
+    ap.add_argument("--group", required=True)
+    ap.add_argument("--topology", help="topology JSON (default: the entry's own robot)")
+    ap.add_argument("--run-dir", default=".", help="where ready/injection files go")
+    ap.add_argument("--fault", choices=sorted(FAULTS))
+    ap.add_argument("--target", help="fqn of the faulty node")
+    ap.add_argument("--at", type=float, help="unix time of the injection")
+    return ap
+
+
+def write_json(path: Path, data: dict) -> None:
+    """Write ``data`` to ``path`` atomically (readers never see half a file)."""
+    tmp = path.with_suffix(".tmp")
+    with open(tmp, "w") as f:
+        json.dump(data, f)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def end_on_signals() -> None:
+    """Set STOP on SIGINT/SIGTERM and when the parent dies (polled every 0.5 s from now on)."""
+    parent = os.getppid()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: STOP.set())
+
+    def watch() -> None:
+        while not STOP.wait(0.5):
+            if os.getppid() != parent:  # the parent died: end with it
+                STOP.set()
+
+    threading.Thread(target=watch, daemon=True, name="watch-parent").start()
+
+
+def next_fault(args: argparse.Namespace, run_dir: Path) -> tuple[str, str, float] | None:
+    """``(fault, target, at)`` from the command line, else the first ``fault.json``; None on STOP."""
+    if args.fault and args.target and args.at is not None:
+        return args.fault, args.target, args.at
+    path = run_dir / "fault.json"
+    while not STOP.wait(0.2):
+        try:
+            spec = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+        return spec["fault"], spec["target"], spec["at"]
+    return None
+
+
+def record_injection(run_dir: Path, fault: str, target: str) -> bool:
+    """Write ``injected.json`` for ``fault`` into ``target`` now; False if this run has one already."""
+    path = run_dir / "injected.json"
+    if path.exists():
+        return False
+    write_json(path, {"fault": fault, "target": f"node:{target}", "t": time.time(), "pid": os.getpid()})
+    return True
+
+
+def burn(stop: threading.Event) -> None:
+    """Burn a core until ``stop`` (hashlib releases the GIL on large buffers: the executors keep running)."""
+    buf = b"\x5a" * 2**20
+    while not stop.is_set():
+        hashlib.sha256(buf).digest()
+
+
+def leak(stop: threading.Event) -> None:
+    """Allocate and write ``LEAK_RATE`` bytes per second until ``stop`` or ``LEAK_CAP``."""
+    hoard, step = [], LEAK_RATE // 10
+    while not stop.wait(0.1) and len(hoard) * step < LEAK_CAP:
+        hoard.append(b"\x01" * step)  # written, so resident (RSS grows)
+
+
+def spin(executor) -> None:
+    """Spin ``executor`` until it is shut down."""
+    try:
+        executor.spin()
+    except Exception:  # shutdown races end the spin; the process is ending anyway
+        pass
+
+
+def errlog(logger: Any, stop: threading.Event, text: str) -> None:
+    """Log ``text`` (``{n}``: a counter) at ERROR every 0.5 s until ``stop``: the ``errlog`` fault."""
+    n = 0
+    while not stop.wait(0.5):
+        n += 1
+        logger.error(text.format(n=n))
+
+
+def end_process(executors: list, spinners: list[threading.Thread], destroy: Iterable[Callable[[], None]],
+                context: Any, code: int = 0) -> NoReturn:
+    """Shut the executors down, destroy the nodes and the DDS participant, exit with ``code``.
+
+    A clean shutdown can hang (an executor busy in a callback, DDS teardown): a watchdog exits
+    regardless after 5 s. Destroying the participant makes peers see the nodes leave at once.
+    """
+    watchdog = threading.Timer(5.0, os._exit, args=(code,))
+    watchdog.daemon = True
+    watchdog.start()
+    for ex in executors:
+        ex.shutdown(timeout_sec=1.0)
+    for t in spinners:  # a node still in use by a spinning executor would not really be destroyed
+        t.join(2.0)
+    for fn in destroy:
+        fn()
+    context.try_shutdown()
+    context.destroy()
+    sys.stdout.flush()
+    os._exit(code)  # skip joining stuck executor threads
