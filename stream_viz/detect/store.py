@@ -1,10 +1,10 @@
 """The alert database: SQLite (stdlib) in WAL mode, one commit per batch, a versioned schema.
 
-Tables: ``meta`` (app marker, schema history, free keys), ``runs``, ``alerts``, ``episodes``,
-``snapshots`` (the model as `stream_viz.model.serialize.to_data` JSON whenever its structure
-changed, so ``analyze`` can rerun the RCA offline) and ``problems`` (plugin problems,
-unreadable members). The schema version is ``PRAGMA user_version``; `MIGRATIONS` bring an older
-file up to date.
+Tables: ``meta`` (app marker, schema history, free keys, the run's start/end/watchlist/fault),
+``runs`` (unused: kept for files written before), ``alerts``, ``episodes``, ``snapshots`` (the
+model as `stream_viz.model.serialize.to_data` JSON whenever its structure changed, so
+``analyze`` can rerun the RCA offline) and ``problems`` (plugin problems, unreadable members).
+The schema version is ``PRAGMA user_version``; `MIGRATIONS` bring an older file up to date.
 """
 
 from __future__ import annotations
@@ -254,26 +254,6 @@ class AlertStore:
         self._last_structure = structure
         return True
 
-    def start_run(self, args: Mapping[str, Any], injected: Mapping[str, Any] | None = None,
-                  started_at: float | None = None) -> int:
-        """Record a run (its arguments and an injected fault, if any); return its id."""
-        with self._db as db:
-            cur = db.execute("INSERT INTO runs (started_at, args, injected) VALUES (?, ?, ?)",
-                             (started_at if started_at is not None else time.time(), _json(dict(args)),
-                              None if injected is None else _json(dict(injected))))
-        return int(cur.lastrowid)
-
-    def end_run(self, run_id: int, ended_at: float | None = None) -> None:
-        """Record when run ``run_id`` ended."""
-        with self._db as db:
-            db.execute("UPDATE runs SET ended_at = ? WHERE id = ?",
-                       (ended_at if ended_at is not None else time.time(), run_id))
-
-    def set_injected(self, run_id: int, injected: Mapping[str, Any]) -> None:
-        """Record the fault injected during run ``run_id`` (known only once injected)."""
-        with self._db as db:
-            db.execute("UPDATE runs SET injected = ? WHERE id = ?", (_json(dict(injected)), run_id))
-
     def set_meta(self, key: str, value: Any) -> None:
         """Set a free meta key to a JSON-able value."""
         if key in ("app", "migrations"):
@@ -341,12 +321,6 @@ class AlertStore:
             "SELECT t, plugin, kind, place, message, line, count FROM problems ORDER BY id")
         return [dict(zip(("t", "plugin", "kind", "where", "message", "line", "count"), r, strict=True))
                 for r in rows]
-
-    def runs(self) -> list[dict[str, Any]]:
-        """Return the runs (``id, started_at, ended_at, args, injected``)."""
-        rows = self._db.execute("SELECT id, started_at, ended_at, args, injected FROM runs ORDER BY id")
-        return [{"id": i, "started_at": s, "ended_at": e, "args": json.loads(a),
-                 "injected": None if inj is None else json.loads(inj)} for i, s, e, a, inj in rows]
 
     def close(self) -> None:
         """Close the file (everything added is already committed)."""
