@@ -125,7 +125,7 @@ class Monitor:
         evidence = {m: 1.0 for m in anomalous}
         changed = evidence != self._evidence
         self._evidence = evidence
-        result = self.engine.update(self.seen, alerts, evidence if changed else None)
+        result = self.engine.update(self.seen, alerts, evidence if changed else None, t=t)
         self.view.update(t, sample, self.seen, alerts, result)
         self.progress.update(self._status(t, result))
 

@@ -9,6 +9,7 @@ from typing import Any
 
 import networkx as nx
 
+from stream_viz.rca.episodes import Evidence, stamp
 from stream_viz.rca.pagerank import rank_pagerank
 from stream_viz.rca.settings import RcaSettings
 from stream_viz.rca.subgraph import Iteration, SubgraphState, grow, initial_state, watch
@@ -113,7 +114,7 @@ class RcaEngine:
         self._kept = 0
         self._dropped = 0  # alerts pruned out of the window
         self._outside: dict[str, list[Alert]] = {}  # kept alerts per unwatched member (replay)
-        self._evidence: dict[str, float] = {}
+        self._evidence: dict[str, Evidence] = {}
         self._result = self._make_result([])
 
     @property
@@ -135,7 +136,8 @@ class RcaEngine:
         return self._result
 
     def update(
-        self, G: nx.MultiDiGraph, alerts: Iterable[Alert], evidence: Mapping[str, float] | None = None
+        self, G: nx.MultiDiGraph, alerts: Iterable[Alert], evidence: Mapping[str, float] | None = None,
+        t: float | None = None,
     ) -> RcaResult:
         """Feed new alerts (grow the subgraph in time order) and rerank.
 
@@ -148,6 +150,8 @@ class RcaEngine:
         evidence : mapping, optional
             Metric anomaly strength in [0, 1] per member (nodes or processes); replaces the
             previous evidence when given.
+        t : float, optional
+            The time of this update (the sample's): evidence gets its since/until from it.
         """
         new = sorted(alerts, key=lambda a: a.t)
         before = self.state.last
@@ -163,7 +167,7 @@ class RcaEngine:
         self._prune()
         changed = bool(new) or evidence is not None or self.state.last is not before
         if evidence is not None:
-            self._evidence = dict(evidence)
+            self._evidence = stamp(self._evidence, evidence, t, self.settings.window or float("inf"))
         if changed:
             first = self._iterations[1].alert_member if len(self._iterations) > 1 else None
             ctx = make_context(G, self._alerts, self.settings, self.state.members, self._evidence, first)
