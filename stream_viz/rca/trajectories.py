@@ -48,6 +48,11 @@ class RootCause:
     trajectory: list[str]
     evidence: dict[str, Any] = field(default_factory=dict)
 
+    def to_report(self) -> dict[str, Any]:
+        """The root cause in the report JSON (docs/contracts.md)."""
+        return {"member": self.member, "score": self.score, "trajectory": list(self.trajectory),
+                "evidence": self.evidence}
+
 
 @dataclass
 class Context:
