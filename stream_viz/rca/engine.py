@@ -173,7 +173,7 @@ class RcaEngine:
         if changed:
             first = self._iterations[1].alert_member if len(self._iterations) > 1 else None
             d = diagnose(G, self._alerts, self.settings, RANKERS[self.settings.method], self.state.members,
-                         self._evidence, first)
+                         self._evidence, first, self._result.incidents)
             self._result = self._make_result(d.root_causes, d.first, d.incidents)
         else:
             r = self._result

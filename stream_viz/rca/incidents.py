@@ -12,9 +12,11 @@ ranking of the *current* incident.
 The current incident is an ongoing one (its last episode ended less than ``episode_gap`` before
 the latest alert, or lasts: a node that vanished) if any; among those, one that is not a
 recurrence (an incident all of whose members had symptoms in incidents that ended before it
-began) if any; among those the heaviest (the sum of its members' strongest anomalies), so a
-minor symptom elsewhere does not displace a larger fault that is still going on; ties: the
-newest.
+began) if any; among those the one whose best candidate stands out most (the strongest
+hypothesis test ``ht`` among its candidates, the same for every ranking method), so a minor
+symptom elsewhere does not displace a fault that is still going on; ties: the one with more
+symptomatic members (a lone symptom as clear as the fault's does not displace its cascade),
+then the newest.
 """
 
 from __future__ import annotations
@@ -43,8 +45,10 @@ class Incident:
 
     ``end`` is the last alert (or evidence) time; ``ongoing`` whether it still goes on;
     ``recurring`` whether all its members had symptoms in incidents that ended before it began;
-    ``weight`` the sum of its members' strongest anomalies; ``current`` whether the diagnosis is
-    this incident's.
+    ``strength`` the strongest hypothesis test among its candidates and ``first`` the member of
+    its earliest alert (set when it is ranked);
+    ``current`` whether the diagnosis is this incident's; ``key`` what its ranking was made from
+    (episodes, alerts, evidence, graph).
     """
 
     id: int
@@ -52,19 +56,17 @@ class Incident:
     start: float
     end: float
     ongoing: bool
-    weight: float
     recurring: bool = False
+    strength: float = 0.0
+    first: str | None = None
     current: bool = False
     root_causes: list[RootCause] = field(default_factory=list)
+    key: tuple = field(default=(), repr=False, compare=False)  # what its ranking was made from
 
     @property
     def members(self) -> list[str]:
         """The symptomatic members, sorted."""
         return sorted(self.episodes)
-
-    def holds(self, member: str, t: float) -> bool:
-        """True when ``member`` had a symptom episode of this incident at time ``t``."""
-        return any(a <= t <= b for a, b in self.episodes.get(member, ()))
 
     def to_report(self) -> dict[str, Any]:
         """The incident in the report JSON (docs/contracts.md)."""
@@ -90,24 +92,41 @@ def neighbours(G: nx.MultiDiGraph, m: str) -> set[str]:
     return out
 
 
-def near(
-    G: nx.MultiDiGraph, m: str, hops: int, targets: Iterable[str], links: Mapping[str, set[str]] | None = None
-) -> set[str]:
-    """Return the members of ``targets`` at most ``hops`` hops from ``m`` (`neighbours`, plus
-    ``links``: extra one-hop pairs such as an alert and the node it names), ``m`` excluded."""
-    want = set(targets)
+def ball(
+    G: nx.MultiDiGraph,
+    m: str,
+    radius: int,
+    links: Mapping[str, set[str]] | None = None,
+    cache: dict[str, set[str]] | None = None,
+    rim: bool = False,
+) -> set[Any]:
+    """Return the members at most ``radius`` hops from ``m`` (`neighbours`, plus ``links``: extra
+    one-hop pairs such as an alert and the node it names), ``m`` included.
+
+    With ``rim``, also the edges leaving the outermost of them, as sorted ``(u, v)`` pairs: two
+    members are at most ``2 radius + 1`` hops apart exactly when their balls with rims share a
+    member or an edge (its midpoint). ``cache`` (member → its one-hop members) is filled and
+    reused across calls on the same graph.
+    """
     links = links or {}
-    seen = {m}
+    cache = {} if cache is None else cache
+
+    def step(x: str) -> set[str]:
+        if x not in cache:
+            cache[x] = neighbours(G, x) | links.get(x, set())
+        return cache[x]
+
+    seen: set[Any] = {m}
     frontier = {m}
-    for _ in range(hops):
+    for _ in range(radius):
         nxt = set()
         for x in frontier:
-            nxt |= (neighbours(G, x) | links.get(x, set())) - seen
-        if not nxt:
-            break
+            nxt |= step(x) - seen
         seen |= nxt
         frontier = nxt
-    return (seen - {m}) & want
+    if rim:
+        seen |= {(x, y) if x < y else (y, x) for x in frontier for y in step(x)}
+    return seen
 
 
 def _close(a: Episode, b: Episode, gap: float) -> bool:
@@ -117,7 +136,6 @@ def _close(a: Episode, b: Episode, gap: float) -> bool:
 def find_incidents(
     G: nx.MultiDiGraph,
     episodes: Mapping[str, list[Episode]],
-    weight: Mapping[str, float],
     hops: int,
     gap: float,
     now: float,
@@ -131,8 +149,6 @@ def find_incidents(
         The model.
     episodes : mapping
         Episodes per symptomatic member (ends INF while a state lasts).
-    weight : mapping
-        Strongest anomaly per member (an incident weighs the sum over its members).
     hops : int
         Farthest two members of one incident may be (per linked pair).
     gap : float
@@ -155,12 +171,27 @@ def find_incidents(
             i = parent[i]
         return i
 
+    # Two members are at most `hops` apart exactly when their balls of half that radius meet; the
+    # episodes of the members whose balls hold one point are linked where close in time (a sweep
+    # by start: single linkage of intervals).
+    radius, odd = divmod(hops, 2)
+    cache: dict[str, set[str]] = {}
+    at: dict[Any, list[int]] = {}
     for m in index:
-        for other in near(G, m, hops, index, links):
-            for i in index[m]:
-                for k in index[other]:
-                    if _close(items[i][1], items[k][1], gap):
-                        parent[root(i)] = root(k)
+        for x in ball(G, m, radius, links, cache, rim=bool(odd)):
+            at.setdefault(x, []).extend(index[m])
+    for xs in at.values():
+        if len(xs) < 2:
+            continue
+        xs.sort(key=lambda i: items[i][1][0])
+        run, run_end = xs[0], items[xs[0]][1][1]
+        for i in xs[1:]:
+            start, end = items[i][1]
+            if start <= run_end + gap:
+                parent[root(i)] = root(run)
+                run_end = max(run_end, end)
+            else:
+                run, run_end = i, end
     groups: dict[int, list[int]] = {}
     for i in range(len(items)):
         groups.setdefault(root(i), []).append(i)
@@ -172,7 +203,7 @@ def find_incidents(
         start = min(a for v in eps.values() for a, _ in v)
         last = max(b for v in eps.values() for _, b in v)
         end = max(b if b < INF else max(a, now) for v in eps.values() for a, b in v)
-        out.append(Incident(0, eps, start, end, last >= now - gap, sum(weight.get(m, 0.0) for m in eps)))
+        out.append(Incident(0, eps, start, end, last >= now - gap))
     out.sort(key=lambda inc: (inc.start, inc.members))
     for k, inc in enumerate(out, 1):
         inc.id = k
@@ -185,7 +216,8 @@ def current(incidents: list[Incident]) -> Incident | None:
     """Return the current incident (module docstring), or None when there is none."""
     if not incidents:
         return None
-    return max(incidents, key=lambda inc: (inc.ongoing, not inc.recurring, round(inc.weight, 9), inc.start))
+    return max(incidents, key=lambda inc: (inc.ongoing, not inc.recurring, round(inc.strength, 9),
+                                           len(inc.episodes), inc.start))
 
 
 @dataclass
@@ -205,6 +237,7 @@ def diagnose(
     members: Iterable[str] | None = None,
     evidence: Mapping[str, float | Evidence] | None = None,
     first: str | None = None,
+    previous: Iterable[Incident] = (),
 ) -> Diagnosis:
     """Find the incidents of ``alerts`` (of ``members`` only, when given: ``M_j``) and rank each.
 
@@ -219,40 +252,66 @@ def diagnose(
         `Context` → ranked `RootCause` list (one of the engine's methods).
     first : str, optional
         The first detected symptom (where trajectories start when it is in the incident).
+    previous : iterable of Incident
+        The last diagnosis's incidents: one whose episodes, alerts and evidence are unchanged
+        (an incident that has ended), in a graph with the same members, keeps its ranking
+        instead of being ranked again.
     """
     keep = None if members is None else set(members)
-    s = collect_symptoms(alerts, settings, keep, gone_members(G))
+    gone = gone_members(G)
+    s = collect_symptoms(alerts, settings, keep, gone)
     ev = {m: as_evidence(x) for m, x in (evidence or {}).items()}
     episodes = {m: list(eps) for m, eps in s.episodes.items()}
-    weight = dict(s.anomaly)
     now = s.latest
     for m, e in ev.items():
         ep = e.episode()
         if ep is None or e.strength <= 0:
             continue
         episodes[m] = sorted([*episodes.get(m, []), ep])
-        weight[m] = max(weight.get(m, 0.0), min(1.0, e.strength))
         now = max(now, ep[0] if ep[1] == INF else ep[1])
     links: dict[str, set[str]] = {}
     for m, name in s.named:
         for n in pointed_nodes(G, m, [name]):
             links.setdefault(m, set()).add(n)
             links.setdefault(n, set()).add(m)
-    incidents = find_incidents(G, episodes, weight, settings.incident_hops, settings.episode_gap, now, links)
-    now_inc = current(incidents)
-    if now_inc is None:
-        ctx = make_context(G, alerts, settings, keep, evidence, first)
+    incidents = find_incidents(G, episodes, settings.incident_hops, settings.episode_gap, now, links)
+    if not incidents:
+        ctx = make_context(G, alerts, settings, keep, evidence, first, gone)
         return Diagnosis(ranker(ctx), [], ctx.symptoms.first)
-    chosen = [a for a in alerts if keep is None or a.member in keep]
-    first_of: str | None = None
+    mine = _split(alerts, keep, incidents)
+    known = {inc.key: inc for inc in previous if inc.key}
     for inc in incidents:
-        mine = [a for a in chosen if inc.holds(a.member, a.t)]
         # evidence without a time counts in every incident; timed evidence in its own
         ev_inc = {m: e for m, e in ev.items() if not e.timed or e.episode() in inc.episodes.get(m, ())}
-        ctx = make_context(G, mine, settings, None, ev_inc, first)
+        inc.key = (tuple(sorted((m, tuple(v)) for m, v in inc.episodes.items())), len(mine[inc.id]),
+                   tuple(sorted(ev_inc.items())), G.number_of_nodes(), len(gone), first)
+        if inc.key in known:  # unchanged since the last diagnosis (an incident that has ended)
+            old = known[inc.key]
+            inc.root_causes, inc.strength, inc.first = old.root_causes, old.strength, old.first
+            continue
+        whole = s if len(mine[inc.id]) == s.count else None  # all the alerts: symptoms as collected
+        ctx = make_context(G, mine[inc.id], settings, None, ev_inc, first, gone, whole)
         inc.root_causes = ranker(ctx)
-        if inc is now_inc:
-            inc.current = True
-            first_of = ctx.symptoms.first
-    return Diagnosis(now_inc.root_causes, incidents, first_of)
+        inc.strength = max((v.ht for v in ctx.views.values()), default=0.0)
+        inc.first = ctx.symptoms.first
+    now_inc = current(incidents)
+    assert now_inc is not None  # there are incidents
+    now_inc.current = True
+    return Diagnosis(now_inc.root_causes, incidents, now_inc.first)
 
+
+def _split(alerts: list[Alert], keep: set[str] | None, incidents: list[Incident]) -> dict[int, list[Alert]]:
+    """The alerts of each incident (by id): those of its members during its episodes."""
+    owner: dict[str, list[tuple[float, float, int]]] = {}
+    for inc in incidents:
+        for m, eps in inc.episodes.items():
+            owner.setdefault(m, []).extend((a, b, inc.id) for a, b in eps)
+    out: dict[int, list[Alert]] = {inc.id: [] for inc in incidents}
+    for a in alerts:
+        if keep is not None and a.member not in keep:
+            continue
+        for lo, hi, k in owner.get(a.member, ()):
+            if lo <= a.t <= hi:
+                out[k].append(a)
+                break
+    return out

@@ -40,7 +40,8 @@ class Symptoms:
     last one open, end INF, for a member that is gone); ``own_anomaly``/``own_onset`` the same
     as ``anomaly``/``onset`` without the alerts a node got for its process (``data["process"]``);
     ``named`` the names alerts give of what to blame: ``(alert member, name)`` → (first time,
-    strongest severity weight); ``latest`` the latest alert time.
+    strongest severity weight); ``latest`` the latest alert time; ``count`` how many alerts
+    they come from.
     """
 
     times: dict[str, np.ndarray] = field(default_factory=dict)
@@ -54,6 +55,7 @@ class Symptoms:
     own_onset: dict[str, float] = field(default_factory=dict)
     named: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict)
     latest: float = -INF
+    count: int = 0
 
 
 def gone_members(G: nx.MultiDiGraph) -> set[str]:
@@ -93,18 +95,19 @@ def collect_symptoms(
         s.anomaly[a.member] = max(s.anomaly.get(a.member, 0.0), x)
         s.relevance[a.member] = s.relevance.get(a.member, 0.0) + w
         s.plugins.setdefault(a.member, set()).add(a.plugin)
-        data = a.data or {}
-        if not data.get("process"):  # not an alert a node got for the process it runs in
+        data = a.data
+        if not (data and data.get("process")):  # not an alert a node got for its process
             s.own_anomaly[a.member] = max(s.own_anomaly.get(a.member, 0.0), x)
             s.own_onset[a.member] = min(s.own_onset.get(a.member, INF), a.t)
-        for name in names_in(data):
+        for name in names_in(data) if data else ():
             t0, w0 = s.named.get((a.member, name), (INF, 0.0))
             s.named[(a.member, name)] = (min(t0, a.t), max(w0, w))
         if a.t < first_t:
             first_t, s.first = a.t, a.member
         s.latest = max(s.latest, a.t)
+    s.count = len(chosen)
     for m, ts in raw.items():
-        s.times[m] = np.unique(np.asarray(ts, dtype=float))
+        s.times[m] = np.asarray(sorted(set(ts)), dtype=float)  # np.unique costs more on short lists
         s.onset[m] = float(s.times[m][0])
         s.episodes[m] = merge(s.times[m], settings.episode_gap)
         if m in gone:
@@ -286,8 +289,11 @@ def _settle(
     for v in these.values():
         v.anomaly = max(v.direct, v.charged, v.evidence)
         v.own_anomaly = max(v.own_direct, v.charged, v.own_evidence)
+    # What can excuse at all: the walk upstream stops once it has passed all of them.
+    sources = {m for m in s.anomaly if not m.startswith(("process:", "host:")) and m != "root"}
+    sources |= set(views) | set(ev_passive)
     for n, v in these.items():
-        v.upstream = _upstream(G, n, v, s, views, ev_passive, settings)
+        v.upstream = _upstream(G, n, v, s, views, ev_passive, settings, sources)
 
 
 def _imply_servers(
@@ -326,6 +332,7 @@ def _upstream(
     views: dict[str, NodeView],
     ev_passive: dict[str, Evidence],
     settings: RcaSettings,
+    sources: set[str] | None = None,
 ) -> float:
     """How anomalous ``n``'s causes were while ``n``'s symptoms began.
 
@@ -337,22 +344,28 @@ def _upstream(
     all does not end the search: a fault crosses a node that raised nothing (its output merely
     went on late), so the walk goes on upstream through silent members, up to
     ``max_trajectory`` hops, each silent node passed weakening what is found behind it by
-    `SILENT_DECAY`.
+    `SILENT_DECAY`. ``sources``: the members that can excuse at all (symptoms, candidates,
+    evidence); the walk ends once it has passed every one of them.
     """
     if v.onset < INF:
         lo, hi = v.onset - settings.episode_gap, v.onset + settings.tolerance
     else:  # evidence without a time: any time
         lo, hi = -INF, INF
     mine = set(outputs(G, n))
+    left = None if sources is None else sources - mine - {n}
     worst = 0.0
     seen = {n}
     frontier: list[tuple[str, float]] = [(p, 1.0) for p in causes(G, n) if p not in mine]
     for _ in range(settings.max_trajectory):
+        if left is not None and not left:
+            break
         nxt: list[tuple[str, float]] = []
         for p, w in frontier:
             if p in seen:
                 continue
             seen.add(p)
+            if left is not None:
+                left.discard(p)
             found = _excuse(G, p, n, s, views, ev_passive, lo, hi)
             worst = max(worst, w * found)
             if found > 0 or w * SILENT_DECAY <= worst:

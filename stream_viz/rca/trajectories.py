@@ -23,7 +23,7 @@ explains no other symptom).
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterable, Mapping
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -80,13 +80,16 @@ def make_context(
     members: Iterable[str] | None = None,
     evidence: Mapping[str, float | Evidence] | None = None,
     first: str | None = None,
+    gone: Collection[str] | None = None,
+    symptoms: Symptoms | None = None,
 ) -> Context:
     """Collect symptoms (of ``members`` only, when given: ``M_j``) and the per-node views.
 
     ``first`` is the first detected symptom, where trajectories start (default: the member of
-    the earliest alert).
+    the earliest alert); ``gone`` the vanished members (default: those marked in ``G``);
+    ``symptoms`` those of ``alerts`` when the caller has them already.
     """
-    s = collect_symptoms(alerts, settings, members, gone_members(G))
+    s = symptoms or collect_symptoms(alerts, settings, members, gone_members(G) if gone is None else gone)
     if first is not None and first not in s.times:
         first = None
     return Context(G, settings, s, node_views(G, s, settings, evidence), bool(evidence), first)

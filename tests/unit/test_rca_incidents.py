@@ -9,7 +9,7 @@ import pytest
 
 from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.rca import RcaEngine, RcaSettings, analyze
-from stream_viz.rca.incidents import current, find_incidents, near, neighbours
+from stream_viz.rca.incidents import ball, current, find_incidents, neighbours
 from stream_viz.records import Alert
 
 SENSOR, PERC, PLAN, CTRL = "node:/sensor", "node:/perception", "node:/planner", "node:/controller"
@@ -40,46 +40,66 @@ def test_neighbours_and_hops(G):
     assert neighbours(G, PERC) == {SCAN, OBJ, PROC}
     assert neighbours(G, PROC) == {PERC}
     assert neighbours(G, "node:/unknown") == set()
-    assert near(G, SCAN, 2, [OBJ, CMD, PROC]) == {OBJ, PROC}
-    assert near(G, SCAN, 4, [OBJ, CMD, PROC, BATTERY]) == {OBJ, CMD, PROC}
-    assert near(G, BATTERY, 4, [SCAN], links={BATTERY: {SENSOR}}) == {SCAN}
+    assert ball(G, SCAN, 1) == {SCAN, SENSOR, PERC}
+    assert ball(G, SCAN, 2) == {SCAN, SENSOR, PERC, OBJ, PROC}
+    assert ball(G, SCAN, 1, rim=True) == {SCAN, SENSOR, PERC, (SENSOR, SCAN), (PERC, SCAN), (PERC, OBJ),
+                                          (PERC, PROC)}
+    assert ball(G, BATTERY, 1, links={BATTERY: {SENSOR}}) == {BATTERY, BATT, SENSOR}
+
+
+PAIRS = {(SCAN, OBJ): 2, (OBJ, CMD): 2, (SENSOR, OBJ): 3, (SCAN, CMD): 4, (SENSOR, CMD): 5}
+
+
+@pytest.mark.parametrize("hops", [1, 2, 3, 4, 5])
+def test_incidents_link_members_at_most_hops_apart(G, hops):
+    for (a, b), apart in PAIRS.items():  # each pair alone, at the same time
+        got = find_incidents(G, {a: [(0.0, 1.0)], b: [(0.0, 1.0)]}, hops, 15.0, 1.0)
+        assert (len(got) == 1) == (apart <= hops), (a, b, hops)
 
 
 def test_find_incidents_groups_by_graph_and_time(G):
     episodes = {SCAN: [(0.0, 5.0)], OBJ: [(8.0, 10.0)], BATTERY: [(3.0, 4.0)], CTRL: [(100.0, 100.0)]}
-    weight = {SCAN: 0.8, OBJ: 0.8, BATTERY: 0.5, CTRL: 0.8}
-    got = find_incidents(G, episodes, weight, hops=4, gap=15.0, now=100.0)
+    got = find_incidents(G, episodes, hops=4, gap=15.0, now=100.0)
     assert [(i.id, i.members, i.start, i.end, i.ongoing) for i in got] == [
         (1, [OBJ, SCAN], 0.0, 10.0, False),  # two hops apart, 3 s apart: one incident
         (2, [BATTERY], 3.0, 4.0, False),  # at the same time, but not connected
         (3, [CTRL], 100.0, 100.0, True),  # connected to /objects, but 90 s later
     ]
-    assert got[0].weight == pytest.approx(1.6) and current(got) is got[2]
+    assert current(got) is got[2]
     # one hop allowed: /scan and /objects (two hops apart) are separate incidents
-    assert [i.members for i in find_incidents(G, episodes, weight, 1, 15.0, 100.0)] == [
+    assert [i.members for i in find_incidents(G, episodes, 1, 15.0, 100.0)] == [
         [SCAN], [BATTERY], [OBJ], [CTRL]]
     # a vanished member's open episode keeps its incident going, and joins what comes later
-    got = find_incidents(G, {SCAN: [(0.0, float("inf"))], CTRL: [(100.0, 100.0)]}, weight, 6, 15.0, 100.0)
+    got = find_incidents(G, {SCAN: [(0.0, float("inf"))], CTRL: [(100.0, 100.0)]}, 6, 15.0, 100.0)
     assert [(i.members, i.end, i.ongoing) for i in got] == [([CTRL, SCAN], 100.0, True)]
 
 
-def test_the_current_incident_is_ongoing_new_and_heavy(G):
+def strengths(incidents, **by_first_member):
+    for inc in incidents:
+        inc.strength = by_first_member.get(inc.members[0], 0.0)
+    return incidents
+
+
+def test_the_current_incident_is_ongoing_new_and_stands_out(G):
     # the battery warns every 60 s (each its own episode: a recurring symptom); the fault at
     # 100-130 is still going on when the battery warns again at 125
     episodes = {BATTERY: [(0.0, 0.0), (60.0, 60.0), (125.0, 125.0)],
                 SCAN: [(100.0, 130.0)], OBJ: [(101.0, 130.0)]}
-    weight = {BATTERY: 0.5, SCAN: 0.8, OBJ: 0.8}
-    got = find_incidents(G, episodes, weight, 4, 15.0, 130.0)
+    got = find_incidents(G, episodes, 4, 15.0, 130.0)
     assert [(i.members, i.recurring, i.ongoing) for i in got] == [
         ([BATTERY], False, False), ([BATTERY], True, False), ([OBJ, SCAN], False, True),
         ([BATTERY], True, True)]
-    assert current(got).members == [OBJ, SCAN]
-    # a newer minor symptom elsewhere does not displace an ongoing heavier fault ...
-    got = find_incidents(G, {SCAN: [(100.0, 130.0)], BATTERY: [(125.0, 125.0)]}, weight, 4, 15.0, 130.0)
-    assert current(got).members == [SCAN]
-    # ... an equally heavy one does: it is the newest
-    got = find_incidents(G, {OBJ: [(100.0, 130.0)], SCAN: [(125.0, 125.0)]}, weight, 1, 15.0, 130.0)
-    assert current(got).members == [SCAN]
+    assert current(strengths(got, **{BATTERY: 0.9, OBJ: 0.5})).members == [OBJ, SCAN]
+    # a newer symptom elsewhere whose best candidate stands out less does not displace an
+    # ongoing fault ...
+    got = find_incidents(G, {SCAN: [(100.0, 130.0)], BATTERY: [(125.0, 125.0)]}, 4, 15.0, 130.0)
+    assert current(strengths(got, **{SCAN: 0.64, BATTERY: 0.4})).members == [SCAN]
+    # ... one that stands out as much does when the incidents are as large: it is the newest ...
+    assert current(strengths(got, **{SCAN: 0.64, BATTERY: 0.64})).members == [BATTERY]
+    # ... not when the fault's cascade is larger
+    got = find_incidents(G, {SCAN: [(100.0, 130.0)], OBJ: [(101.0, 130.0)], BATTERY: [(125.0, 125.0)]},
+                         4, 15.0, 130.0)
+    assert current(strengths(got, **{OBJ: 0.64, BATTERY: 0.64})).members == [OBJ, SCAN]
     assert current([]) is None
 
 
