@@ -9,7 +9,8 @@ names) and the episodes are at most ``episode_gap`` apart in time (single linkag
 such pairs is one incident). Each incident is ranked on its own alerts; the diagnosis is the
 ranking of the *current* incident.
 
-The current incident is an ongoing one (its last episode ended less than ``episode_gap`` before
+The current incident is one with a candidate at all (not, say, the metric evidence of a process
+that hosts no node); among those an ongoing one (its last episode ended less than ``episode_gap`` before
 the latest alert, or lasts: a node that vanished) if any; among those, one that is not a
 recurrence (an incident all of whose members had symptoms in incidents that ended before it
 began) if any; among those the one whose best candidate stands out most (the strongest
@@ -216,8 +217,8 @@ def current(incidents: list[Incident]) -> Incident | None:
     """Return the current incident (module docstring), or None when there is none."""
     if not incidents:
         return None
-    return max(incidents, key=lambda inc: (inc.ongoing, not inc.recurring, round(inc.strength, 9),
-                                           len(inc.episodes), inc.start))
+    return max(incidents, key=lambda inc: (inc.strength > 0, inc.ongoing, not inc.recurring,
+                                           round(inc.strength, 9), len(inc.episodes), inc.start))
 
 
 @dataclass

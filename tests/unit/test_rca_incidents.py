@@ -101,6 +101,10 @@ def test_the_current_incident_is_ongoing_new_and_stands_out(G):
                          4, 15.0, 130.0)
     assert current(strengths(got, **{OBJ: 0.64, BATTERY: 0.64})).members == [OBJ, SCAN]
     assert current([]) is None
+    # an incident nothing in which can be a cause (strength 0) is never the current one
+    assert current(strengths(got, **{OBJ: 0.0, BATTERY: 0.3})).members == [BATTERY]
+    old = find_incidents(G, {SCAN: [(10.0, 20.0)], BATTERY: [(125.0, 125.0)]}, 4, 15.0, 130.0)
+    assert current(strengths(old, **{SCAN: 0.3, BATTERY: 0.0})).members == [SCAN]  # even when over
 
 
 def test_an_older_unrelated_incident_does_not_take_the_first_place(G):
