@@ -138,8 +138,8 @@ class RcaEngine:
         return self._result
 
     def update(
-        self, G: nx.MultiDiGraph, alerts: Iterable[Alert], evidence: Mapping[str, float] | None = None,
-        t: float | None = None,
+        self, G: nx.MultiDiGraph, alerts: Iterable[Alert],
+        evidence: Mapping[str, float | Evidence] | None = None, t: float | None = None,
     ) -> RcaResult:
         """Feed new alerts (grow the subgraph in time order) and rerank.
 
@@ -150,8 +150,9 @@ class RcaEngine:
         alerts : iterable of Alert
             Alerts since the last update.
         evidence : mapping, optional
-            Metric anomaly strength in [0, 1] per member (nodes or processes); replaces the
-            previous evidence when given.
+            Metric anomaly strength in [0, 1] per member (nodes or processes), or `Evidence`
+            with its own since/until; replaces the previous evidence when given (what is missing
+            from it has ended).
         t : float, optional
             The time of this update (the sample's): evidence gets its since/until from it.
         """
@@ -233,7 +234,7 @@ def analyze(
     alerts: Iterable[Alert],
     settings: RcaSettings,
     watchlist: Iterable[str] | None = None,
-    evidence: Mapping[str, float] | None = None,
+    evidence: Mapping[str, float | Evidence] | None = None,
 ) -> RcaResult:
     """Rerun the diagnosis from scratch on ``alerts`` (offline; ``stream-viz analyze``).
 

@@ -31,10 +31,8 @@ def tf_graph(rates=None, loc_gone=False):
     add_member(g, LOC, **({"gone": True} if loc_gone else {}))
     for m in (ODOM, NAV, POSE, ODOM_T, "process:9"):
         add_member(g, m)
-    add_flow_edge(g, ODOM, TF, "pub")
-    add_flow_edge(g, LOC, TF, "pub")
-    add_flow_edge(g, ODOM, ODOM_T, "pub")
-    add_flow_edge(g, LOC, POSE, "pub")
+    for node, topic in ((ODOM, TF), (LOC, TF), (ODOM, ODOM_T), (LOC, POSE)):
+        add_flow_edge(g, node, topic, "pub")
     add_flow_edge(g, TF, NAV, "sub")
     add_tree_edge(g, "process:9", LOC)
     return g
