@@ -5,14 +5,14 @@ else, the fault of now. Ranked together, a loud old symptom can take the first p
 fault a user is looking at. So symptom episodes (`stream_viz.rca.episodes`) are grouped first:
 two episodes belong to one incident when their members are at most ``incident_hops`` hops apart
 (data flow in either direction, service calls, a node and its process, an alert and the node it
-names) and the episodes are at most ``episode_gap`` apart in time (single linkage: a chain of
-such pairs is one incident). Each incident is ranked on its own alerts; the diagnosis is the
-ranking of the *current* incident.
+names, a service and its servers and clients) and the episodes are at most ``episode_gap``
+apart in time (single linkage: a chain of such pairs is one incident). Each incident is ranked
+on its own alerts; the diagnosis is the ranking of the *current* incident.
 
 The current incident is one with a candidate at all (not, say, the metric evidence of a process
-that hosts no node); among those an ongoing one (its last episode ended less than ``episode_gap`` before
-the latest alert, or lasts: a node that vanished) if any; among those, one that is not a
-recurrence (an incident all of whose members had symptoms in incidents that ended before it
+that hosts no node); among those an ongoing one (its last episode ended less than
+``episode_gap`` before the latest alert, or lasts: a node that vanished) if any; among those,
+one that is not a recurrence (an incident all of whose members had symptoms in incidents that ended before it
 began) if any; among those the one whose best candidate stands out most (the strongest
 hypothesis test ``ht`` among its candidates, the same for every ranking method), so a minor
 symptom elsewhere does not displace a fault that is still going on; ties: the one with more
@@ -29,7 +29,7 @@ from typing import Any
 import networkx as nx
 
 from stream_viz.model.graph import FLOW
-from stream_viz.model.queries import nodes_of_process, process_of_node
+from stream_viz.model.queries import clients, nodes_of_process, process_of_node, servers
 from stream_viz.rca.charge import pointed_nodes
 from stream_viz.rca.episodes import INF, Episode, Evidence, as_evidence
 from stream_viz.rca.settings import RcaSettings
@@ -270,11 +270,15 @@ def diagnose(
             continue
         episodes[m] = sorted([*episodes.get(m, []), ep])
         now = max(now, ep[0] if ep[1] == INF else ep[1])
+    # One hop beyond the flow edges: an alert and the nodes it names; a service (it has no edge)
+    # and its servers and clients.
+    pairs = [(m, n) for m, name in s.named for n in pointed_nodes(G, m, [name])]
+    pairs += [(m, n) for m in episodes if m.startswith(("service:", "action:"))
+              for n in (*servers(G, m), *clients(G, m))]
     links: dict[str, set[str]] = {}
-    for m, name in s.named:
-        for n in pointed_nodes(G, m, [name]):
-            links.setdefault(m, set()).add(n)
-            links.setdefault(n, set()).add(m)
+    for m, n in pairs:
+        links.setdefault(m, set()).add(n)
+        links.setdefault(n, set()).add(m)
     incidents = find_incidents(G, episodes, settings.incident_hops, settings.episode_gap, now, links)
     if not incidents:
         ctx = make_context(G, alerts, settings, keep, evidence, first, gone)

@@ -129,6 +129,9 @@ def test_a_services_alert_points_at_the_server():
         by, order = causes_of(service_graph(), alerts)
         assert order[0] == PLANNER, member
         assert by[PLANNER].evidence["charged"] == pytest.approx(ERR * S.charge)
+    # a symptom on the service member alone (no data) goes to its server, in the client's incident
+    r = analyze(service_graph(), [al(SRV, "services", 10), al(CMD, "topic_rate", 12)], RcaSettings(), None)
+    assert len(r.incidents) == 1 and r.root_causes[0].member == PLANNER
 
 
 def test_an_unnamed_server_of_an_unexplained_client_is_a_weaker_candidate():
