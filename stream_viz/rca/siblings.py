@@ -8,7 +8,7 @@ candidate nodes of one process, the node whose own change came first (beyond the
 or at the same time but stronger, excuses its siblings in the hypothesis test (as a causal
 parent would): on one executor it can be their cause. A node with no own change at all is
 excused by any sibling that has one. Nodes whose own changes are the same (in time, strength
-and kind) cannot be told apart, and the verdict says so.
+and kind), and whose inputs explain them as much, cannot be told apart, and the verdict says so.
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ class Verdict:
 
     ``process``: the process it shares; ``excuse``: how strongly a sibling that changed first
     (or more) explains it, in [0, 1]; ``indistinguishable``: siblings whose own changes are the
-    same as its own (empty when it is excused).
+    same as its own and explained as much by their inputs (empty when it is excused).
     """
 
     process: str
@@ -67,8 +67,9 @@ def _before(a: OwnChange, b: OwnChange, tol: float) -> bool:
 
 
 def _same(a: OwnChange, b: OwnChange, tol: float) -> bool:
+    """Same own change, and explained as much by their inputs (else the data flow tells them apart)."""
     return (_close(a.own_onset, b.own_onset, tol) and abs(a.own_anomaly - b.own_anomaly) <= EPS
-            and len(a.own_kinds) == len(b.own_kinds))
+            and len(a.own_kinds) == len(b.own_kinds) and abs(a.upstream - b.upstream) <= EPS)
 
 
 def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> dict[str, Verdict]:

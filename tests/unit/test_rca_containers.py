@@ -97,6 +97,17 @@ def test_an_own_error_log_tells_the_blocking_node_apart(G):
     assert by[LIDAR].evidence["upstream"] == pytest.approx(OUT)
 
 
+def test_siblings_the_data_flow_tells_apart_are_not_indistinguishable(G):
+    # A process alert on both, but one feeds the other: the data flow tells them apart.
+    add_member(G, "topic:/cam_info")
+    add_flow_edge(G, CAM, "topic:/cam_info", "pub")
+    add_flow_edge(G, "topic:/cam_info", LIDAR, "sub")
+    alerts = [al(n, "process_resources", 9, "warn", process=BOX) for n in (CAM, LIDAR)]
+    by, order = rank(G, alerts)
+    assert order[0] == CAM and by[LIDAR].evidence["upstream"] > 0
+    assert all("indistinguishable_from" not in by[n].evidence for n in (CAM, LIDAR))
+
+
 def test_nodes_in_separate_processes_are_not_siblings(G):
     by, _ = rank(G, [*silent(IMAGE, 10), al(DET, "rosout", 20)])
     assert "process" not in by[CAM].evidence and "process" not in by[DET].evidence
