@@ -257,8 +257,26 @@ def node_views(
         spans = [(max(a, t), b) for a, b in s.episodes[m] if b >= t]
         for n in pointed_nodes(G, m, [name]):
             _charge(view(n), m, _clip(w * charge), t, spans, "named")
-    # Several publishers: the share of each follows its own traffic or its other evidence then.
-    gap, tol = settings.episode_gap, settings.tolerance
+    _charge_shared(G, s, views, shared_by, settings)
+    _settle(G, views, views, s, ev_passive, settings)
+    _imply_servers(G, s, views, ev_passive, settings)
+    for n, verdict in siblings.judge(G, views, settings.tolerance).items():
+        v = views[n]
+        v.process, v.sibling, v.indistinguishable = verdict.process, verdict.excuse, verdict.indistinguishable
+        v.upstream = max(v.upstream, v.sibling)
+    for v in views.values():
+        v.ht = v.anomaly * (1.0 - v.upstream)
+    return views
+
+
+def _charge_shared(
+    G: nx.MultiDiGraph, s: Symptoms, views: dict[str, NodeView], shared_by: list[tuple[str, list[str]]],
+    settings: RcaSettings,
+) -> None:
+    """Charge the symptoms of members with several publishers: each publisher's share follows its
+    own traffic or the evidence of its own around the symptom (`charge.publisher_shares`), judged
+    on what was charged before any such member."""
+    gap = settings.episode_gap
     shares = {}
     for m, nodes in shared_by:
         lo, hi = s.onset[m] - gap, s.episodes[m][-1][1] + gap
@@ -267,17 +285,9 @@ def node_views(
         shares[m] = publisher_shares(G, m, nodes, other)
     for m, nodes in shared_by:
         for n in nodes:
-            if shares[m][n] > 0:
-                _charge(view(n), m, s.anomaly[m] * charge * shares[m][n], s.onset[m], s.episodes[m], "output")
-    _settle(G, views, views, s, ev_passive, settings)
-    _imply_servers(G, s, views, ev_passive, settings)
-    for n, verdict in siblings.judge(G, views, tol).items():
-        v = views[n]
-        v.process, v.sibling, v.indistinguishable = verdict.process, verdict.excuse, verdict.indistinguishable
-        v.upstream = max(v.upstream, v.sibling)
-    for v in views.values():
-        v.ht = v.anomaly * (1.0 - v.upstream)
-    return views
+            x = s.anomaly[m] * settings.charge * shares[m][n]
+            if x > 0:
+                _charge(views.setdefault(n, NodeView(n)), m, x, s.onset[m], s.episodes[m], "output")
 
 
 def _settle(
