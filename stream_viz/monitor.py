@@ -99,7 +99,7 @@ class Monitor:
         # The store rate-limits an ongoing symptom (episodes); the RCA sees what the database
         # keeps, so `analyze` on the file reproduces the live diagnosis.
         alerts = self.store.add_sample(sample, self.shadow.seen, found.alerts, found.problems)
-        result = self.engine.update(self.shadow.seen, alerts, found.new_evidence)
+        result = self.engine.update(self.shadow.seen, alerts, found.new_evidence, t=sample.t)
         self.view.update(sample.t, sample, self.shadow.seen, alerts, result)
         self._tell(sample.t, alerts, found.problems, result)
 

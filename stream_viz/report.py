@@ -1,4 +1,4 @@
-"""The report JSON of docs/contracts.md (``stream-viz.report/v1``), written atomically."""
+"""The report JSON of docs/contracts.md (``stream-viz.report/v2``), written atomically."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from stream_viz.errors import OutputError
 from stream_viz.model.graph import FLOW
 from stream_viz.records import Alert
 
-SCHEMA = "stream-viz.report/v1"
+SCHEMA = "stream-viz.report/v2"
 
 
 def build_report(
@@ -34,7 +34,8 @@ def build_report(
     alerts : iterable of Alert
         Every alert stored during the run, in time order.
     rca : mapping
-        ``{"iterations": [...], "root_causes": [...]}`` as the RCA engine reports them.
+        ``{"iterations": [...], "root_causes": [...], "incidents": [...]}`` as the RCA engine
+        reports them (`RcaResult.to_report`).
     started_at, ended_at : float
         Unix seconds.
     injected : mapping, optional
@@ -65,6 +66,7 @@ def build_report(
         ],
         "iterations": list(rca.get("iterations", [])),
         "root_causes": list(rca.get("root_causes", [])),
+        "incidents": list(rca.get("incidents", [])),
     }
     if injected:
         report["injected"] = dict(injected)

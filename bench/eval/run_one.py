@@ -70,7 +70,7 @@ class Live:
     """What the live part of a run leaves: the closed monitor, its results, the run's times and cost."""
 
     mon: Monitor
-    report: dict  # the monitor's final report (stream-viz.report/v1)
+    report: dict  # the monitor's final report (stream-viz.report/v2)
     stored: list[Alert]
     pids: dict[str, str]  # process member -> the system's process name
     alive: dict[str, bool]

@@ -10,13 +10,14 @@ from typing import Any
 import networkx as nx
 
 from stream_viz.detect.watchlist import CONFIGURED, Watchlist
+from stream_viz.rca.episodes import Evidence, stamp
+from stream_viz.rca.incidents import Incident, diagnose
 from stream_viz.rca.pagerank import rank_pagerank
 from stream_viz.rca.settings import RcaSettings
 from stream_viz.rca.subgraph import Iteration, SubgraphState, grow, initial_state
 from stream_viz.rca.trajectories import (
     Context,
     RootCause,
-    make_context,
     rank_count,
     rank_hypothesis,
     rank_trajectory,
@@ -49,7 +50,10 @@ class RcaResult:
     method, policy : str
         How it was computed.
     first_symptom : str or None
-        The member of the earliest alert of ``M_j`` in the window.
+        The member of the earliest alert of the current incident (of ``M_j``, in the window).
+    incidents : list of Incident
+        Every incident in the window, oldest first, each ranked; ``root_causes`` is the
+        current one's ranking.
     """
 
     iterations: list[Iteration]
@@ -61,9 +65,11 @@ class RcaResult:
     policy: str = "both"
     first_symptom: str | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    incidents: list[Incident] = field(default_factory=list)
 
     def to_report(self) -> dict[str, Any]:
-        """The ``iterations`` and ``root_causes`` parts of the report JSON (docs/contracts.md)."""
+        """The ``iterations``, ``root_causes`` and ``incidents`` parts of the report JSON
+        (docs/contracts.md)."""
         members: set[str] = set()
         edges: set[tuple[str, str]] = set()
         watched: set[str] = set()
@@ -83,11 +89,8 @@ class RcaResult:
             })
         return {
             "iterations": its,
-            "root_causes": [
-                {"member": rc.member, "score": rc.score, "trajectory": list(rc.trajectory),
-                 "evidence": rc.evidence}
-                for rc in self.root_causes
-            ],
+            "root_causes": [rc.to_report() for rc in self.root_causes],
+            "incidents": [inc.to_report() for inc in self.incidents],
             "rca": {"method": self.method, "policy": self.policy, "first_symptom": self.first_symptom,
                     "alerts": self.alerts, "kept": self.kept},
         }
@@ -117,7 +120,7 @@ class RcaEngine:
         self._kept = 0
         self._dropped = 0  # alerts pruned out of the window
         self._outside: dict[str, list[Alert]] = {}  # kept alerts per unwatched member (replay)
-        self._evidence: dict[str, float] = {}
+        self._evidence: dict[str, Evidence] = {}
         self._result = self._make_result([])
 
     @property
@@ -130,7 +133,8 @@ class RcaEngine:
         return self._result
 
     def update(
-        self, G: nx.MultiDiGraph, alerts: Iterable[Alert], evidence: Mapping[str, float] | None = None
+        self, G: nx.MultiDiGraph, alerts: Iterable[Alert],
+        evidence: Mapping[str, float | Evidence] | None = None, t: float | None = None,
     ) -> RcaResult:
         """Feed new alerts (grow the subgraph in time order) and rerank.
 
@@ -141,8 +145,11 @@ class RcaEngine:
         alerts : iterable of Alert
             Alerts since the last update.
         evidence : mapping, optional
-            Metric anomaly strength in [0, 1] per member (nodes or processes); replaces the
-            previous evidence when given.
+            Metric anomaly strength in [0, 1] per member (nodes or processes), or `Evidence`
+            with its own since/until; replaces the previous evidence when given (what is missing
+            from it has ended).
+        t : float, optional
+            The time of this update (the sample's): evidence gets its since/until from it.
         """
         new = sorted(alerts, key=lambda a: a.t)
         before = self.state.last
@@ -160,13 +167,15 @@ class RcaEngine:
         self._prune()
         changed = bool(new) or evidence is not None or self.state.last is not before
         if evidence is not None:
-            self._evidence = dict(evidence)
+            self._evidence = stamp(self._evidence, evidence, t, self.settings.window or float("inf"))
         if changed:
             first = self._iterations[1].alert_member if len(self._iterations) > 1 else None
-            ctx = make_context(G, self._alerts, self.settings, self.state.members, self._evidence, first)
-            self._result = self._make_result(RANKERS[self.settings.method](ctx), ctx.symptoms.first)
+            d = diagnose(G, self._alerts, self.settings, RANKERS[self.settings.method], self.state.members,
+                         self._evidence, first, self._result.incidents)
+            self._result = self._make_result(d.root_causes, d.first, d.incidents)
         else:
-            self._result = self._make_result(self._result.root_causes, self._result.first_symptom)
+            r = self._result
+            self._result = self._make_result(r.root_causes, r.first_symptom, r.incidents)
         return self._result
 
     def _feed(self, G: nx.MultiDiGraph, alert: Alert) -> None:
@@ -204,8 +213,10 @@ class RcaEngine:
                     if not self._outside[m]:
                         del self._outside[m]
 
-    def _make_result(self, causes: list[RootCause], first: str | None = None) -> RcaResult:
+    def _make_result(self, causes: list[RootCause], first: str | None = None,
+                     incidents: list[Incident] | None = None) -> RcaResult:
         return RcaResult(
+            incidents=list(incidents or ()),
             iterations=list(self._iterations),
             root_causes=causes,
             state=self.state,
@@ -222,7 +233,7 @@ def analyze(
     alerts: Iterable[Alert],
     settings: RcaSettings,
     watchlist: Iterable[str] | None = None,
-    evidence: Mapping[str, float] | None = None,
+    evidence: Mapping[str, float | Evidence] | None = None,
 ) -> RcaResult:
     """Rerun the diagnosis from scratch on ``alerts`` (offline; ``stream-viz analyze``).
 

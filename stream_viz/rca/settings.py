@@ -59,6 +59,12 @@ class RcaSettings:
     replay : bool
         When a member joins the watchlist, its earlier alerts (kept because it was not watched
         then, within the window) grow the subgraph at once. False: the paper's rule strictly.
+    episode_gap : float
+        Alerts of one member less than this many seconds apart form one episode (a flapping
+        symptom is one episode); an episode is over once this long passed after its last alert.
+    incident_hops : int
+        Symptoms at most this many hops apart in the graph (data flow in either direction,
+        service calls, a node and its process) and close in time form one incident.
     """
 
     policy: str = setting("both", choices=POLICIES)
@@ -76,6 +82,8 @@ class RcaSettings:
     shortlist: int = setting(20, ge=1)
     pagerank_alpha: float = setting(0.85, gt=0, lt=1)
     replay: bool = True
+    episode_gap: float = setting(15.0, gt=0)
+    incident_hops: int = setting(4, ge=1)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str) -> RcaSettings:

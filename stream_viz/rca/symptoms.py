@@ -1,24 +1,32 @@
 """From alerts to symptoms per member, and the per-node view the rankers share.
 
-A symptom on a passive member (a topic's rate dropped) is charged to its publisher node(s); an
-alert on a process to the nodes it hosts. So every candidate is a node, and a node whose output
-went silent is a candidate even when it raised no alert itself (hang, degrade, delay).
+A symptom on a passive member (a topic's rate dropped) is charged to its publisher node(s) — with
+several publishers, to those whose own traffic or evidence changed (`charge`); an alert on a
+process to the nodes it hosts; an alert naming a server to that server. So every candidate is a
+node, and a node whose output went silent is a candidate even when it raised no alert itself
+(hang, degrade, delay). Symptoms have a time: episodes of alerts (`episodes`), and metric
+evidence with a since/until; a cause excuses an effect only while its episode lasts.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 
 import networkx as nx
 import numpy as np
 
-from stream_viz.model.queries import nodes_of_process
+from stream_viz.model.queries import called_servers, nodes_of_process
+from stream_viz.rca import siblings
 from stream_viz.rca.causal import causes, is_node, outputs, publishers
+from stream_viz.rca.charge import charged_nodes, names_in, pointed_nodes, publisher_shares
+from stream_viz.rca.episodes import Episode, Evidence, as_evidence, merge, overlaps
 from stream_viz.rca.settings import RcaSettings
 from stream_viz.records import Alert
 
 INF = float("inf")
+IMPLIED_SERVER = 0.5  # a server suspected only because a client of it stands unexplained
+UNEXPLAINED = 0.5  # a client whose inputs explain less than this makes its servers suspects
 
 
 @dataclass
@@ -28,7 +36,12 @@ class Symptoms:
     ``times`` sorted unique alert times; ``onset`` first alert time; ``anomaly`` the strongest
     alert (severity weight × plugin factor) in [0, 1]; ``relevance`` the sum of severity weights
     (count × severity); ``plugins`` distinct plugin names; ``first`` the member of the earliest
-    alert (the first symptom).
+    alert (the first symptom); ``episodes`` runs of alerts at most ``episode_gap`` apart (the
+    last one open, end INF, for a member that is gone); ``own_anomaly``/``own_onset`` the same
+    as ``anomaly``/``onset`` without the alerts a node got for its process (``data["process"]``);
+    ``named`` the names alerts give of what to blame: ``(alert member, name)`` → (first time,
+    strongest severity weight); ``latest`` the latest alert time; ``count`` how many alerts
+    they come from.
     """
 
     times: dict[str, np.ndarray] = field(default_factory=dict)
@@ -37,15 +50,30 @@ class Symptoms:
     relevance: dict[str, float] = field(default_factory=dict)
     plugins: dict[str, set[str]] = field(default_factory=dict)
     first: str | None = None
+    episodes: dict[str, list[Episode]] = field(default_factory=dict)
+    own_anomaly: dict[str, float] = field(default_factory=dict)
+    own_onset: dict[str, float] = field(default_factory=dict)
+    named: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict)
+    latest: float = -INF
+    count: int = 0
+
+
+def gone_members(G: nx.MultiDiGraph) -> set[str]:
+    """Return the members of ``G`` marked ``gone`` (vanished: their symptom lasts)."""
+    return {m for m, g in G.nodes(data="gone") if g}
 
 
 def collect_symptoms(
-    alerts: Iterable[Alert], settings: RcaSettings, members: Iterable[str] | None = None
+    alerts: Iterable[Alert],
+    settings: RcaSettings,
+    members: Iterable[str] | None = None,
+    gone: Collection[str] = (),
 ) -> Symptoms:
     """Return the symptoms of ``alerts`` (only members in ``members`` when given, e.g. ``M_j``).
 
     Alerts older than ``settings.window`` seconds before the latest one are left out (window 0:
-    none is). Unknown severities count as ``warn``.
+    none is). Unknown severities count as ``warn``. A member in ``gone`` has vanished: its last
+    episode lasts (a crash is reported once, and stays a crash).
     """
     keep = None if members is None else set(members)
     chosen = [a for a in alerts if keep is None or a.member in keep]
@@ -62,15 +90,28 @@ def collect_symptoms(
     for a in chosen:
         w = sev.get(a.severity, sev.get("warn", 0.5))
         factor = 1.0 if (a.plugin in direct or not a.member.startswith("node:")) else settings.charge
+        x = min(1.0, w * factor)
         raw.setdefault(a.member, []).append(a.t)
-        s.anomaly[a.member] = max(s.anomaly.get(a.member, 0.0), min(1.0, w * factor))
+        s.anomaly[a.member] = max(s.anomaly.get(a.member, 0.0), x)
         s.relevance[a.member] = s.relevance.get(a.member, 0.0) + w
         s.plugins.setdefault(a.member, set()).add(a.plugin)
+        data = a.data
+        if not (data and data.get("process")):  # not an alert a node got for its process
+            s.own_anomaly[a.member] = max(s.own_anomaly.get(a.member, 0.0), x)
+            s.own_onset[a.member] = min(s.own_onset.get(a.member, INF), a.t)
+        for name in names_in(data) if data else ():
+            t0, w0 = s.named.get((a.member, name), (INF, 0.0))
+            s.named[(a.member, name)] = (min(t0, a.t), max(w0, w))
         if a.t < first_t:
             first_t, s.first = a.t, a.member
+        s.latest = max(s.latest, a.t)
+    s.count = len(chosen)
     for m, ts in raw.items():
-        s.times[m] = np.unique(np.asarray(ts, dtype=float))
+        s.times[m] = np.asarray(sorted(set(ts)), dtype=float)  # np.unique costs more on short lists
         s.onset[m] = float(s.times[m][0])
+        s.episodes[m] = merge(s.times[m], settings.episode_gap)
+        if m in gone:
+            s.episodes[m][-1] = (s.episodes[m][-1][0], INF)
     return s
 
 
@@ -78,10 +119,20 @@ def collect_symptoms(
 class NodeView:
     """What the rankers know about one candidate node.
 
-    ``direct``: its own alerts (and its process's); ``charged``: symptoms of its outputs ×
-    ``charge``; ``evidence``: metric anomaly; ``anomaly`` the max of the three; ``onset`` when
-    its own or charged symptoms began; ``upstream`` how anomalous its causal parents were no
-    later than its onset (+ tolerance); ``ht`` = anomaly × (1 − upstream), the hypothesis test.
+    ``direct``: its own alerts (and its process's); ``charged``: symptoms of its outputs, of the
+    services it serves and of alerts naming it × ``charge``; ``evidence``: metric anomaly;
+    ``anomaly`` the max of the three; ``onset`` when its own or charged symptoms (or timed
+    evidence) began; ``upstream`` how anomalous its causal parents were while its symptoms began
+    (within ``episode_gap`` before its onset up to ``tolerance`` after), or a sibling in its process
+    that changed first (``sibling``); ``ht`` = anomaly × (1 − upstream), the hypothesis test.
+
+    ``own_*``: the same without what it shares with its process (the process's alerts and
+    metric evidence) — what tells it apart from its siblings; ``own_kinds`` which kinds of own
+    change it has (``alert``, ``output``, ``named``, ``metric``). ``spans`` the episodes of its
+    symptoms; ``untimed`` the strength of metric evidence without a time. ``implied``: a server
+    suspected only because a client of it stands unexplained (it excuses nobody). ``process`` and
+    ``indistinguishable``: the process it shares with other candidates, and those of them whose
+    own changes are the same as its own.
     """
 
     member: str
@@ -94,19 +145,66 @@ class NodeView:
     ht: float = 0.0
     own: list[str] = field(default_factory=list)  # symptomatic members charged to it (itself first)
     plugins: set[str] = field(default_factory=set)
+    own_direct: float = 0.0
+    own_evidence: float = 0.0
+    own_anomaly: float = 0.0
+    own_onset: float = INF
+    own_kinds: set[str] = field(default_factory=set)
+    spans: list[Episode] = field(default_factory=list)
+    untimed: float = 0.0
+    implied: bool = False
+    sibling: float = 0.0
+    process: str | None = None
+    indistinguishable: list[str] = field(default_factory=list)
+
+    def active(self, t0: float, t1: float) -> float:
+        """Its anomaly when one of its symptoms held in ``[t0, t1]``; else its untimed evidence
+        when it has no timed symptom at all; else 0."""
+        if overlaps(self.spans, t0, t1):
+            return self.anomaly
+        return 0.0 if self.spans else self.untimed
 
 
 def _clip(x: float) -> float:
     return float(min(1.0, max(0.0, x)))
 
 
+def _metric(v: NodeView, e: Evidence, own: bool) -> None:
+    v.evidence = max(v.evidence, e.strength)
+    ep = e.episode()
+    if ep is None:
+        v.untimed = max(v.untimed, e.strength)
+    else:
+        v.onset = min(v.onset, ep[0])
+        v.spans.append(ep)
+    if own:
+        v.own_evidence = max(v.own_evidence, e.strength)
+        v.own_onset = min(v.own_onset, ep[0] if ep else INF)
+        v.own_kinds.add("metric")
+
+
+def _charge(v: NodeView, m: str, x: float, onset: float, spans: list[Episode], kind: str) -> None:
+    """Charge the symptom ``m`` (strength ``x``, from ``onset``) to ``v`` as its own change."""
+    v.charged = max(v.charged, x)
+    v.onset = min(v.onset, onset)
+    v.own_onset = min(v.own_onset, onset)
+    v.own_kinds.add(kind)
+    v.spans += spans
+    if m not in v.own:
+        v.own.append(m)
+
+
 def node_views(
     G: nx.MultiDiGraph,
     s: Symptoms,
     settings: RcaSettings,
-    evidence: Mapping[str, float] | None = None,
+    evidence: Mapping[str, float | Evidence] | None = None,
 ) -> dict[str, NodeView]:
-    """Return a `NodeView` for every node with a symptom, a charged symptom or metric evidence."""
+    """Return a `NodeView` for every node with a symptom, a charged symptom or metric evidence.
+
+    ``evidence``: metric anomaly per member (a node or a process; others excuse their
+    subscribers only), a number in [0, 1] (no time) or `Evidence` with its since/until.
+    """
     views: dict[str, NodeView] = {}
 
     def view(n: str) -> NodeView:
@@ -114,18 +212,21 @@ def node_views(
             views[n] = NodeView(n)
         return views[n]
 
-    ev_topic: dict[str, float] = {}
+    ev_passive: dict[str, Evidence] = {}
     for m, x in (evidence or {}).items():
-        x = _clip(x)
-        if x <= 0:
+        e = as_evidence(x)
+        e = Evidence(_clip(e.strength), e.since, e.until)
+        if e.strength <= 0:
             continue
         if is_node(G, m):
-            view(m).evidence = max(view(m).evidence, x)
+            _metric(view(m), e, own=True)
         elif m.startswith("process:"):
             for n in nodes_of_process(G, m):
-                view(n).evidence = max(view(n).evidence, x)
+                _metric(view(n), e, own=False)
         else:
-            ev_topic[m] = x
+            ev_passive[m] = e
+    charge = settings.charge
+    shared_by: list[tuple[str, list[str]]] = []  # passive members with several publishers
     for m, a in s.anomaly.items():
         if is_node(G, m):
             v = view(m)
@@ -133,6 +234,11 @@ def node_views(
             v.onset = min(v.onset, s.onset[m])
             v.own.insert(0, m)
             v.plugins |= s.plugins[m]
+            v.spans += s.episodes[m]
+            if m in s.own_anomaly:
+                v.own_direct = max(v.own_direct, s.own_anomaly[m])
+                v.own_onset = min(v.own_onset, s.own_onset[m])
+                v.own_kinds.add("alert")
         elif m.startswith(("process:", "host:")) or m == "root":
             for n in nodes_of_process(G, m):
                 v = view(n)
@@ -140,18 +246,89 @@ def node_views(
                 v.onset = min(v.onset, s.onset[m])
                 v.own.append(m)
                 v.plugins |= s.plugins[m]
+                v.spans += s.episodes[m]
         else:
-            for n in publishers(G, m):
-                v = view(n)
-                v.charged = max(v.charged, a * settings.charge)
-                v.onset = min(v.onset, s.onset[m])
-                v.own.append(m)
-    tol = settings.tolerance
-    for n, v in views.items():
-        v.anomaly = max(v.direct, v.charged, v.evidence)
-        v.upstream = _upstream(G, n, v, s, views, ev_topic, tol, settings.max_trajectory)
+            nodes = charged_nodes(G, m)
+            if len(nodes) > 1:
+                shared_by.append((m, nodes))
+            for n in nodes if len(nodes) == 1 else ():
+                _charge(view(n), m, a * charge, s.onset[m], s.episodes[m], "output")
+    for (m, name), (t, w) in s.named.items():
+        spans = [(max(a, t), b) for a, b in s.episodes[m] if b >= t]
+        for n in pointed_nodes(G, m, [name]):
+            _charge(view(n), m, _clip(w * charge), t, spans, "named")
+    _charge_shared(G, s, views, shared_by, settings)
+    _settle(G, views, views, s, ev_passive, settings)
+    _imply_servers(G, s, views, ev_passive, settings)
+    for n, verdict in siblings.judge(G, views, settings.tolerance).items():
+        v = views[n]
+        v.process, v.sibling, v.indistinguishable = verdict.process, verdict.excuse, verdict.indistinguishable
+        v.upstream = max(v.upstream, v.sibling)
+    for v in views.values():
         v.ht = v.anomaly * (1.0 - v.upstream)
     return views
+
+
+def _charge_shared(
+    G: nx.MultiDiGraph, s: Symptoms, views: dict[str, NodeView], shared_by: list[tuple[str, list[str]]],
+    settings: RcaSettings,
+) -> None:
+    """Charge the symptoms of members with several publishers: each publisher's share follows its
+    own traffic or the evidence of its own around the symptom (`charge.publisher_shares`), judged
+    on what was charged before any such member."""
+    gap = settings.episode_gap
+    shares = {}
+    for m, nodes in shared_by:
+        lo, hi = s.onset[m] - gap, s.episodes[m][-1][1] + gap
+        other = {n: max(v.direct, v.charged, v.evidence) if overlaps(v.spans, lo, hi) else v.untimed
+                 for n in nodes if (v := views.get(n)) is not None}
+        shares[m] = publisher_shares(G, m, nodes, other)
+    for m, nodes in shared_by:
+        for n in nodes:
+            x = s.anomaly[m] * settings.charge * shares[m][n]
+            if x > 0:
+                _charge(views.setdefault(n, NodeView(n)), m, x, s.onset[m], s.episodes[m], "output")
+
+
+def _settle(
+    G: nx.MultiDiGraph, these: Mapping[str, NodeView], views: dict[str, NodeView], s: Symptoms,
+    ev_passive: dict[str, Evidence], settings: RcaSettings,
+) -> None:
+    """Fill in the anomalies of ``these`` views, then their upstream excuse (which reads the
+    anomalies of all ``views``), once every symptom is charged."""
+    for v in these.values():
+        v.anomaly = max(v.direct, v.charged, v.evidence)
+        v.own_anomaly = max(v.own_direct, v.charged, v.own_evidence)
+    # What can excuse at all: the walk upstream stops once it has passed all of them.
+    sources = {m for m in s.anomaly if not m.startswith(("process:", "host:")) and m != "root"}
+    sources |= set(views) | set(ev_passive)
+    for n, v in these.items():
+        v.upstream = _upstream(G, n, v, s, views, ev_passive, settings, sources)
+
+
+def _imply_servers(
+    G: nx.MultiDiGraph, s: Symptoms, views: dict[str, NodeView], ev_passive: dict[str, Evidence],
+    settings: RcaSettings,
+) -> None:
+    """Make the silent servers of an unexplained client candidates (weakly: `IMPLIED_SERVER`).
+
+    A client that waits on a server shows the server's fault as its own (error logs, stalled
+    outputs) while the server's topics may look healthy; so a server nothing else speaks for
+    becomes a candidate when a client of it has such symptoms of its own and its inputs do not
+    explain them.
+    """
+    implied: dict[str, NodeView] = {}
+    for n, v in list(views.items()):
+        # its own logs or outputs, not what it shares with its process (CPU, memory)
+        if v.upstream >= UNEXPLAINED or not v.own_kinds & {"alert", "output"}:
+            continue
+        for srv in called_servers(G, n):
+            if srv in views:
+                continue  # it has evidence of its own, or an alert named it
+            sv = implied.setdefault(srv, NodeView(srv, implied=True))
+            _charge(sv, n, v.own_anomaly * settings.charge * IMPLIED_SERVER, v.own_onset, v.spans, "client")
+    views.update(implied)
+    _settle(G, implied, views, s, ev_passive, settings)
 
 
 SILENT_DECAY = 0.75  # an excuse found behind a silent node counts this much less per such node
@@ -163,31 +340,43 @@ def _upstream(
     v: NodeView,
     s: Symptoms,
     views: dict[str, NodeView],
-    ev_topic: dict[str, float],
-    tol: float,
-    max_hops: int = 12,
+    ev_passive: dict[str, Evidence],
+    settings: RcaSettings,
+    sources: set[str] | None = None,
 ) -> float:
-    """How anomalous ``n``'s causes were when (or before) ``n``'s symptoms began.
+    """How anomalous ``n``'s causes were while ``n``'s symptoms began.
 
-    A parent topic counts with its own symptom, and with the direct evidence of its other
-    publishers (a crashed sensor whose topic nobody watches still excuses its subscriber). A
-    parent with no symptom at all does not end the search: a fault crosses a node that raised
-    nothing (its output merely went on late), so the walk goes on upstream through silent
-    members, up to ``max_hops``, each silent node passed weakening what is found behind it by
-    `SILENT_DECAY`.
+    A cause counts when one of its episodes met ``[onset − episode_gap, onset + tolerance]``:
+    it began no later than the node's symptoms (+ tolerance) and had not long ended — an
+    upstream episode that ended before does not excuse a later fault. A parent topic counts
+    with its own symptom, and with the direct evidence of its other publishers (a crashed
+    sensor whose topic nobody watches still excuses its subscriber). A parent with no symptom at
+    all does not end the search: a fault crosses a node that raised nothing (its output merely
+    went on late), so the walk goes on upstream through silent members, up to
+    ``max_trajectory`` hops, each silent node passed weakening what is found behind it by
+    `SILENT_DECAY`. ``sources``: the members that can excuse at all (symptoms, candidates,
+    evidence); the walk ends once it has passed every one of them.
     """
-    before = v.onset + tol
+    if v.onset < INF:
+        lo, hi = v.onset - settings.episode_gap, v.onset + settings.tolerance
+    else:  # evidence without a time: any time
+        lo, hi = -INF, INF
     mine = set(outputs(G, n))
+    left = None if sources is None else sources - mine - {n}
     worst = 0.0
     seen = {n}
     frontier: list[tuple[str, float]] = [(p, 1.0) for p in causes(G, n) if p not in mine]
-    for _ in range(max_hops):
+    for _ in range(settings.max_trajectory):
+        if left is not None and not left:
+            break
         nxt: list[tuple[str, float]] = []
         for p, w in frontier:
             if p in seen:
                 continue
             seen.add(p)
-            found = _excuse(G, p, n, s, views, ev_topic, before)
+            if left is not None:
+                left.discard(p)
+            found = _excuse(G, p, n, s, views, ev_passive, lo, hi)
             worst = max(worst, w * found)
             if found > 0 or w * SILENT_DECAY <= worst:
                 continue  # an alerting member ends its path: the earlier ones are its own causes
@@ -205,22 +394,22 @@ def _excuse(
     n: str,
     s: Symptoms,
     views: dict[str, NodeView],
-    ev_topic: dict[str, float],
-    before: float,
+    ev_passive: dict[str, Evidence],
+    lo: float,
+    hi: float,
 ) -> float:
-    """How much the cause ``p`` of ``n`` was anomalous no later than ``before``."""
+    """How much the cause ``p`` of ``n`` was anomalous at some time in ``[lo, hi]``."""
     if is_node(G, p):  # a server it calls, or a node further upstream
         pv = views.get(p)
-        if pv is None:
-            return 0.0
-        if pv.onset <= before:
-            return pv.anomaly
-        return pv.evidence if pv.onset == INF else 0.0
-    worst = s.anomaly[p] if p in s.anomaly and s.onset[p] <= before else 0.0
-    worst = max(worst, ev_topic.get(p, 0.0))
+        return 0.0 if pv is None or pv.implied else pv.active(lo, hi)
+    worst = s.anomaly[p] if p in s.anomaly and overlaps(s.episodes[p], lo, hi) else 0.0
+    e = ev_passive.get(p)
+    if e is not None and e.meets(lo, hi):
+        worst = max(worst, e.strength)
     for q in publishers(G, p):
         qv = views.get(q)
-        if q == n or qv is None:
+        if q == n or qv is None or qv.implied:
             continue
-        worst = max(worst, max(qv.direct, qv.evidence) if qv.onset <= before else qv.evidence)
+        own = max(qv.direct, qv.evidence)
+        worst = max(worst, own if overlaps(qv.spans, lo, hi) else (0.0 if qv.spans else qv.untimed))
     return worst

@@ -23,7 +23,7 @@ explains no other symptom).
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterable, Mapping
+from collections.abc import Collection, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,8 +32,9 @@ import numpy as np
 
 from stream_viz.rca.causal import path_back, trace
 from stream_viz.rca.cooccurrence import cooccurrence
+from stream_viz.rca.episodes import Evidence
 from stream_viz.rca.settings import RcaSettings
-from stream_viz.rca.symptoms import NodeView, Symptoms, collect_symptoms, node_views
+from stream_viz.rca.symptoms import NodeView, Symptoms, collect_symptoms, gone_members, node_views
 from stream_viz.rca.timelag import LagDistribution
 from stream_viz.records import Alert
 
@@ -46,6 +47,11 @@ class RootCause:
     score: float
     trajectory: list[str]
     evidence: dict[str, Any] = field(default_factory=dict)
+
+    def to_report(self) -> dict[str, Any]:
+        """The root cause in the report JSON (docs/contracts.md)."""
+        return {"member": self.member, "score": self.score, "trajectory": list(self.trajectory),
+                "evidence": self.evidence}
 
 
 @dataclass
@@ -72,15 +78,18 @@ def make_context(
     alerts: Iterable[Alert],
     settings: RcaSettings,
     members: Iterable[str] | None = None,
-    evidence: Mapping[str, float] | None = None,
+    evidence: Mapping[str, float | Evidence] | None = None,
     first: str | None = None,
+    gone: Collection[str] | None = None,
+    symptoms: Symptoms | None = None,
 ) -> Context:
     """Collect symptoms (of ``members`` only, when given: ``M_j``) and the per-node views.
 
     ``first`` is the first detected symptom, where trajectories start (default: the member of
-    the earliest alert).
+    the earliest alert); ``gone`` the vanished members (default: those marked in ``G``);
+    ``symptoms`` those of ``alerts`` when the caller has them already.
     """
-    s = collect_symptoms(alerts, settings, members)
+    s = symptoms or collect_symptoms(alerts, settings, members, gone_members(G) if gone is None else gone)
     if first is not None and first not in s.times:
         first = None
     return Context(G, settings, s, node_views(G, s, settings, evidence), bool(evidence), first)
@@ -163,6 +172,10 @@ def _evidence(v: NodeView, tr: Trajectory | None = None, **extra: Any) -> dict[s
         "symptoms": list(v.own),
         "plugins": sorted(v.plugins),
     }
+    if v.process is not None:  # it shares this process with other candidates
+        out["process"] = v.process
+    if v.indistinguishable:
+        out["indistinguishable_from"] = list(v.indistinguishable)
     if tr is not None:
         out.update(
             coverage=round(tr.coverage, 4),

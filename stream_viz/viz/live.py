@@ -71,13 +71,13 @@ class LiveView:
         if len(result.iterations) == self._iterations and result.root_causes == self._causes:
             return
         report = result.to_report()
-        causes = report["root_causes"]
+        causes, incidents = report["root_causes"], report["incidents"]
         new = report["iterations"][self._iterations:]
         for it in new:
-            self.rec.rca(seen, it, causes)
+            self.rec.rca(seen, it, causes, incidents=incidents)
         self._iterations = len(report["iterations"])
         if not new and report["iterations"]:
-            self.rec.report(report_markdown(causes, report["iterations"][-1]), t)
+            self.rec.report(report_markdown(causes, report["iterations"][-1], incidents=incidents), t)
         self._causes = result.root_causes
 
     def _flush_metrics(self) -> None:
@@ -108,6 +108,6 @@ def save_diagnosis(path: Path, G: nx.MultiDiGraph, alerts: list[Alert], result: 
         rec.alerts(alerts)
         report = result.to_report()
         for it in report["iterations"]:
-            rec.rca(G, it, report["root_causes"])
+            rec.rca(G, it, report["root_causes"], incidents=report["incidents"])
     finally:
         rec.close()

@@ -1,9 +1,10 @@
 """``/rca/...``: per RCA iteration j, G_j and W_j and the top fault trajectory over the system graph,
-and the ranked root causes as a markdown report."""
+and the ranked root causes (of the current incident, and every incident) as a markdown report."""
 
 from __future__ import annotations
 
 import itertools
+import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -61,22 +62,65 @@ def report_markdown(
     root_causes: Sequence[Mapping[str, Any]],
     iteration: Mapping[str, Any] | None = None,
     top: int = 10,
+    incidents: Sequence[Mapping[str, Any]] = (),
 ) -> str:
-    """Return the markdown report: the ranked root causes with their trajectories."""
+    """Return the markdown report: the current incident's ranked root causes with their
+    trajectories, the candidates it cannot tell apart, and every incident (report JSON form)."""
     lines = ["# Root-cause analysis", ""]
     if iteration is not None:
         lines += [f"Iteration j = {iteration.get('j')}: subgraph of {len(iteration.get('subgraph', []))} "
                   f"members, watchlist of {len(iteration.get('watchlist', []))}"
                   + (f", last alert on `{iteration['alert']}`" if iteration.get("alert") else "") + ".", ""]
+    now = next((inc for inc in incidents if inc.get("current")), None)
+    if now is not None and len(incidents) > 1:
+        lines += [f"Root causes of incident {now['id']} ({_status(now)}, {len(now['members'])} symptomatic "
+                  f"members); {len(incidents) - 1} other incident(s) below.", ""]
     if not root_causes:
-        return "\n".join([*lines, "No root cause found yet."])
-    lines += ["| rank | root cause | score | trajectory (first symptom → cause) |", "|---|---|---|---|"]
-    for i, rc in enumerate(root_causes[:top], 1):
-        traj = " → ".join(f"`{m}`" for m in rc.get("trajectory") or [rc["member"]])
-        lines.append(f"| {i} | **`{rc['member']}`** | {float(rc.get('score', 0.0)):.3f} | {traj} |")
-    if len(root_causes) > top:
-        lines += ["", f"… and {len(root_causes) - top} more."]
+        lines.append("No root cause found yet.")
+    else:
+        lines += ["| rank | root cause | score | trajectory (first symptom → cause) |", "|---|---|---|---|"]
+        for i, rc in enumerate(root_causes[:top], 1):
+            traj = " → ".join(f"`{m}`" for m in rc.get("trajectory") or [rc["member"]])
+            lines.append(f"| {i} | **`{rc['member']}`** | {float(rc.get('score', 0.0)):.3f} | {traj} |")
+        if len(root_causes) > top:
+            lines += ["", f"… and {len(root_causes) - top} more."]
+        lines += _alike_notes(root_causes[:top])
+    if len(incidents) > 1:
+        lines += ["", "## Incidents (times UTC)", "",
+                  "| incident | symptomatic members | from | to | top root cause |", "|---|---|---|---|---|"]
+        for inc in incidents:
+            name = f"**{inc['id']} (current)**" if inc.get("current") else str(inc["id"])
+            causes = inc.get("root_causes") or []
+            first = f"`{causes[0]['member']}`" if causes else "–"
+            until = "ongoing" if inc.get("ongoing") else _clock(inc["end"])
+            lines.append(f"| {name} | {len(inc['members'])} | {_clock(inc['start'])} | {until} | {first} |")
     return "\n".join(lines)
+
+
+def _status(inc: Mapping[str, Any]) -> str:
+    return f"since {_clock(inc['start'])} UTC, ongoing" if inc.get("ongoing") else (
+        f"{_clock(inc['start'])}–{_clock(inc['end'])} UTC, over")
+
+
+def _clock(t: float) -> str:
+    return time.strftime("%H:%M:%S", time.gmtime(float(t)))
+
+
+def _alike_notes(root_causes: Sequence[Mapping[str, Any]]) -> list[str]:
+    """One line per group of candidates the diagnosis cannot tell apart (same process, same own
+    changes): the fault is in that process, not necessarily in the first of them."""
+    out, seen = [], set()
+    for rc in root_causes:
+        ev = rc.get("evidence") or {}
+        alike = ev.get("indistinguishable_from") or []
+        group = tuple(sorted({rc["member"], *alike}))
+        if not alike or group in seen:
+            continue
+        seen.add(group)
+        names = ", ".join(f"`{m}`" for m in group)
+        out.append(f"{names} run in `{ev.get('process', '?')}` and changed alike: the symptoms cannot "
+                   "tell them apart (the fault is in that process).")
+    return ["", *out] if out else []
 
 
 def log_report(rec: rr.RecordingStream, markdown: str) -> None:
@@ -102,6 +146,7 @@ def log_rca(
     root_causes: Sequence[Mapping[str, Any]] = (),
     gone: Sequence[str] = (),
     status: Mapping[str, str] | None = None,
+    incidents: Sequence[Mapping[str, Any]] = (),
 ) -> Layout:
     """Log RCA iteration ``j`` on both timelines (``time`` = its ``t``, ``rca_iteration`` = ``j``).
 
@@ -115,6 +160,8 @@ def log_rca(
         ``{"j", "t", "subgraph": [...], "watchlist": [...], "edges": [[u, v], ...], "alert": member}``.
     root_causes : sequence of mapping
         Ranked best first, ``{"member", "score", "trajectory": [...]}`` (report JSON form).
+    incidents : sequence of mapping
+        Every incident (report JSON form), listed in the report.
     """
     rec.set_time(paths.TIME, timestamp=float(iteration["t"]))
     rec.set_time(paths.RCA_ITERATION, sequence=int(iteration["j"]))
@@ -122,7 +169,7 @@ def log_rca(
         layout = log_system(rec, G, layout, gone=gone, status=status)
         _log_overlay(rec, paths.RCA_SUBGRAPH, subgraph_arrays(iteration, layout))
         _log_overlay(rec, paths.RCA_TRAJECTORY, trajectory_arrays(root_causes, layout))
-        log_report(rec, report_markdown(root_causes, iteration))
+        log_report(rec, report_markdown(root_causes, iteration, incidents=incidents))
     finally:
         # Later data (metrics, /system updates) must not inherit this iteration number.
         rec.disable_timeline(paths.RCA_ITERATION)

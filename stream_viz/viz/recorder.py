@@ -314,12 +314,13 @@ class Recorder:
         return log_alerts(self.rec, alerts)
 
     def rca(self, G: nx.MultiDiGraph, iteration: Mapping[str, Any],
-            root_causes: Sequence[Mapping[str, Any]] = (), gone: Collection[str] = ()) -> None:
-        """Log one RCA iteration (overlays + report) on both timelines."""
-        self._last_rca, self._last_report = (G, iteration, root_causes, gone), None
+            root_causes: Sequence[Mapping[str, Any]] = (), gone: Collection[str] = (),
+            incidents: Sequence[Mapping[str, Any]] = ()) -> None:
+        """Log one RCA iteration (overlays + report, with the incidents) on both timelines."""
+        self._last_rca, self._last_report = (G, iteration, root_causes, gone, incidents), None
         gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
         self.layout = log_rca(self.rec, G, self.layout, iteration, root_causes,
-                              gone=sorted(gone_all), status=self.status)
+                              gone=sorted(gone_all), status=self.status, incidents=incidents)
 
     def report(self, markdown: str, t: float | None = None) -> None:
         """Log a markdown report at ``/rca/report``."""

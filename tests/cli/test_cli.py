@@ -28,7 +28,7 @@ def run_cli(args: list[str], env: dict[str, str], timeout: float = 180) -> subpr
 def check_report(report: dict) -> None:
     """The report contract of docs/contracts.md (every field checked by docs/report.schema.json)."""
     REPORT_SCHEMA.validate(report)
-    assert report["schema"] == "stream-viz.report/v1"
+    assert report["schema"] == "stream-viz.report/v2"
     assert report["ended_at"] >= report["started_at"] > 1e9
     for m in report["members"]:
         assert set(m) >= {"id", "kind"}

@@ -25,9 +25,10 @@ def test_roundtrip_through_asdict():
 @pytest.mark.parametrize(
     ("d", "message"),
     [
-        ({"polcy": "both"}, "[rca] unknown key 'polcy' (known: charge, direct_plugins, icp_iterations, "
-                            "max_offset, max_trajectory, method, pagerank_alpha, policy, replay, "
-                            "severity, shortlist, tolerance, top_k, weights, window)"),
+        ({"polcy": "both"}, "[rca] unknown key 'polcy' (known: charge, direct_plugins, episode_gap, "
+                            "icp_iterations, incident_hops, max_offset, max_trajectory, method, "
+                            "pagerank_alpha, policy, replay, severity, shortlist, tolerance, top_k, "
+                            "weights, window)"),
         ({"policy": "sideways"}, '[rca] policy = "sideways": expected one of downstream, upstream, both'),
         ({"method": "magic"},
          '[rca] method = "magic": expected one of trajectory, pagerank, hypothesis, count'),
@@ -41,6 +42,8 @@ def test_roundtrip_through_asdict():
         ({"severity": {"critical": 1.0}},
          "[rca.severity] unknown key 'critical' (known: error, fatal, info, warn)"),
         ({"top_k": 0}, "[rca] top_k = 0: expected an integer >= 1"),
+        ({"episode_gap": 0}, "[rca] episode_gap = 0: expected a number > 0"),
+        ({"incident_hops": 0}, "[rca] incident_hops = 0: expected an integer >= 1"),
         ({"top_k": True}, "[rca] top_k = true: expected an integer >= 1"),
         ({"tolerance": "2s"}, '[rca] tolerance = "2s": expected a number > 0'),
         ({"tolerance": 0}, "[rca] tolerance = 0: expected a number > 0"),

@@ -89,7 +89,13 @@ def _set(path, value):
 
 @pytest.mark.parametrize(("name", "edit"), [
     ("no schema", _drop("schema")),
-    ("other schema version", _set(["schema"], "stream-viz.report/v2")),
+    ("other schema version", _set(["schema"], "stream-viz.report/v1")),
+    ("no incidents", _drop("incidents")),
+    ("incident without ongoing", lambda r: r["incidents"][0].pop("ongoing")),
+    ("incident id 0", _set(["incidents", 0, "id"], 0)),
+    ("incident root cause a topic", _set(["incidents", 0, "root_causes", 0, "member"], IMAGE)),
+    ("indistinguishable from a topic",
+     _set(["root_causes", 0, "evidence", "indistinguishable_from"], [IMAGE])),
     ("no root_causes", _drop("root_causes")),
     ("unknown top-level key", _set(["extra"], 1)),
     ("started_at as text", _set(["started_at"], "90")),
@@ -127,3 +133,26 @@ def test_the_schema_names_the_codes_vocabulary():
     assert defs["edge"]["properties"]["kind"]["enum"] == list(FLOW_KINDS)
     assert defs["injected"]["properties"]["fault"]["enum"] == list(FAULTS)
     assert set(defs["evidence"]["properties"]["method"]["enum"]) == set(METHODS) - {"trajectory"}
+
+
+def test_incidents_in_the_report(G):
+    old = [Alert(OBJECTS, "topic_rate", 10.0, "warn", "rate dropped")]  # long before: its own incident
+    result = analyze(G, old + ALERTS, RcaSettings(), None)
+    rep = json.loads(json.dumps(build_report(G, old + ALERTS, result.to_report(), 5.0, 110.0)))
+    VALIDATOR.validate(rep)
+    got = [(i["id"], i["members"], i["start"], i["end"], i["ongoing"], i["current"])
+           for i in rep["incidents"]]
+    assert got == [(1, [OBJECTS], 10.0, 10.0, False, False),
+                   (2, [CAM, IMAGE, OBJECTS], 100.0, 102.0, True, True)]
+    assert rep["incidents"][1]["root_causes"] == rep["root_causes"]
+    assert rep["incidents"][0]["root_causes"][0]["member"] == DET
+
+
+def test_nodes_that_cannot_be_told_apart_are_named_in_the_report(G):
+    add_member(G, "node:/cam2", pid=7)
+    add_tree_edge(G, "process:7", "node:/cam2")
+    alerts = [Alert("process:7", "process_resources", 100.0, "warn", "cpu 100%")]
+    rep = build_report(G, alerts, analyze(G, alerts, RcaSettings(), None).to_report(), 90.0, 110.0)
+    VALIDATOR.validate(json.loads(json.dumps(rep)))
+    ev = {rc["member"]: rc["evidence"] for rc in rep["root_causes"]}
+    assert ev[CAM]["process"] == "process:7" and ev[CAM]["indistinguishable_from"] == ["node:/cam2"]

@@ -1,0 +1,113 @@
+"""Nodes that share a process (a component container, one executor): which one changed first.
+
+Nodes in one process share its evidence (its CPU, memory, exit) and, on a single-threaded
+executor, its thread: one node's blocking callback starves its siblings, whose outputs go
+silent too. So the process's own evidence cannot tell them apart; their *own* changes can —
+alerts on the node itself, symptoms of its outputs, metric evidence on the node. Among the
+candidate nodes of one process, the node whose own change came first (beyond the tolerance),
+or at the same time but stronger, excuses its siblings in the hypothesis test (as a causal
+parent would): on one executor it can be their cause. A node with no own change at all is
+excused by any sibling that has one. Nodes whose own changes are the same (in time, strength
+and kind), and whose inputs explain them as much, cannot be told apart, and the verdict says so.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import networkx as nx
+
+from stream_viz.model.queries import process_of_node
+
+INF = float("inf")
+EPS = 1e-9
+
+
+class OwnChange(Protocol):
+    """What `judge` reads of a candidate (`stream_viz.rca.symptoms.NodeView` has it)."""
+
+    own_onset: float
+    own_anomaly: float
+    own_kinds: set[str]
+    upstream: float
+    implied: bool
+
+
+@dataclass
+class Verdict:
+    """A candidate among its process's candidates.
+
+    ``process``: the process it shares; ``excuse``: how strongly a sibling that changed first
+    (or more) explains it, in [0, 1]; ``indistinguishable``: siblings whose own changes are the
+    same as its own and explained as much by their inputs (empty when it is excused).
+    """
+
+    process: str
+    excuse: float = 0.0
+    indistinguishable: list[str] = field(default_factory=list)
+
+
+def _close(a: float, b: float, tol: float) -> bool:
+    return a == b or abs(a - b) <= tol  # two INF (untimed) onsets are close too
+
+
+def _before(a: OwnChange, b: OwnChange, tol: float) -> bool:
+    """True when ``a``'s own change came before ``b``'s, or with it but stronger or wider."""
+    if a.own_anomaly <= 0:
+        return False
+    if b.own_anomaly <= 0 or a.own_onset < b.own_onset - tol:
+        return True
+    if not _close(a.own_onset, b.own_onset, tol):
+        return False
+    if abs(a.own_anomaly - b.own_anomaly) > EPS:
+        return a.own_anomaly > b.own_anomaly
+    return len(a.own_kinds) > len(b.own_kinds)
+
+
+def _same(a: OwnChange, b: OwnChange, tol: float) -> bool:
+    """Same own change, and explained as much by their inputs (else the data flow tells them apart)."""
+    return (_close(a.own_onset, b.own_onset, tol) and abs(a.own_anomaly - b.own_anomaly) <= EPS
+            and len(a.own_kinds) == len(b.own_kinds) and abs(a.upstream - b.upstream) <= EPS)
+
+
+def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> dict[str, Verdict]:
+    """Return a `Verdict` for every candidate that shares its process with another candidate.
+
+    Parameters
+    ----------
+    G : MultiDiGraph
+        The model (the process tree says which process hosts a node).
+    views : mapping
+        Candidate node → its own change (`OwnChange`); implied candidates (a server suspected
+        only because of its client) take no part.
+    tol : float
+        Seconds counted as simultaneous.
+    """
+    groups: dict[str, list[str]] = {}
+    for n, v in views.items():
+        p = None if v.implied else process_of_node(G, n)
+        if p is not None:
+            groups.setdefault(p, []).append(n)
+    out: dict[str, Verdict] = {}
+    for p, nodes in groups.items():
+        if len(nodes) < 2:
+            continue
+        for n in nodes:
+            v = views[n]
+            verdict = Verdict(p)
+            for m in nodes:
+                if m == n:
+                    continue
+                w = views[m]
+                if _before(w, v, tol):
+                    # a sibling explained by its own inputs explains its siblings less
+                    verdict.excuse = max(verdict.excuse, w.own_anomaly * (1.0 - w.upstream))
+                elif _same(w, v, tol):
+                    verdict.indistinguishable.append(m)
+            if verdict.excuse > 0:
+                verdict.indistinguishable = []
+            verdict.indistinguishable.sort()
+            out[n] = verdict
+    return out

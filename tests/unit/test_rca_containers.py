@@ -1,0 +1,113 @@
+"""Component containers and executors (issue 16, item 2): several nodes in one process; the one
+whose own outputs changed first or most ranks first, and the report says when they cannot be
+told apart."""
+
+from __future__ import annotations
+
+import pytest
+
+from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
+from stream_viz.rca import RcaSettings, analyze
+from stream_viz.records import Alert
+
+CAM, LIDAR, IMU, DET, FUSE = "node:/cam", "node:/lidar", "node:/imu", "node:/det", "node:/fuse"
+IMAGE, SCAN, IMUT = "topic:/image", "topic:/scan", "topic:/imu"
+BOX = "process:7"
+S = RcaSettings()
+OUT = S.severity["error"] * S.charge  # a silent output, charged to its publisher
+
+
+def al(member, plugin, t, severity="error", **data):
+    return Alert(member, plugin, float(t), severity, f"{plugin} on {member}", data)
+
+
+@pytest.fixture
+def G():
+    """A sensor container (process 7: cam, lidar, imu, one executor); det (process 8) subscribes
+    to /image and /scan, fuse (process 9) to /imu."""
+    g = new_graph()
+    for m in (CAM, LIDAR, IMU, DET, FUSE, IMAGE, SCAN, IMUT, BOX, "process:8", "process:9"):
+        add_member(g, m)
+    for node, topic in ((CAM, IMAGE), (LIDAR, SCAN), (IMU, IMUT)):
+        add_flow_edge(g, node, topic, "pub")
+        add_tree_edge(g, BOX, node)
+    add_flow_edge(g, IMAGE, DET, "sub")
+    add_flow_edge(g, SCAN, DET, "sub")
+    add_flow_edge(g, IMUT, FUSE, "sub")
+    add_tree_edge(g, "process:8", DET)
+    add_tree_edge(g, "process:9", FUSE)
+    return g
+
+
+def rank(G, alerts):
+    r = analyze(G, alerts, RcaSettings(), None)
+    return {rc.member: rc for rc in r.root_causes}, [rc.member for rc in r.root_causes]
+
+
+def silent(topic, t0, n=3):
+    return [al(topic, "topic_rate", t0 + 5 * k) for k in range(n)]
+
+
+def test_the_node_whose_own_output_stopped_first_ranks_first(G):
+    # cam's callback blocks at 10; the single executor starves lidar and imu, whose outputs are
+    # seen to stop 4 s later. Before: all three were charged alike and tied.
+    by, order = rank(G, silent(IMAGE, 10) + silent(SCAN, 14) + silent(IMUT, 14))
+    assert order[0] == CAM
+    assert by[CAM].evidence["process"] == BOX and "indistinguishable_from" not in by[CAM].evidence
+    for sib in (LIDAR, IMU):
+        assert by[sib].evidence["upstream"] == pytest.approx(OUT)  # excused by cam, which came first
+        assert by[sib].evidence["hypothesis"] == pytest.approx(OUT * (1 - OUT))
+
+
+def test_a_starved_container_whose_outputs_stop_together_is_named_indistinguishable(G):
+    by, order = rank(G, silent(IMAGE, 10) + silent(SCAN, 10) + silent(IMUT, 11))
+    assert set(order[:3]) == {CAM, LIDAR, IMU}
+    for n in (CAM, LIDAR, IMU):
+        assert by[n].evidence["process"] == BOX
+        assert by[n].evidence["indistinguishable_from"] == sorted({CAM, LIDAR, IMU} - {n})
+        assert by[n].evidence["hypothesis"] == pytest.approx(OUT)
+
+
+def test_a_process_alert_goes_to_the_node_whose_own_outputs_changed(G):
+    # A multi-threaded container: cam's busy callback raises the process's CPU; its siblings go
+    # on publishing. Before: the process alert made all three equal candidates.
+    cpu = [al(BOX, "process_resources", 9 + 5 * k, "warn") for k in range(3)]
+    by, order = rank(G, cpu + silent(IMAGE, 12))
+    assert order[0] == CAM
+    for sib in (LIDAR, IMU):
+        assert by[sib].evidence["upstream"] == pytest.approx(OUT)
+        assert "indistinguishable_from" not in by[sib].evidence
+    # The same, with the process alert delivered on each node (data names the process).
+    per_node = [al(n, "process_resources", 9, "warn", process=BOX) for n in (CAM, LIDAR, IMU)]
+    _, order = rank(G, per_node + silent(IMAGE, 12))
+    assert order[0] == CAM
+
+
+def test_a_process_alert_alone_cannot_tell_its_nodes_apart(G):
+    by, order = rank(G, [al(n, "process_resources", 9, "warn", process=BOX) for n in (CAM, LIDAR, IMU)])
+    assert set(order) == {CAM, LIDAR, IMU}
+    assert by[LIDAR].evidence["indistinguishable_from"] == [CAM, IMU]
+
+
+def test_an_own_error_log_tells_the_blocking_node_apart(G):
+    # All outputs stop together, but cam also logs that its callback overran.
+    alerts = [al(CAM, "rosout", 10, "warn"), *silent(IMAGE, 10), *silent(SCAN, 10), *silent(IMUT, 10)]
+    by, order = rank(G, alerts)
+    assert order[0] == CAM and "indistinguishable_from" not in by[CAM].evidence
+    assert by[LIDAR].evidence["upstream"] == pytest.approx(OUT)
+
+
+def test_siblings_the_data_flow_tells_apart_are_not_indistinguishable(G):
+    # A process alert on both, but one feeds the other: the data flow tells them apart.
+    add_member(G, "topic:/cam_info")
+    add_flow_edge(G, CAM, "topic:/cam_info", "pub")
+    add_flow_edge(G, "topic:/cam_info", LIDAR, "sub")
+    alerts = [al(n, "process_resources", 9, "warn", process=BOX) for n in (CAM, LIDAR)]
+    by, order = rank(G, alerts)
+    assert order[0] == CAM and by[LIDAR].evidence["upstream"] > 0
+    assert all("indistinguishable_from" not in by[n].evidence for n in (CAM, LIDAR))
+
+
+def test_nodes_in_separate_processes_are_not_siblings(G):
+    by, _ = rank(G, [*silent(IMAGE, 10), al(DET, "rosout", 20)])
+    assert "process" not in by[CAM].evidence and "process" not in by[DET].evidence

@@ -1,0 +1,181 @@
+"""Incidents (issue 16, item 12) and intermittent faults (item 9): symptoms connected in the graph
+and close in time form one incident; the diagnosis is the current incident's; a flapping symptom
+is one episode and still ranks its root first."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
+from stream_viz.rca import RcaEngine, RcaSettings, analyze
+from stream_viz.rca.incidents import ball, current, find_incidents, neighbours
+from stream_viz.records import Alert
+
+SENSOR, PERC, PLAN, CTRL = "node:/sensor", "node:/perception", "node:/planner", "node:/controller"
+SCAN, OBJ, CMD = "topic:/scan", "topic:/objects", "topic:/cmd"
+BATT, BATTERY = "node:/battery", "topic:/battery"
+PROC = "process:42"
+
+
+@pytest.fixture
+def G():
+    """sensor → /scan → perception → /objects → planner → /cmd → controller; perception runs in
+    process 42; battery → /battery stands apart (nobody subscribes)."""
+    g = new_graph()
+    for m in (SENSOR, PERC, PLAN, CTRL, SCAN, OBJ, CMD, BATT, BATTERY, PROC):
+        add_member(g, m)
+    for a, b, kind in ((SENSOR, SCAN, "pub"), (SCAN, PERC, "sub"), (PERC, OBJ, "pub"), (OBJ, PLAN, "sub"),
+                       (PLAN, CMD, "pub"), (CMD, CTRL, "sub"), (BATT, BATTERY, "pub")):
+        add_flow_edge(g, a, b, kind)
+    add_tree_edge(g, PROC, PERC)
+    return g
+
+
+def al(member, plugin, t, severity="error", **data):
+    return Alert(member, plugin, float(t), severity, f"{plugin} on {member}", data)
+
+
+def test_neighbours_and_hops(G):
+    assert neighbours(G, PERC) == {SCAN, OBJ, PROC}
+    assert neighbours(G, PROC) == {PERC}
+    assert neighbours(G, "node:/unknown") == set()
+    assert ball(G, SCAN, 1) == {SCAN, SENSOR, PERC}
+    assert ball(G, SCAN, 2) == {SCAN, SENSOR, PERC, OBJ, PROC}
+    assert ball(G, SCAN, 1, rim=True) == {SCAN, SENSOR, PERC, (SENSOR, SCAN), (PERC, SCAN), (PERC, OBJ),
+                                          (PERC, PROC)}
+    assert ball(G, BATTERY, 1, links={BATTERY: {SENSOR}}) == {BATTERY, BATT, SENSOR}
+
+
+PAIRS = {(SCAN, OBJ): 2, (OBJ, CMD): 2, (SENSOR, OBJ): 3, (SCAN, CMD): 4, (SENSOR, CMD): 5}
+
+
+@pytest.mark.parametrize("hops", [1, 2, 3, 4, 5])
+def test_incidents_link_members_at_most_hops_apart(G, hops):
+    for (a, b), apart in PAIRS.items():  # each pair alone, at the same time
+        got = find_incidents(G, {a: [(0.0, 1.0)], b: [(0.0, 1.0)]}, hops, 15.0, 1.0)
+        assert (len(got) == 1) == (apart <= hops), (a, b, hops)
+
+
+def test_find_incidents_groups_by_graph_and_time(G):
+    episodes = {SCAN: [(0.0, 5.0)], OBJ: [(8.0, 10.0)], BATTERY: [(3.0, 4.0)], CTRL: [(100.0, 100.0)]}
+    got = find_incidents(G, episodes, hops=4, gap=15.0, now=100.0)
+    assert [(i.id, i.members, i.start, i.end, i.ongoing) for i in got] == [
+        (1, [OBJ, SCAN], 0.0, 10.0, False),  # two hops apart, 3 s apart: one incident
+        (2, [BATTERY], 3.0, 4.0, False),  # at the same time, but not connected
+        (3, [CTRL], 100.0, 100.0, True),  # connected to /objects, but 90 s later
+    ]
+    assert current(got) is got[2]
+    # one hop allowed: /scan and /objects (two hops apart) are separate incidents
+    assert [i.members for i in find_incidents(G, episodes, 1, 15.0, 100.0)] == [
+        [SCAN], [BATTERY], [OBJ], [CTRL]]
+    # a vanished member's open episode keeps its incident going, and joins what comes later
+    got = find_incidents(G, {SCAN: [(0.0, float("inf"))], CTRL: [(100.0, 100.0)]}, 6, 15.0, 100.0)
+    assert [(i.members, i.end, i.ongoing) for i in got] == [([CTRL, SCAN], 100.0, True)]
+
+
+def strengths(incidents, **by_first_member):
+    for inc in incidents:
+        inc.strength = by_first_member.get(inc.members[0], 0.0)
+    return incidents
+
+
+def test_the_current_incident_is_ongoing_new_and_stands_out(G):
+    # the battery warns every 60 s (each its own episode: a recurring symptom); the fault at
+    # 100-130 is still going on when the battery warns again at 125
+    episodes = {BATTERY: [(0.0, 0.0), (60.0, 60.0), (125.0, 125.0)],
+                SCAN: [(100.0, 130.0)], OBJ: [(101.0, 130.0)]}
+    got = find_incidents(G, episodes, 4, 15.0, 130.0)
+    assert [(i.members, i.recurring, i.ongoing) for i in got] == [
+        ([BATTERY], False, False), ([BATTERY], True, False), ([OBJ, SCAN], False, True),
+        ([BATTERY], True, True)]
+    assert current(strengths(got, **{BATTERY: 0.9, OBJ: 0.5})).members == [OBJ, SCAN]
+    # a newer symptom elsewhere whose best candidate stands out less does not displace an
+    # ongoing fault ...
+    got = find_incidents(G, {SCAN: [(100.0, 130.0)], BATTERY: [(125.0, 125.0)]}, 4, 15.0, 130.0)
+    assert current(strengths(got, **{SCAN: 0.64, BATTERY: 0.4})).members == [SCAN]
+    # ... one that stands out as much does when the incidents are as large: it is the newest ...
+    assert current(strengths(got, **{SCAN: 0.64, BATTERY: 0.64})).members == [BATTERY]
+    # ... not when the fault's cascade is larger
+    got = find_incidents(G, {SCAN: [(100.0, 130.0)], OBJ: [(101.0, 130.0)], BATTERY: [(125.0, 125.0)]},
+                         4, 15.0, 130.0)
+    assert current(strengths(got, **{OBJ: 0.64, BATTERY: 0.64})).members == [OBJ, SCAN]
+    assert current([]) is None
+    # an incident nothing in which can be a cause (strength 0) is never the current one
+    assert current(strengths(got, **{OBJ: 0.0, BATTERY: 0.3})).members == [BATTERY]
+    old = find_incidents(G, {SCAN: [(10.0, 20.0)], BATTERY: [(125.0, 125.0)]}, 4, 15.0, 130.0)
+    assert current(strengths(old, **{SCAN: 0.3, BATTERY: 0.0})).members == [SCAN]  # even when over
+
+
+def test_an_older_unrelated_incident_does_not_take_the_first_place(G):
+    # The controller logged errors long ago (an old incident, loud: 10 errors); now the sensor
+    # crashes. Before: one ranking of everything in the window put the controller first.
+    old = [al(CTRL, "rosout", k) for k in range(0, 50, 5)]
+    crash = [al(SENSOR, "member_gone", 300, "fatal"), al(SCAN, "topic_rate", 301), al(OBJ, "topic_rate", 302)]
+    r = analyze(G, old + crash, RcaSettings(), None)
+    assert r.root_causes[0].member == SENSOR and CTRL not in [rc.member for rc in r.root_causes]
+    assert [(i.members, i.current) for i in r.incidents] == [([CTRL], False), ([SENSOR, OBJ, SCAN], True)]
+    assert r.incidents[0].root_causes[0].member == CTRL
+    rep = r.to_report()["incidents"]
+    assert [(i["id"], i["start"], i["end"], i["ongoing"], i["current"]) for i in rep] == [
+        (1, 0.0, 45.0, False, False), (2, 300.0, 302.0, True, True)]
+    assert rep[1]["root_causes"] == r.to_report()["root_causes"]
+
+
+def test_a_recurring_symptom_elsewhere_does_not_take_the_first_place(G):
+    battery = [al(BATTERY, "topic_rate", t, "warn") for t in (0, 60, 120, 180)]
+    fault = [al(SCAN, "topic_rate", t) for t in range(150, 200, 5)]
+    r = analyze(G, battery + fault, RcaSettings(), None)
+    assert r.root_causes[0].member == SENSOR and BATT not in [rc.member for rc in r.root_causes]
+    assert sum(i.members == [BATTERY] for i in r.incidents) == 4
+
+
+def test_an_ended_upstream_episode_leaves_the_later_fault_its_own_incident(G):
+    old = [al(SCAN, "topic_rate", t) for t in (0, 5, 10)]
+    fault = [al(PERC, "rosout", 100), al(PERC, "rosout", 101)]
+    r = analyze(G, old + fault, RcaSettings(), None)
+    assert [rc.member for rc in r.root_causes] == [PERC]
+    assert r.root_causes[0].evidence["upstream"] == 0.0
+
+
+def test_ended_process_evidence_is_an_incident_of_its_own(G):
+    eng = RcaEngine(RcaSettings(), watchlist=None)
+    eng.update(G, [], {PROC: 1.0}, t=10.0)
+    eng.update(G, [], {}, t=20.0)
+    res = eng.update(G, [al(PLAN, "rosout", 100)], t=100.0)
+    assert [rc.member for rc in res.root_causes] == [PLAN]
+    assert [(i.members, i.start, i.end, i.ongoing) for i in res.incidents] == [
+        ([PROC], 10.0, 20.0, False), ([PLAN], 100.0, 100.0, True)]
+    assert res.incidents[0].root_causes[0].member == PERC
+
+
+def flapping(t0=10.0, cycles=6, period=8.0, on=4.0):
+    """The sensor's link drops for ``on`` s every ``period`` s: /scan alerts while it is down,
+    /objects 1 s later, /cmd 2 s later; the planner logs errors all along (the loud victim)."""
+    out = []
+    for c in range(cycles):
+        start = t0 + c * period
+        for k in range(int(on)):
+            t = start + k
+            out += [al(SCAN, "topic_rate", t), al(OBJ, "topic_rate", t + 1), al(CMD, "topic_rate", t + 2)]
+        out += [al(PLAN, "rosout", start + 2), al(PLAN, "rosout", start + 3)]
+    return sorted(out, key=lambda a: a.t)
+
+
+def test_a_flapping_fault_is_one_incident_and_ranks_its_root_first(G):
+    r = analyze(G, flapping(), RcaSettings(), None)
+    assert len(r.incidents) == 1 and r.incidents[0].start == 10.0 and r.incidents[0].end == 55.0
+    top = r.root_causes[0]
+    assert top.member == SENSOR
+    assert top.trajectory == [CMD, PLAN, OBJ, PERC, SCAN, SENSOR]
+    # The gaps break neither co-occurrence nor time lag: /scan-/objects and /objects-planner
+    # match every alert within the tolerance (1), planner-/cmd after a 1 s shift (exp(-1/10));
+    # the onsets (10, 11, 12, 12) put /scan-/objects and /objects-planner at lag 1 (5 of the 6
+    # pairs are at least as far apart), planner-/cmd at lag 0 (1).
+    assert top.evidence["cooccurrence"] == pytest.approx((2 + np.exp(-0.1)) / 3, abs=1e-4)
+    assert top.evidence["timelag"] == pytest.approx((5 / 6 + 5 / 6 + 1) / 3, abs=1e-4)
+    # the same with the drops longer than episode_gap: each drop its own incident, and the
+    # current one (the last drop, still going on) ranks the sensor first as well
+    r = analyze(G, flapping(period=40.0), RcaSettings(), None)
+    assert len(r.incidents) == 6 and [i.recurring for i in r.incidents] == [False] + [True] * 5
+    assert r.incidents[-1].current and r.root_causes[0].member == SENSOR

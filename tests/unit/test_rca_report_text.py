@@ -1,0 +1,52 @@
+"""The viewer's report text (`/rca/report`): the current incident's root causes, the candidates it
+cannot tell apart, and every incident."""
+
+from __future__ import annotations
+
+from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
+from stream_viz.rca import RcaSettings, analyze
+from stream_viz.records import Alert
+from stream_viz.viz.rca import report_markdown
+
+A, B, C, OUT = "node:/a", "node:/b", "node:/c", "topic:/out"
+
+
+def test_report_lists_incidents_and_names_nodes_it_cannot_tell_apart():
+    g = new_graph()
+    for m in (A, B, C, OUT, "process:7", "process:8"):
+        add_member(g, m)
+    add_tree_edge(g, "process:7", A)
+    add_tree_edge(g, "process:7", B)
+    add_tree_edge(g, "process:8", C)
+    add_flow_edge(g, C, OUT, "pub")
+    alerts = [Alert(OUT, "topic_rate", 60.0, "warn", "rate dropped"),  # 00:01:00, over by 00:03:20
+              Alert("process:7", "process_resources", 200.0, "warn", "cpu 100%")]
+    rep = analyze(g, alerts, RcaSettings(), None).to_report()
+    text = report_markdown(rep["root_causes"], rep["iterations"][-1], incidents=rep["incidents"])
+    assert text.splitlines()[4:] == [
+        "Root causes of incident 2 (since 00:03:20 UTC, ongoing, 1 symptomatic members); "
+        "1 other incident(s) below.",
+        "",
+        "| rank | root cause | score | trajectory (first symptom → cause) |",
+        "|---|---|---|---|",
+        f"| 1 | **`{A}`** | {rep['root_causes'][0]['score']:.3f} | `{A}` |",
+        f"| 2 | **`{B}`** | {rep['root_causes'][1]['score']:.3f} | `{B}` |",
+        "",
+        f"`{A}`, `{B}` run in `process:7` and changed alike: the symptoms cannot tell them apart "
+        "(the fault is in that process).",
+        "",
+        "## Incidents (times UTC)",
+        "",
+        "| incident | symptomatic members | from | to | top root cause |",
+        "|---|---|---|---|---|",
+        f"| 1 | 1 | 00:01:00 | 00:01:00 | `{C}` |",
+        f"| **2 (current)** | 1 | 00:03:20 | ongoing | `{A}` |",
+    ]
+
+
+def test_a_single_incident_reads_as_before():
+    causes = [{"member": A, "score": 0.5, "trajectory": [OUT, A], "evidence": {}}]
+    incidents = [{"id": 1, "members": [OUT], "start": 1.0, "end": 2.0, "ongoing": True, "current": True,
+                  "root_causes": causes}]
+    assert report_markdown(causes, None, incidents=incidents) == report_markdown(causes)
+    assert report_markdown([]).endswith("No root cause found yet.")

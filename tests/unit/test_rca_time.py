@@ -1,0 +1,124 @@
+"""Time in the evidence (issue 16, item 10): episodes of alerts, metric evidence with since/until,
+and an upstream episode that has ended no longer excusing a later fault downstream."""
+
+from __future__ import annotations
+
+import pytest
+
+from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
+from stream_viz.rca import RcaEngine, RcaSettings
+from stream_viz.rca.episodes import INF, Evidence, merge, overlaps, stamp
+from stream_viz.rca.symptoms import collect_symptoms, gone_members, node_views
+from stream_viz.records import Alert
+
+SENSOR, PERC, PLAN = "node:/sensor", "node:/perception", "node:/planner"
+SCAN, OBJ = "topic:/scan", "topic:/objects"
+PROC = "process:42"
+
+
+def graph(sensor_gone: bool = False):
+    """sensor → /scan → perception → /objects → planner; perception runs in process 42."""
+    g = new_graph()
+    for m in (PERC, PLAN, SCAN, OBJ, PROC):
+        add_member(g, m)
+    add_member(g, SENSOR, **({"gone": True} if sensor_gone else {}))
+    add_flow_edge(g, SENSOR, SCAN, "pub")
+    add_flow_edge(g, SCAN, PERC, "sub")
+    add_flow_edge(g, PERC, OBJ, "pub")
+    add_flow_edge(g, OBJ, PLAN, "sub")
+    add_tree_edge(g, PROC, PERC)
+    return g
+
+
+def al(member, plugin, t, severity="error", **data):
+    return Alert(member, plugin, float(t), severity, f"{plugin} on {member}", data)
+
+
+def views(G, alerts, evidence=None, **settings):
+    s = RcaSettings(**settings)
+    return node_views(G, collect_symptoms(alerts, s, None, gone_members(G)), s, evidence)
+
+
+def test_episodes_merge_runs_of_alerts_and_overlap_intervals():
+    assert merge([0.0, 1.0, 2.0, 10.0, 11.0, 30.0], gap=5.0) == [(0.0, 2.0), (10.0, 11.0), (30.0, 30.0)]
+    assert merge([], gap=5.0) == []
+    eps = [(0.0, 2.0), (10.0, 11.0)]
+    assert overlaps(eps, 2.0, 5.0) and overlaps(eps, 5.0, 10.0) and not overlaps(eps, 3.0, 9.0)
+
+
+def test_stamp_gives_evidence_a_since_and_an_until():
+    e = stamp({}, {PROC: 1.0}, 10.0)
+    assert e == {PROC: Evidence(1.0, 10.0, None)}
+    e = stamp(e, {PROC: 0.5}, 15.0)  # still holds: since stays
+    assert e == {PROC: Evidence(0.5, 10.0, None)}
+    e = stamp(e, {}, 20.0, keep=60.0)  # gone from the evidence: it ended now, and is kept
+    assert e == {PROC: Evidence(0.5, 10.0, 20.0)}
+    assert stamp(e, {}, 80.0, keep=60.0) == e  # within keep of its end
+    assert stamp(e, {}, 80.5, keep=60.0) == {}
+    e = stamp(e, {PROC: 1.0}, 30.0)  # a new episode
+    assert e == {PROC: Evidence(1.0, 30.0, None)}
+    assert stamp({}, {PROC: 0.7}, None) == {PROC: Evidence(0.7)}  # no time known: untimed
+    assert Evidence(1.0, 10.0, 20.0).episode() == (10.0, 20.0)
+    assert Evidence(1.0, 10.0).episode() == (10.0, INF) and Evidence(1.0).episode() is None
+
+
+def test_flapping_alerts_are_one_episode_and_a_gone_member_s_episode_lasts():
+    G = graph(sensor_gone=True)
+    alerts = [al(SCAN, "topic_rate", t) for t in (0, 4, 12, 16, 24)] + [al(SENSOR, "member_gone", 3, "fatal")]
+    s = collect_symptoms(alerts, RcaSettings(episode_gap=10.0), None, gone_members(G))
+    assert s.episodes[SCAN] == [(0.0, 24.0)]
+    assert s.episodes[SENSOR] == [(3.0, INF)]
+    s = collect_symptoms(alerts, RcaSettings(episode_gap=5.0))
+    assert s.episodes[SCAN] == [(0.0, 4.0), (12.0, 16.0), (24.0, 24.0)]
+
+
+def test_an_ended_upstream_episode_does_not_excuse_a_later_fault_downstream():
+    G = graph()
+    old = [al(SCAN, "topic_rate", t) for t in (0, 5, 10)]  # /scan silent for a while, then fine
+    fault = [al(PERC, "rosout", 100), al(PERC, "rosout", 101)]
+    v = views(G, old + fault, window=0)
+    # Before: /scan's onset (0) was before perception's (100), so it excused it fully (0.8).
+    assert v[PERC].upstream == 0.0 and v[PERC].ht == pytest.approx(0.8)
+    # The same /scan symptom still going on when perception's began excuses it.
+    ongoing = old + [al(SCAN, "topic_rate", t) for t in (15, 25, 35, 45, 55, 65, 75, 85, 95)]
+    v = views(G, ongoing + fault, window=0)
+    assert v[PERC].upstream == pytest.approx(0.8) and v[PERC].ht == pytest.approx(0.8 * 0.2)
+    # Ended less than episode_gap before: still the same episode of trouble.
+    v = views(G, [al(SCAN, "topic_rate", 90), *fault], window=0)
+    assert v[PERC].upstream == pytest.approx(0.8)
+
+
+def test_a_crashed_node_reported_once_still_excuses_later_victims():
+    alerts = [al(SENSOR, "member_gone", 0, "fatal"), al(PERC, "rosout", 60)]
+    assert views(graph(sensor_gone=True), alerts)[PERC].upstream == 1.0  # the sensor is still gone
+    assert views(graph(), alerts)[PERC].upstream == 0.0  # it came back: its episode ended at 0
+
+
+def test_process_evidence_is_judged_in_time_like_an_alert():
+    G = graph()
+    fault = [al(PLAN, "rosout", 100)]
+    # Untimed evidence (no since): it counts at any time, as before.
+    assert views(G, fault, {PROC: 1.0})[PLAN].upstream == 1.0
+    # Evidence that held from 30 to 50 does not excuse the planner's fault at 100 ...
+    v = views(G, fault, {PROC: Evidence(1.0, 30.0, 50.0)})
+    assert v[PLAN].upstream == 0.0
+    assert v[PERC].onset == 30.0 and v[PERC].evidence == 1.0  # ... and has an onset, like an alert
+    # ... evidence that still holds does.
+    assert views(G, fault, {PROC: Evidence(1.0, 30.0)})[PLAN].upstream == 1.0
+    # Evidence that began after the planner's fault is no cause of it.
+    assert views(G, fault, {PROC: Evidence(1.0, 110.0)})[PLAN].upstream == 0.0
+
+
+def test_the_engine_stamps_evidence_with_the_update_time():
+    G = graph()
+    eng = RcaEngine(RcaSettings(), watchlist=None)
+    eng.update(G, [], {PROC: 1.0}, t=10.0)
+    eng.update(G, [], {}, t=20.0)  # the process is normal again
+    res = eng.update(G, [al(PLAN, "rosout", 100)], t=100.0)
+    planner = next(rc for rc in res.root_causes if rc.member == PLAN)
+    assert planner.evidence["upstream"] == 0.0
+    eng = RcaEngine(RcaSettings(), watchlist=None)
+    eng.update(G, [], {PROC: 1.0}, t=10.0)  # still anomalous when the planner's fault comes
+    res = eng.update(G, [al(PLAN, "rosout", 100)], t=100.0)
+    planner = next(rc for rc in res.root_causes if rc.member == PLAN)
+    assert planner.evidence["upstream"] == 1.0 and res.root_causes[0].member == PERC
