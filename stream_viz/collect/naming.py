@@ -48,7 +48,8 @@ class NodeNames:
     def resolve(self, name: str, namespace: str = "/", bare: bool = True, tails: bool = True) -> str | None:
         """Return the node ``name`` refers to, or None.
 
-        In order: the name as a fully qualified name; relative to ``namespace``; with ``tails``,
+        In order: the name as a fully qualified name and relative to ``namespace`` (the namespace
+        first for a relative name, as ROS resolves it); with ``tails``,
         the longest tail of its tokens as a fully qualified name (an aggregator's
         ``/Robot/Sensors/lidar`` → ``/lidar``) or under ``namespace``; with ``bare``, the last
         token as the base name of exactly one node (of several, the one under ``namespace``).
@@ -56,9 +57,14 @@ class NodeNames:
         toks = tokens(name)
         if not toks:
             return None
+        # a relative name resolves in the namespace first, as ROS resolves it
+        if namespace == "/":
+            spaces: tuple[str, ...] = ("/",)
+        else:
+            spaces = ("/", namespace) if name.startswith("/") else (namespace, "/")
         for k in range(len(toks) if tails else 1):
             tail = toks[k:]
-            for ns in ("/", namespace) if namespace != "/" else ("/",):
+            for ns in spaces:
                 fqn = join(ns, tail)
                 if fqn in self.fqns:
                     return fqn
