@@ -143,7 +143,8 @@ class QosCompat(Plugin):
         for topic, sub, level, mismatched, total, reasons in _analyse(ctx):
             if level == "warning":
                 if ctx.settings["warnings"]:
-                    yield ctx.alert(sub, "info", f"QoS on {topic} cannot be judged: " + "; ".join(reasons),
+                    yield ctx.alert(sub, "info", f"QoS on {_name(topic)} cannot be judged: "
+                                    + "; ".join(reasons),
                                     symptom="qos_unknown", topic=topic, publishers=mismatched,
                                     reasons=reasons)
                 continue
@@ -151,7 +152,7 @@ class QosCompat(Plugin):
             what = ("receives nothing" if nothing
                     else f"receives from {total - len(mismatched)} of {total} publishers")
             yield ctx.alert(sub, "error" if nothing else "warn",
-                            f"QoS incompatible on {topic}, {what}: " + "; ".join(reasons),
+                            f"QoS incompatible on {_name(topic)}, {what}: " + "; ".join(reasons),
                             symptom="qos_incompatible", topic=topic, publishers=mismatched,
                             reasons=reasons, receives_nothing=nothing)
 
@@ -212,3 +213,7 @@ def endpoints(ctx: PluginContext, topic: str) -> tuple[dict[str, list[dict]], di
             if not side[m] and isinstance(q, dict):
                 side[m] = [q]
     return pubs, subs
+
+
+def _name(member: str) -> str:
+    return member.partition(":")[2]
