@@ -15,9 +15,12 @@ be the present; otherwise `RclTake` switches itself off and the caller takes thr
 from __future__ import annotations
 
 import ctypes
+import struct
 import time
 from collections.abc import Callable
 from typing import Any
+
+from stream_viz.collect.cdr import header_stamp_ns
 
 GID_SIZE = 16
 RET_OK = 0
@@ -47,6 +50,14 @@ class _MessageInfo(ctypes.Structure):  # rmw_message_info_t
                 ("publisher_gid", _Gid), ("from_intra_process", ctypes.c_bool)]
 
 
+# One C call per message reads what we need of the two structures (attribute access through
+# ctypes costs more than the take): source, received, sequence number, (reception number and
+# the gid's implementation pointer skipped) gid bytes; the buffer's address and length.
+_INFO = struct.Struct("=qqQ16x16s").unpack_from
+_BUFFER = struct.Struct("@PNN").unpack_from
+_STAMP_LE = struct.Struct("<BBxxiI").unpack_from  # encapsulation 00 01 (CDR, little endian), stamp
+
+
 def _loaded(name: str) -> str | None:
     """Path of the shared library ``name`` this process has loaded (rclpy loads rcl), or None."""
     try:
@@ -62,6 +73,8 @@ def _loaded(name: str) -> str | None:
 
 # A record sink: (received ns, source ns, size, sequence number, gid, head bytes or the payload).
 Sink = Callable[[int, int, int, int, bytes, bytes], None]
+# A window's add: (received ns, source ns, size, sequence number, gid[, message age ns]).
+Add = Callable[..., None]
 
 
 class RclTake:
@@ -101,30 +114,53 @@ class RclTake:
         self._fini = rcutils.rcutils_uint8_array_fini
         self._fini.argtypes = [ctypes.c_void_p]
         take = rcl.rcl_take_serialized_message
-        take.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+        # no argtypes: the arguments are built as ctypes objects once per drain, not converted
+        # on every call
         take.restype = ctypes.c_int
         self._take = take
         self._info = _MessageInfo()
+        self._view: memoryview | None = None
+        self._view_of: tuple[int, int] | None = None
 
-    def drain(self, handle: Any, sink: Sink, payload: bool = False) -> int:
+    def drain(self, handle: Any, add: Add | None = None, stamped: bool = False,
+              sink: Sink | None = None, payload: bool = False) -> int:
         """Take every waiting message of an rclpy subscription ``handle``; return how many.
 
-        The caller holds the handle (``with handle:``). ``sink`` gets each message's record; its
-        last argument is the first `HEAD` bytes, or the whole payload with ``payload``.
+        The caller holds the handle (``with handle:``). Each message's record goes to ``add``
+        (a `TopicWindow.add`; with ``stamped`` the message age from its header stamp too), or,
+        given a ``sink``, there with the first `HEAD` bytes (the whole payload with ``payload``).
         """
-        take, buf, info = self._take, self._buf, self._info
-        ptr, buf_ref, info_ref = handle.pointer, ctypes.byref(buf), ctypes.byref(info)
-        string_at, gid_addr = ctypes.string_at, ctypes.addressof(info.publisher_gid.data)
+        take, string_at, unpack_info, unpack_buffer = self._take, ctypes.string_at, _INFO, _BUFFER
+        args = (ctypes.c_void_p(handle.pointer), ctypes.byref(self._buf), ctypes.byref(self._info), None)
+        info, buf = memoryview(self._info).cast("B"), memoryview(self._buf).cast("B")
         n = 0
-        while take(ptr, buf_ref, info_ref, None) == RET_OK:
+        while take(*args) == RET_OK:
             if not self._checked and not self._check():
                 return n
-            size = buf.buffer_length
-            data = string_at(buf.buffer, size if payload else min(size, HEAD))
-            sink(info.received_timestamp, info.source_timestamp, size,
-                 info.publication_sequence_number, string_at(gid_addr, GID_SIZE), data)
+            src, recv, seq, gid = unpack_info(info)
+            addr, size, capacity = unpack_buffer(buf)
             n += 1
+            if sink is not None:
+                sink(recv, src, size, seq, gid, string_at(addr, size if payload else min(size, HEAD)))
+            elif stamped:
+                stamp = self._stamp(addr, size, capacity)
+                add(recv, src, size, seq, gid, None if stamp is None else recv - stamp)
+            else:
+                add(recv, src, size, seq, gid)
         return n
+
+    def _stamp(self, addr: int, size: int, capacity: int) -> int | None:
+        """The header stamp of the message in the buffer, read in place (a view of the buffer is
+        kept until rmw reallocates it: copying 12 bytes out costs more than reading them)."""
+        if size < 12:
+            return None
+        if self._view_of != (addr, capacity):
+            self._view = memoryview((ctypes.c_char * capacity).from_address(addr)).cast("B")
+            self._view_of = (addr, capacity)
+        e0, kind, sec, nanosec = _STAMP_LE(self._view)
+        if e0 != 0 or kind != 1:  # not little-endian CDR: the general reader
+            return header_stamp_ns(bytes(self._view[:12]))
+        return None if sec == 0 and nanosec == 0 else sec * 1_000_000_000 + nanosec
 
     def _check(self) -> bool:
         """Check the first message's info against what it must be; switch off when it is not."""
@@ -141,6 +177,9 @@ class RclTake:
 
     def close(self) -> None:
         """Free the buffer."""
+        if self._view is not None:
+            self._view.release()
+            self._view = self._view_of = None
         if self._allocated:
             self._fini(ctypes.byref(self._buf))
         self.available = self._checked = self._allocated = False

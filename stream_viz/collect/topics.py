@@ -58,7 +58,8 @@ class _Watch:
     created_ns: int
     window: TopicWindow
     kind: str  # raw (metrics) | log (rclpy deserialises) | diag (payload kept) | event (service events)
-    sink: Sink
+    stamped: bool  # the type begins with a Header: the message age is read
+    sink: Sink | None  # what the messages of the log, diag and event kinds go to
 
 
 class TopicMonitor:
@@ -152,11 +153,11 @@ class TopicMonitor:
         window = TopicWindow()
         with self._lock:
             self._failed.pop(topic, None)
-            self._watches[topic] = _Watch(sub, time.time_ns(), window, kind,
-                                          self._sink(topic, kind, window, has_header(cls)))
+            self._watches[topic] = _Watch(sub, time.time_ns(), window, kind, has_header(cls),
+                                          self._sink(topic, kind, window))
 
-    def _sink(self, topic: str, kind: str, window: TopicWindow, stamped: bool) -> Sink:
-        """What to do with each message taken from ``topic`` (called under the lock)."""
+    def _sink(self, topic: str, kind: str, window: TopicWindow) -> Sink | None:
+        """What to do with each message taken from ``topic``; None: its window's add (raw)."""
         add = window.add
         if kind == "event":
             service, events = topic[: -len(EVENT_SUFFIX)], self._service_events
@@ -173,15 +174,7 @@ class TopicMonitor:
                 add(recv, src, size, seq, gid)
                 messages.append((topic, msg, recv, gid))
             return keep
-        if stamped:
-            def stamped_add(recv: int, src: int, size: int, seq: int, gid: bytes | None, head: bytes) -> None:
-                stamp = header_stamp_ns(head)
-                add(recv, src, size, seq, gid, None if stamp is None else recv - stamp)
-            return stamped_add
-
-        def plain(recv: int, src: int, size: int, seq: int, gid: bytes | None, head: bytes) -> None:
-            add(recv, src, size, seq, gid)
-        return plain
+        return None
 
     def _run(self) -> None:
         while not self._stop.wait(self.period_s):
@@ -212,15 +205,24 @@ class TopicMonitor:
         """Take what waits on one subscription: through rcl with gids, else through rclpy."""
         rcl = self.rcl
         if rcl is not None and rcl.available and w.kind != "log":
-            n = rcl.drain(handle, w.sink, payload=w.kind == "diag")
+            n = rcl.drain(handle, w.window.add, w.stamped, w.sink, payload=w.kind == "diag")
             if rcl.available:
                 return n
-        raw, sink, take, msg_type, n = w.kind != "log", w.sink, handle.take_message, w.sub.msg_type, 0
+        raw, take, msg_type, n = w.kind != "log", handle.take_message, w.sub.msg_type, 0
+        add, sink, stamped = w.window.add, w.sink, w.stamped
         while (got := take(msg_type, raw)) is not None:
             msg, info = got
             n += 1
-            sink(info["received_timestamp"], info["source_timestamp"], len(msg) if raw else 0,
-                 info.get("publication_sequence_number"), None, msg)
+            recv, src, seq = info["received_timestamp"], info["source_timestamp"], info.get(
+                "publication_sequence_number")
+            size = len(msg) if raw else 0
+            if sink is not None:
+                sink(recv, src, size, seq, None, msg)
+            elif stamped:
+                stamp = header_stamp_ns(msg)
+                add(recv, src, size, seq, None, None if stamp is None else recv - stamp)
+            else:
+                add(recv, src, size, seq)
         return n
 
     def take_messages(self) -> list[tuple[str, Any, int, bytes | None]]:

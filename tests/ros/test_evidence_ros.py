@@ -257,3 +257,20 @@ def _theta(run, member):
 
 def _node(run, member):
     return _theta(run, member)
+
+
+def test_without_rcl_gids_the_ages_are_still_measured(children, tmp_path, run_of):
+    """Where the rcl take is unavailable (another rmw layout), rclpy takes: no publisher rates,
+    the rest as before, header stamps included."""
+    flag = tmp_path / "lag"
+    flag.touch()
+    children.python(STAMPED, str(flag), name="imu")
+    run = run_of(["topic_rate"])
+    run.collector.topics.rcl.available = False
+    _ready(run, "topic:/robot/imu")
+    wait_for(lambda: (run.step(), _theta(run, "topic:/robot/imu")["stamp_age_ms"] > 280)[1], timeout=20,
+             period=PERIOD)
+    th = _theta(run, "topic:/robot/imu")
+    assert 15.0 <= th["rate_hz"] <= 25.0 and th["stamp_age_ms"] < 400.0, th
+    assert "publisher_rates" not in run.G.nodes["topic:/robot/imu"]
+    assert _node(run, "node:/robot/imu_driver")["sent_hz"] == th["rate_hz"]  # the only publisher
