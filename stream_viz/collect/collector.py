@@ -105,7 +105,7 @@ class Collector:
         self._closed = False
 
     def start(self) -> None:
-        """Create our own rclpy Context and observer node, subscribe to /rosout and /diagnostics."""
+        """Create our own rclpy Context and observer node, subscribe to the event topics."""
         if self.node is not None:
             return
         ctx = Context()
@@ -243,6 +243,8 @@ class Collector:
             self.calls.add(service, recv, etype, client_gid, seq, writer)
         self.calls.forget(set(reading.service_events))
         stats = self.calls.stats(time.time_ns())
+        if not stats:  # no service introspected: nothing to attribute
+            return {}, {}
         prefixes: dict[bytes, list[str]] = {}
         for node, gid in reading.rosout_gids.items():
             prefixes.setdefault(gid[:12], []).append(node)

@@ -77,10 +77,20 @@ def test_message_age_of_stamps_lagging_300ms(children, tmp_path, run_of):
     assert 280.0 <= sick["stamp_age_ms"] <= 400.0 and sick["latency_ms"] < 50.0, sick
 
 
+def _spin(nodes: str) -> str:
+    """The end of a child script: spin ``nodes`` (a Python tuple's items) on one executor."""
+    return f"""
+from rclpy.executors import SingleThreadedExecutor
+ex = SingleThreadedExecutor()
+for n in ({nodes},):
+    ex.add_node(n)
+ex.spin()
+"""
+
+
 QOS = """
 import rclpy
 from rclpy.duration import Duration
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 rclpy.init()
@@ -93,11 +103,7 @@ listener.create_subscription(String, '/chatter', lambda m: None,
 watchdog.create_subscription(String, '/status', lambda m: None,
                              QoSProfile(depth=10, deadline=Duration(seconds=0.1)))
 talker.create_timer(0.05, lambda: (pub.publish(String(data='x')), status.publish(String(data='ok'))))
-ex = SingleThreadedExecutor()
-for n in (talker, listener, watchdog):
-    ex.add_node(n)
-ex.spin()
-"""
+""" + _spin("talker, listener, watchdog")
 
 
 def test_qos_incompatible_subscribers_reliable_and_deadline(children, run_of):
@@ -119,7 +125,6 @@ def test_qos_incompatible_subscribers_reliable_and_deadline(children, run_of):
 
 DIAG = """
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 rclpy.init()
 my_node = rclpy.create_node('my_node', namespace='/robot')
@@ -138,11 +143,7 @@ def tick():
         DiagnosticStatus(level=DiagnosticStatus.ERROR, name='/Robot/Motors', message='Error'),
         status('/Robot/Motors/my_node: motor')]))
 monitor.create_timer(0.5, tick)
-ex = SingleThreadedExecutor()
-for n in (my_node, monitor, agg):
-    ex.add_node(n)
-ex.spin()
-"""
+""" + _spin("my_node, monitor, agg")
 
 
 def test_diagnostics_updater_status_mapped_to_its_node_by_name(children, run_of):
