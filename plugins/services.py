@@ -26,8 +26,8 @@ class Services(Plugin):
     """Alerts on the clients of a service (or the service, when its waiting client is unknown):
 
     * ``waiting`` (warn): an observed call has been open ≥ ``max(min_wait_s, wait_factor × the
-      service's usual response time)``; or the client logged (≥ ``log_level``) a line naming the
-      service or its server;
+      service's usual response time)``; or the client logged (≥ ``log_level``, ERROR: a WARN
+      about a service not ready yet is the usual bring-up) a line naming the service or its server;
     * ``slow_response`` (warn): the service's mean response time rose above its own baseline by
       ``max(k·σ, min_rise_ms)`` for ``confirm`` samples;
     * ``server_gone`` (warn): the service had a server and has none while clients remain.
@@ -45,7 +45,7 @@ class Services(Plugin):
         "min_wait_s": 2.0,
         "wait_factor": 3.0,
         "min_rise_ms": 200.0,
-        "log_level": "warn",
+        "log_level": "error",
         "server_gone": True,
     }
 

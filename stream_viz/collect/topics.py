@@ -171,7 +171,9 @@ class TopicMonitor:
             messages = self._messages
 
             def keep(recv: int, src: int, size: int, seq: int, gid: bytes | None, msg: Any) -> None:
-                add(recv, src, size, seq, gid)
+                # the diagnostics arrays come as bytes (deserialised later), with a Header
+                stamp = header_stamp_ns(msg) if kind == "diag" else None
+                add(recv, src, size, seq, gid, None if stamp is None else recv - stamp)
                 messages.append((topic, msg, recv, gid))
             return keep
         return None
