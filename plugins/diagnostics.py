@@ -64,7 +64,7 @@ class Diagnostics(Plugin):
                 prev_sev, prev_by = sev, by
             worst[member] = (prev_sev, prev_by, statuses)
         for member, (sev, by, statuses) in sorted(worst.items()):
-            texts = [f"{st['name']}: {st['level'].upper()} {st['text']}".strip() for st in statuses]
+            texts = [st["text"] for st in statuses]  # the collector's "<name>: <LEVEL> <message>"
             more = f" (+{len(texts) - 3} more)" if len(texts) > 3 else ""
             yield ctx.alert(member, sev, "diagnostics " + "; ".join(texts[:3]) + more + f" (mapped by {by})",
                             symptom="diagnostics", statuses=statuses, mapped_by=by)

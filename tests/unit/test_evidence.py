@@ -345,6 +345,7 @@ def test_diagnostics_plugin_says_how_each_alert_was_mapped():
     alerts = drive_alerts("diagnostics", [(1.0, G, evs)])
     assert [(a.member, a.severity, a.data["mapped_by"]) for a in alerts] == [
         ("node:/camera", "warn", "publisher"), ("node:/detector", "error", "name")]
+    assert alerts[1].message == "diagnostics detector: inference: ERROR CUDA error (mapped by name)"
     assert alerts[1].data["statuses"] == [{"name": "detector: inference", "level": "error",
                                            "text": "detector: inference: ERROR CUDA error",
                                            "mapped_by": "name"}]
