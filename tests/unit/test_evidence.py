@@ -512,3 +512,13 @@ def test_message_age_skewed_or_implausible_clocks_are_said_so_not_called_latency
     alerts = drive_alerts("message_age", sim)
     assert alerts and all(a.data["symptom"] == "clock_skew" for a in alerts)
     assert "not from the wall clock" in alerts[0].message
+
+
+def test_snapshot_text_says_who_sends_on_a_multi_publisher_topic():
+    from stream_viz.collect.snapshot import _member_line
+
+    G = model()
+    G.nodes["topic:/img"]["publisher_rates"] = {"node:/camera": 10.0, "node:/replay": 2.5}
+    assert "from node:/camera 10 Hz, node:/replay 2.5 Hz" in _member_line(G, "topic:/img")
+    G.nodes["topic:/img"]["publisher_rates"] = {"node:/camera": 10.0}
+    assert " from " not in _member_line(G, "topic:/img")
