@@ -92,6 +92,8 @@ class RclTake:
         self.available = False
         self.why = ""
         self._checked = self._allocated = False
+        self._view: memoryview | None = None  # of the serialized buffer, while rmw keeps it
+        self._view_of: tuple[int, int] | None = None
         try:
             self._setup()
             self.available = True
@@ -119,8 +121,6 @@ class RclTake:
         take.restype = ctypes.c_int
         self._take = take
         self._info = _MessageInfo()
-        self._view: memoryview | None = None
-        self._view_of: tuple[int, int] | None = None
 
     def drain(self, handle: Any, add: Add | None = None, stamped: bool = False,
               sink: Sink | None = None, payload: bool = False) -> int:
