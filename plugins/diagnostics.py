@@ -1,4 +1,4 @@
-"""/diagnostics statuses WARN, ERROR and STALE, as alerts on the node that reported them."""
+"""/diagnostics statuses WARN, ERROR and STALE, as alerts on the node each status is about."""
 
 from __future__ import annotations
 
@@ -26,8 +26,14 @@ def diag_level(event: Event) -> str:
 
 
 class Diagnostics(Plugin):
-    """One alert per reporting member and sample: its worst status (WARN→warn, ERROR→error,
-    STALE→``stale_severity``), the statuses named in the message.
+    """One alert per member a status is about and sample: its worst status (WARN→warn,
+    ERROR→error, STALE→``stale_severity``), the statuses named in the message.
+
+    The collector maps a status to a node by its name, then its hardware id, then its publisher
+    (``mapped_by`` in the event, `stream_viz.collect.diagnostics`); ``hardware`` (a list of
+    ``"<hardware id>=<node name>"``) maps the hardware ids the system does not tell, where the
+    collector fell back to the publisher or to nothing. The alert says how it was mapped
+    (``mapped_by`` of its worst status; each status's in ``statuses``).
 
     Event plugins alert whether or not the member is watched (``watched_only`` to change it):
     a reported fault is evidence, not an attribute to screen.
@@ -35,40 +41,45 @@ class Diagnostics(Plugin):
 
     name = "diagnostics"
     kinds = ("node",)
-    settings: ClassVar[dict[str, Any]] = {"stale_severity": "warn", "watched_only": False}
+    settings: ClassVar[dict[str, Any]] = {"stale_severity": "warn", "watched_only": False, "hardware": []}
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         s = ctx.settings
-        worst: dict[str, tuple[str, list[str]]] = {}
+        worst: dict[str, tuple[str, str, list[dict[str, Any]]]] = {}
         for e in ctx.events:
-            if e.kind != "diag" or (s["watched_only"] and e.member not in ctx.watch):
+            if e.kind != "diag":
                 continue
             level = diag_level(e)
             if level == "ok":
                 continue
+            member, by = _mapped(ctx, e)
+            if s["watched_only"] and member not in ctx.watch:
+                continue
             sev = s["stale_severity"] if level == "stale" else level
             sev = sev if sev in RANK else "warn"
-            member = _named_node(ctx, e) or e.member
-            prev_sev, texts = worst.get(member, ("info", []))
-            texts.append(f"{e.data.get('name', '')}: {level.upper()} {e.text}".strip())
-            worst[member] = (sev if RANK[sev] > RANK[prev_sev] else prev_sev, texts)
-        for member, (sev, texts) in sorted(worst.items()):
+            prev_sev, prev_by, statuses = worst.get(member, ("info", by, []))
+            statuses.append({"name": e.data.get("name", ""), "level": level, "text": e.text,
+                             "mapped_by": by})
+            if RANK[sev] > RANK[prev_sev]:
+                prev_sev, prev_by = sev, by
+            worst[member] = (prev_sev, prev_by, statuses)
+        for member, (sev, by, statuses) in sorted(worst.items()):
+            texts = [st["text"] for st in statuses]  # the collector's "<name>: <LEVEL> <message>"
             more = f" (+{len(texts) - 3} more)" if len(texts) > 3 else ""
-            yield ctx.alert(member, sev, "diagnostics " + "; ".join(texts[:3]) + more,
-                            symptom="diagnostics", statuses=len(texts))
+            yield ctx.alert(member, sev, "diagnostics " + "; ".join(texts[:3]) + more + f" (mapped by {by})",
+                            symptom="diagnostics", statuses=statuses, mapped_by=by)
 
 
-def _named_node(ctx: PluginContext, e: Event) -> str | None:
-    """The node a status is about when its hardware_id or name is a node of the graph.
-
-    An aggregator or monitor node often publishes the statuses of others: the fault is in the
-    node the status names, not in the publisher.
-    """
-    for key in ("hardware_id", "name"):
-        value = str(e.data.get(key, "") or "").strip()
-        if not value:
-            continue
-        member = "node:" + (value if value.startswith("/") else "/" + value)
-        if ctx.attr(member, "kind") == "node":
-            return member
-    return None
+def _mapped(ctx: PluginContext, e: Event) -> tuple[str, str]:
+    """The member a status is about and how it was mapped: the collector's mapping, unless it
+    fell back to the publisher (or nothing) and the configured ``hardware`` table knows its id."""
+    by = str(e.data.get("mapped_by") or "publisher")
+    if by in ("publisher", "none"):
+        hw = str(e.data.get("hardware_id", "") or "").strip()
+        table = dict(item.partition("=")[::2] for item in ctx.settings["hardware"])
+        target = table.get(hw, "").strip() if hw else ""
+        if target:
+            member = target if target.startswith("node:") else "node:" + ("/" + target.lstrip("/"))
+            if ctx.attr(member, "kind") == "node":
+                return member, "hardware_id"
+    return e.member, by

@@ -1,5 +1,6 @@
-"""Structural trouble in the ROS graph: one name on two nodes, subscribers without a publisher,
-incompatible QoS between a publisher and a subscriber."""
+"""Structural trouble in the ROS graph: one name on two nodes, subscribers without a publisher.
+
+Incompatible QoS has its own plugin, ``qos_compat``."""
 
 from __future__ import annotations
 
@@ -19,9 +20,7 @@ class GraphAnomalies(Plugin):
     * a subscriber whose topic has had no publisher for ``grace_s``: warn on the subscriber. The
       grace starts again whenever many nodes appear in one sample (at least ``burst_min`` and
       ``burst_ratio`` of the nodes): a system still being discovered (bring-up, or the monitor
-      attaching to 500 nodes) shows subscribers seconds before their publishers;
-    * incompatible QoS between a publisher and a subscriber of a topic (see `_endpoints`):
-      error on the subscriber.
+      attaching to 500 nodes) shows subscribers seconds before their publishers.
 
     A topic is checked when it or the subscriber is watched; topics in ``ignore_topics`` never.
     """
@@ -29,7 +28,7 @@ class GraphAnomalies(Plugin):
     name = "graph_anomalies"
     kinds = ("node", "topic")
     settings: ClassVar[dict[str, Any]] = {
-        "grace_s": 5.0, "ignore_topics": [], "duplicates": True, "no_publisher": True, "qos": True,
+        "grace_s": 5.0, "ignore_topics": [], "duplicates": True, "no_publisher": True,
         "recheck_s": 10.0, "burst_min": 5, "burst_ratio": 0.05,
     }
 
@@ -46,7 +45,7 @@ class GraphAnomalies(Plugin):
             ctx.state["settled_from"] = ctx.t
         settled_from = ctx.state.get("settled_from", -float("inf"))
         orphans = set()
-        for topic, orphan, subs, qos_bad in _analyse(ctx):
+        for topic, orphan, subs in _analyse(ctx):
             if orphan and s["no_publisher"]:
                 orphans.add(topic)
                 since = max(orphan_since.setdefault(topic, ctx.t), settled_from)
@@ -54,16 +53,12 @@ class GraphAnomalies(Plugin):
                     for v in subs:
                         yield ctx.alert(v, "warn", f"subscribes to {topic} which has had no publisher for "
                                         f"{ctx.t - since:.0f} s", symptom="no_publisher", topic=topic)
-            if s["qos"]:
-                for v, bad in qos_bad:
-                    yield ctx.alert(v, "error", f"QoS incompatible on {topic}: " + "; ".join(bad),
-                                    symptom="qos_incompatible", topic=topic)
         for topic in set(orphan_since) - orphans:
             del orphan_since[topic]
 
 
-def _analyse(ctx: PluginContext) -> list[tuple[str, bool, list[str], list[tuple[str, list[str]]]]]:
-    """Per topic with watched subscribers: orphaned?, the subscribers, QoS mismatches.
+def _analyse(ctx: PluginContext) -> list[tuple[str, bool, list[str]]]:
+    """Per topic with watched subscribers: orphaned?, the subscribers.
 
     The structure only changes with the graph, so this is redone only when the diff or the
     watchlist changed, or every ``recheck_s``; cheap on 1,000 members.
@@ -76,74 +71,13 @@ def _analyse(ctx: PluginContext) -> list[tuple[str, bool, list[str], list[tuple[
     for topic in ctx.members("topic"):
         if topic in ignore:
             continue
-        pubs, subs = _endpoints(ctx, topic)
-        subs = {v: q for v, q in subs.items() if topic in ctx.watch or v in ctx.watch}
+        pubs = ctx.publishers(topic)
+        subs = [v for v in ctx.subscribers(topic) if topic in ctx.watch or v in ctx.watch]
         if not subs:
             continue
-        qos_bad = []
-        for v in sorted(subs):
-            bad = sorted({f"{u}: {w}" for u, pqs in pubs.items() for pq in pqs
-                          for sq in subs[v] for w in incompatible(pq, sq)})
-            if bad:
-                qos_bad.append((v, bad))
-        out.append((topic, not pubs, sorted(subs), qos_bad))
+        out.append((topic, not pubs, subs))
     ctx.state["analysis"] = (ctx.watch, ctx.t + ctx.settings["recheck_s"], out)
     return out
-
-
-def _endpoints(ctx: PluginContext, topic: str) -> tuple[dict[str, list[Any]], dict[str, list[Any]]]:
-    """Publisher and subscriber nodes of ``topic`` with their QoS profiles.
-
-    The topic attribute ``qos`` (a list of ``{"node", "role", "reliability", "durability", …}``,
-    one per endpoint, as the collector writes it) is used when present, else an edge's ``qos``.
-    """
-    pubs: dict[str, list[Any]] = {u: [] for u in ctx.publishers(topic)}
-    subs: dict[str, list[Any]] = {v: [] for v in ctx.subscribers(topic)}
-    for q in ctx.attr(topic, "qos") or ():
-        if not isinstance(q, dict):
-            continue
-        side = pubs if q.get("role") == "pub" else subs if q.get("role") == "sub" else None
-        node = q.get("node", "")
-        member = node if str(node).startswith("node:") else f"node:{node}"
-        if side is not None and member in side:
-            side[member].append(q)
-    for u in pubs:
-        pubs[u] = pubs[u] or _edge_qos(ctx, u, topic)
-    for v in subs:
-        subs[v] = subs[v] or _edge_qos(ctx, topic, v)
-    return pubs, subs
-
-
-def _edge_qos(ctx: PluginContext, source: str, target: str) -> list[Any]:
-    """The QoS profile on the data-flow edge ``source → target``, as a list of none or one."""
-    q = ctx.flow_edge(source, target).get("qos")
-    return [] if q is None else [q]
-
-
-def incompatible(pub_qos: Any, sub_qos: Any) -> list[str]:
-    """Return why a publisher with ``pub_qos`` cannot serve a subscriber with ``sub_qos``."""
-    why = []
-    if _policy(sub_qos, "reliability") == "reliable" and _policy(pub_qos, "reliability") == "best_effort":
-        why.append("reliable subscriber, best-effort publisher")
-    if _policy(sub_qos, "durability") == "transient_local" and _policy(pub_qos, "durability") == "volatile":
-        why.append("transient-local subscriber, volatile publisher")
-    return why
-
-
-def _policy(qos: Any, key: str) -> str:
-    """Return a QoS policy: ``reliable``, ``best_effort``, ``transient_local``, ``volatile`` or ''."""
-    if not isinstance(qos, dict):
-        return ""
-    raw = qos.get(key)
-    if isinstance(raw, int) and not isinstance(raw, bool):
-        # rclpy enums: reliability RELIABLE=1, BEST_EFFORT=2; durability TRANSIENT_LOCAL=1, VOLATILE=2.
-        return {("reliability", 1): "reliable", ("reliability", 2): "best_effort",
-                ("durability", 1): "transient_local", ("durability", 2): "volatile"}.get((key, raw), "")
-    text = str(raw or "").lower()
-    for word in ("best_effort", "reliable", "transient_local", "volatile"):
-        if word in text:
-            return word
-    return ""
 
 
 def discovery_burst(G: nx.MultiDiGraph, added: Any, least: int, ratio: float) -> bool:

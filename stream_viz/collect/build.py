@@ -7,6 +7,7 @@ from collections import defaultdict
 import networkx as nx
 
 from stream_viz.collect.readings import GraphReading, PidInfo, ProcessReading, TopicStats
+from stream_viz.collect.services import ServiceStats
 from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.model.ids import ROOT, make_id
 from stream_viz.model.theta import SCHEMAS, make_theta
@@ -17,6 +18,8 @@ def build_model(
     pids: dict[str, PidInfo],
     processes: dict[int, ProcessReading],
     topic_stats: dict[str, TopicStats] | None = None,
+    service_stats: dict[str, ServiceStats] | None = None,
+    calls: dict[str, list[dict[str, object]]] | None = None,
 ) -> nx.MultiDiGraph:
     """Return the model graph of one sample.
 
@@ -30,7 +33,14 @@ def build_model(
         Pid → `ProcessReading` of the nodes' processes and their ancestors; ``alive=False`` ones
         are processes that ended while DDS still lists their nodes.
     topic_stats : dict, optional
-        Topic → `TopicStats` (a topic missing here is ``measured=False``).
+        Topic → `TopicStats` (a topic missing here is ``measured=False``). Its messages/s per
+        publisher gid become the topic attribute ``publisher_rates`` (node id → Hz, the gids
+        mapped with ``reading.publisher_gids``) and add up to each node's θ ``sent_hz``.
+    service_stats : dict, optional
+        Service → `ServiceStats` of the services whose calls are observed (introspection).
+    calls : dict, optional
+        Service → its open calls as ``{"client", "server", "waited_s"}`` (node ids or None),
+        the service attribute ``calls``.
 
     Returns
     -------
@@ -41,6 +51,8 @@ def build_model(
     G = new_graph()
     stats = topic_stats or {}
     counts: dict[str, dict[str, float]] = {n: dict.fromkeys(SCHEMAS["node"], 0.0) for n in reading.nodes}
+    for c in counts.values():
+        c["sent_hz"] = float("nan")  # until a measured topic of the node says
     for topic, types in sorted(reading.topics.items()):
         pubs, subs = reading.publishers.get(topic, []), reading.subscribers.get(topic, [])
         st = stats.get(topic, TopicStats(False, "not observed"))
@@ -49,6 +61,13 @@ def build_model(
         qos = [{"node": e.node, "role": role, **e.qos} for role, eps in (("pub", pubs), ("sub", subs))
                for e in eps]
         attrs = {"type": types[0] if types else "", "qos": qos, "measured": st.measured}
+        shares = _shares(st, sorted({e.node for e in pubs}), reading.publisher_gids.get(topic, {}))
+        if st.by_publisher:
+            attrs["publisher_rates"] = {make_id("node", n): hz for n, hz in shares.items()}
+        for n, hz in shares.items():
+            if n in counts:
+                sent = counts[n]["sent_hz"]
+                counts[n]["sent_hz"] = hz if sent != sent else sent + hz
         if len(types) > 1:
             attrs["types"] = list(types)
         if not st.measured:
@@ -70,15 +89,44 @@ def build_model(
         for e in {e.node for e in reading.subscribers.get(topic, [])}:
             add_flow_edge(G, tid, make_id("node", e), "sub")
             counts[e]["subscriptions"] += 1
-    _add_calls(G, reading, counts)
+    _add_calls(G, reading, counts, service_stats or {}, calls or {})
     for fqn, c in counts.items():
         G.nodes[make_id("node", fqn)]["theta"] = make_theta("node", c)
     _add_process_tree(G, reading, pids, processes)
     return G
 
 
-def _add_calls(G: nx.MultiDiGraph, reading: GraphReading, counts: dict[str, dict[str, float]]) -> None:
-    """Service and action members, and ``send`` edges client node → server node."""
+def publisher_rates(by_gid: dict[bytes, float], gid_nodes: dict[bytes, str]) -> dict[str, float]:
+    """Return node fqn → messages/s from messages/s per publisher gid (a node's publishers of
+    one topic add up); gids of no known publisher are left out."""
+    out: dict[str, float] = {}
+    for gid, hz in by_gid.items():
+        node = gid_nodes.get(gid)
+        if node is not None:
+            out[node] = out.get(node, 0.0) + hz
+    return out
+
+
+def _shares(st: TopicStats, pubs: list[str], gid_nodes: dict[bytes, str]) -> dict[str, float]:
+    """Messages/s each publisher node of a topic sent over the window; empty when unknown.
+
+    From the publisher gids of the messages when there are some; a silent topic's publishers
+    each sent none; the only publisher sent them all; several without gids: unknown.
+    """
+    rate = st.metrics.get("rate_hz")
+    if rate is None or not pubs:
+        return {}
+    if st.by_publisher:
+        rates = publisher_rates(st.by_publisher, gid_nodes)
+        return {n: rates.get(n, 0.0) for n in pubs}
+    if rate == 0 or len(pubs) == 1:
+        return {n: rate for n in pubs}
+    return {}
+
+
+def _add_calls(G: nx.MultiDiGraph, reading: GraphReading, counts: dict[str, dict[str, float]],
+               service_stats: dict[str, ServiceStats], calls: dict[str, list[dict[str, object]]]) -> None:
+    """Service and action members (observed calls on services), ``send`` edges client → server."""
     for kind, srv_attr, cli_attr, label in (("service", "services", "clients", "services"),
                                             ("action", "action_servers", "action_clients", "actions")):
         servers: dict[str, list[str]] = defaultdict(list)
@@ -97,8 +145,16 @@ def _add_calls(G: nx.MultiDiGraph, reading: GraphReading, counts: dict[str, dict
         sends: dict[tuple[str, str], list[str]] = defaultdict(list)
         for name in sorted(set(servers) | set(clients)):
             srv, cli = sorted(set(servers[name])), sorted(set(clients[name]))
+            values: dict[str, float] = {"servers": len(srv), "clients": len(cli)}
+            extra: dict[str, object] = {}
+            ss = service_stats.get(name) if kind == "service" else None
+            if ss is not None:
+                waited = [w for w, _, _ in ss.open_calls]
+                values.update(calls_per_s=ss.calls_per_s, response_ms=ss.response_ms,
+                              waiting=len(waited), wait_s=max(waited, default=0.0))
+                extra = {"introspected": True, "calls": list(calls.get(name, []))}
             add_member(G, make_id(kind, name), type=(types[name] or [""])[0], servers=srv, clients=cli,
-                       theta=make_theta(kind, {"servers": len(srv), "clients": len(cli)}))
+                       theta=make_theta(kind, values), **extra)
             for c in cli:
                 for s in srv:
                     if c != s:

@@ -17,12 +17,15 @@ from rclpy.parameter import Parameter
 from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 
 from stream_viz.collect.build import build_model
+from stream_viz.collect.diagnostics import DiagnosticsReader
 from stream_viz.collect.fastdds import decode_gid
+from stream_viz.collect.naming import NodeNames
 from stream_viz.collect.pidmap import PidResolver
 from stream_viz.collect.processes import ProcessSampler
 from stream_viz.collect.readings import GraphReading, PidInfo, ProcessReading
 from stream_viz.collect.rosgraph import GidCache, QosCache, read_graph
-from stream_viz.collect.topics import TopicMonitor, diag_events, log_event
+from stream_viz.collect.services import ServiceCalls, ServiceStats, party
+from stream_viz.collect.topics import DIAGNOSTICS, TopicMonitor, log_event
 from stream_viz.errors import CollectError
 from stream_viz.model.diff import diff
 from stream_viz.model.graph import new_graph
@@ -94,13 +97,15 @@ class Collector:
         self.sampler = ProcessSampler()
         self.qos = QosCache()
         self.gids = GidCache()
+        self.diagnostics = DiagnosticsReader()
+        self.calls = ServiceCalls(window_s=window_s)
         self._prev = new_graph()
         self._prev_pids: dict[str, int | None] = {}
         self._dead: dict[int, ProcessReading] = {}
         self._closed = False
 
     def start(self) -> None:
-        """Create our own rclpy Context and observer node, subscribe to /rosout and /diagnostics."""
+        """Create our own rclpy Context and observer node, subscribe to the event topics."""
         if self.node is not None:
             return
         ctx = Context()
@@ -130,14 +135,15 @@ class Collector:
         t = time.time()
         reading = read_graph(self.node, own=self.own, include_hidden=self.include_hidden,
                              include_internal=self.include_internal, qos=self.qos, gids=self.gids)
-        self.topics.update(reading.topics)
+        self.topics.update(reading.topics, reading.service_events)
         pids = self.resolver.resolve(reading.rosout_gids)
         for fqn in reading.nodes:
             pids.setdefault(fqn, PidInfo(None, "unknown"))
         node_pids = {n: p.pid for n, p in pids.items() if n in reading.nodes}
         ps = self.sampler.sample({p for p in node_pids.values() if p is not None})
-        if ps.exited:  # one of its nodes may be back under the same name, with a new gid
+        if ps.exited:  # one of its nodes may be back under the same name, with new gids
             self.gids.invalidate()
+            self.qos.invalidate()
         events = self._process_events(t, ps.exited, node_pids)
         events += self._restarts(t, node_pids)
         # Keep the process of nodes DDS still lists after their process died (SIGKILL: ~20 s).
@@ -153,8 +159,13 @@ class Collector:
             processes[pid] = ProcessReading(pid, None, alive=False)
         pub_counts = {tp: len(eps) for tp, eps in reading.publishers.items()}
         stats = self.topics.stats(pub_counts)
-        events += self._message_events(t, reading)
-        G = build_model(reading, pids, processes, stats)
+        # A message from a publisher gid we do not know: a new endpoint of an unchanged node set.
+        self.qos.invalidate({tp for tp, st in stats.items()
+                             if any(g not in reading.publisher_gids.get(tp, {}) for g in st.by_publisher)})
+        index = NodeNames(reading.nodes)
+        events += self._message_events(t, reading, index)
+        services, calls = self._service_calls(reading)
+        G = build_model(reading, pids, processes, stats, services, calls)
         unreadable = {make_id("node", n): why for n, why in reading.skipped.items()}
         for pid, why in ps.errors.items():
             if pid not in processes:  # dead ones are in the model, marked alive=False
@@ -197,22 +208,61 @@ class Collector:
                                  {"old_pid": old, "pid": pid}))
         return out
 
-    def _message_events(self, t: float, reading: GraphReading) -> list[Event]:
-        nodes = set(reading.nodes)
-        diag_pubs = sorted({e.node for e in reading.publishers.get("/diagnostics", [])})
+    def _message_events(self, t: float, reading: GraphReading, index: NodeNames) -> list[Event]:
+        services = frozenset(s for nr in reading.nodes.values() for s in (*nr.services, *nr.clients))
         out: list[Event] = []
-        for topic, msg, info in self.topics.take_messages():
+        for topic, msg, recv, gid in self.topics.take_messages():
             try:
                 if topic == "/rosout":
-                    ev = log_event(msg, nodes)
+                    ev = log_event(msg, index, services)
                     if ev is not None:
                         out.append(ev)
-                else:
-                    out += diag_events(msg, info["source_timestamp"] / 1e9, diag_pubs, nodes)
+                elif topic == "/parameter_events":
+                    self.diagnostics.hardware.add(msg)
+                elif topic in DIAGNOSTICS:
+                    publisher = self._publisher(reading, topic, gid)
+                    out += self.diagnostics.events(topic, msg, recv / 1e9, publisher, index)
             except (AttributeError, TypeError, ValueError) as e:  # a malformed message: say so, go on
                 out.append(Event(t, "observe_error", make_id("topic", topic), "warn",
                                  f"cannot read a {topic} message: {e}"))
         return out
+
+    @staticmethod
+    def _publisher(reading: GraphReading, topic: str, gid: bytes | None) -> str | None:
+        """The node that published a message: by its gid, else the topic's only publisher."""
+        if gid is not None and gid in reading.publisher_gids.get(topic, {}):
+            return reading.publisher_gids[topic][gid]
+        pubs = {e.node for e in reading.publishers.get(topic, [])}
+        return next(iter(pubs)) if len(pubs) == 1 else None
+
+    def _service_calls(self, reading: GraphReading) -> tuple[dict[str, ServiceStats],
+                                                            dict[str, list[dict[str, object]]]]:
+        """Feed the service events taken since the last sample; return the services' stats and
+        their open calls with the client and server nodes where the gids tell them."""
+        for service, recv, (etype, _stamp, client_gid, seq), writer in self.topics.take_service_events():
+            self.calls.add(service, recv, etype, client_gid, seq, writer)
+        self.calls.forget(set(reading.service_events))
+        stats = self.calls.stats(time.time_ns())
+        if not stats:  # no service introspected: nothing to attribute
+            return {}, {}
+        prefixes: dict[bytes, list[str]] = {}
+        for node, gid in reading.rosout_gids.items():
+            prefixes.setdefault(gid[:12], []).append(node)
+        servers: dict[str, list[str]] = {}
+        clients: dict[str, list[str]] = {}
+        for fqn, nr in reading.nodes.items():
+            for s in nr.services:
+                servers.setdefault(s, []).append(fqn)
+            for s in nr.clients:
+                clients.setdefault(s, []).append(fqn)
+        calls = {}
+        for service, st in stats.items():
+            calls[service] = [
+                {"client": _node_id(party(cg, prefixes, sorted(clients.get(service, [])))),
+                 "server": _node_id(party(sg, prefixes, sorted(servers.get(service, [])))),
+                 "waited_s": round(waited, 3)}
+                for waited, cg, sg in st.open_calls[:10]]
+        return stats, calls
 
     def close(self) -> None:
         """Stop observing: end the drain thread, destroy the node, shut our own Context. Idempotent."""
@@ -236,3 +286,7 @@ class Collector:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _node_id(fqn: str | None) -> str | None:
+    return None if fqn is None else make_id("node", fqn)

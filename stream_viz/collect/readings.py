@@ -17,7 +17,8 @@ class Endpoint:
     topic: str
     type: str
     gid: bytes
-    qos: dict[str, Any]  # reliability, durability, history (str), depth (int)
+    # reliability, durability, history, liveliness (str); depth, deadline_ns, liveliness_lease_ns (int)
+    qos: dict[str, Any]
 
 
 @dataclass
@@ -43,6 +44,8 @@ class GraphReading:
     publishers: dict[str, list[Endpoint]] = field(default_factory=dict)  # topic -> endpoints
     subscribers: dict[str, list[Endpoint]] = field(default_factory=dict)
     rosout_gids: dict[str, bytes] = field(default_factory=dict)  # node fqn -> gid of its /rosout pub
+    publisher_gids: dict[str, dict[bytes, str]] = field(default_factory=dict)  # topic -> gid -> node
+    service_events: dict[str, str] = field(default_factory=dict)  # service -> its event topic's type
     skipped: dict[str, str] = field(default_factory=dict)  # node fqn -> why it was skipped
 
 
@@ -78,3 +81,4 @@ class TopicStats:
     measured: bool
     reason: str = ""
     metrics: dict[str, float] = field(default_factory=dict)
+    by_publisher: dict[bytes, float] = field(default_factory=dict)  # publisher gid -> messages/s

@@ -13,6 +13,7 @@ from typing import Any
 from rclpy.node import Node, NodeNameNonExistentError
 
 from stream_viz.collect.readings import Endpoint, GraphReading, NodeReading
+from stream_viz.collect.services import EVENT_SUFFIX
 from stream_viz.model.ids import node_fqn
 
 UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
@@ -36,14 +37,26 @@ def is_param_service(name: str, node_fqn_: str) -> bool:
 
 
 def qos_dict(qos: Any) -> dict[str, Any]:
-    """Return a QoS profile as plain data (policy names lower-case, depth as int)."""
+    """Return a QoS profile as plain data: policy names lower-case, depth as int, durations in ns.
+
+    ``deadline_ns`` and ``liveliness_lease_ns`` are rmw's: 0 is "unspecified" (the default) and
+    `INFINITE_NS` infinite (what discovery reports for an endpoint that set none).
+    """
     def pol(p: Any) -> str:
         return getattr(p, "name", str(p)).lower()
     history = pol(qos.history)
     # DDS discovery does not carry history/depth: rmw reports "unknown" and 0, kept as unknown.
     depth = int(qos.depth) if history != "unknown" else None
     return {"reliability": pol(qos.reliability), "durability": pol(qos.durability),
-            "history": history, "depth": depth}
+            "history": history, "depth": depth, "deadline_ns": _ns(qos.deadline),
+            "liveliness": pol(qos.liveliness), "liveliness_lease_ns": _ns(qos.liveliness_lease_duration)}
+
+
+INFINITE_NS = 2**63 - 1  # RMW_DURATION_INFINITE in ns
+
+
+def _ns(duration: Any) -> int:
+    return min(int(getattr(duration, "nanoseconds", 0)), INFINITE_NS)
 
 
 def _actions(services: list[tuple[str, list[str]]]) -> dict[str, list[str]]:
@@ -71,23 +84,38 @@ class QosCache:
         self.budget_s = budget_s
         self._known: dict[str, frozenset[tuple[str, str]]] = {}
         self._qos: dict[tuple[str, str, str], dict[str, Any]] = {}
+        self._gids: dict[str, dict[bytes, str]] = {}  # topic -> publisher endpoint gid -> node
 
     def refresh(self, node: Node, topic: str, endpoints: frozenset[tuple[str, str]],
                 nodes: dict[str, NodeReading], deadline: float) -> None:
         if self._known.get(topic) == endpoints or time.monotonic() > deadline:
             return
+        gids: dict[bytes, str] = {}
         for role, call in (("pub", node.get_publishers_info_by_topic),
                            ("sub", node.get_subscriptions_info_by_topic)):
             for e in _endpoints(call(topic), topic, nodes):
                 self._qos[(topic, e.node, role)] = e.qos
+                if role == "pub":
+                    gids[e.gid] = e.node
+        self._gids[topic] = gids
         self._known[topic] = endpoints
 
     def get(self, topic: str, node: str, role: str) -> dict[str, Any]:
         return self._qos.get((topic, node, role), {})
 
+    def publisher_gids(self, topic: str) -> dict[bytes, str]:
+        """Return the gid → node of ``topic``'s publishers, as last read."""
+        return self._gids.get(topic, {})
+
+    def invalidate(self, topics: set[str] | None = None) -> None:
+        """Read these topics' endpoints again (None: all): a publisher gid we do not know came,
+        or a process exited (a node back under its name has new gids, the same endpoint set)."""
+        self._known = {} if topics is None else {t: v for t, v in self._known.items() if t not in topics}
+
     def forget(self, topics: set[str]) -> None:
         self._known = {t: v for t, v in self._known.items() if t in topics}
         self._qos = {k: v for k, v in self._qos.items() if k[0] in topics}
+        self._gids = {t: v for t, v in self._gids.items() if t in topics}
 
 
 class GidCache:
@@ -188,6 +216,9 @@ def read_graph(node: Node, *, own: str, include_hidden: bool = False,
                 if topic_ok(topic):
                     ends[role].setdefault(topic, []).append(fqn)
                     r.topics.setdefault(topic, list(types))
+                elif role == "pub" and topic.endswith(EVENT_SUFFIX) and types:
+                    # service introspection: observed whether or not hidden names are kept
+                    r.service_events.setdefault(topic[: -len(EVENT_SUFFIX)], types[0])
     deadline = time.monotonic() + qos.budget_s
     for topic in sorted(r.topics):
         pubs_, subs_ = sorted(set(ends["pub"].get(topic, []))), sorted(set(ends["sub"].get(topic, [])))
@@ -196,6 +227,7 @@ def read_graph(node: Node, *, own: str, include_hidden: bool = False,
         t0 = r.topics[topic][0] if r.topics[topic] else ""
         r.publishers[topic] = [Endpoint(n, topic, t0, b"", qos.get(topic, n, "pub")) for n in pubs_]
         r.subscribers[topic] = [Endpoint(n, topic, t0, b"", qos.get(topic, n, "sub")) for n in subs_]
+        r.publisher_gids[topic] = qos.publisher_gids(topic)
     qos.forget(set(r.topics))
     r.rosout_gids = gids.get(node, r.nodes, time.monotonic())
     return r

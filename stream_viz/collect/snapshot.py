@@ -35,6 +35,9 @@ def _member_line(G: nx.MultiDiGraph, m: str) -> str:
         extra.append(a.get("type", ""))
         if not a.get("measured", True):
             extra.append(f"not measured: {a.get('reason', '')}")
+        rates = a.get("publisher_rates") or {}
+        if len(rates) > 1:  # who sends what on a multi-publisher topic
+            extra.append("from " + ", ".join(f"{n} {hz:.3g} Hz" for n, hz in rates.items()))
     elif a["kind"] in ("service", "action"):
         extra.append(a.get("type", ""))
     elif a["kind"] == "process":

@@ -1,10 +1,14 @@
-"""Topic metrics from raw subscriptions drained without an executor, plus /rosout and /diagnostics.
+"""Topic metrics from raw subscriptions drained without an executor, plus the event topics.
 
-A background thread takes every waiting message (``take_message`` on the handle; no callbacks,
-no deserialisation) and keeps ``(received, source timestamp, size, sequence number)`` per topic
-over a sliding window with running sums (`TopicWindow`). Inter-arrival times stay exact: they come from the
-``received_timestamp`` DDS stamps, not from when we drained. ``/rosout`` and ``/diagnostics`` are
-deserialised and turned into events. The QoS (best effort, volatile) matches any publisher.
+A background thread takes every waiting message (no callbacks, no deserialisation) and keeps
+``(received, source timestamp, size, sequence number, publisher gid, message age)`` per topic
+over a sliding window with running sums (`TopicWindow`). Inter-arrival times stay exact: they
+come from the ``received_timestamp`` DDS stamps, not from when we drained. Messages are taken
+through rcl with their publisher's gid (`stream_viz.collect.rcltake`; through rclpy without it
+where that is unavailable); a type that begins with a ``std_msgs/Header`` has its stamp read from
+the serialized bytes (`stream_viz.collect.cdr`). /rosout and /parameter_events are deserialised,
+/diagnostics and /diagnostics_agg deserialised from the bytes taken (for events), service event
+topics read raw (`take_service_events`). The QoS (best effort, volatile) matches any publisher.
 """
 
 from __future__ import annotations
@@ -12,19 +16,33 @@ from __future__ import annotations
 import importlib
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 
+from stream_viz.collect.cdr import has_header, header_stamp_ns, is_service_event, service_event_info
+from stream_viz.collect.naming import NodeNames, named_in_text
+from stream_viz.collect.rcltake import RclTake
 from stream_viz.collect.readings import TopicStats
+from stream_viz.collect.services import EVENT_SUFFIX
 from stream_viz.collect.window import TopicWindow
 from stream_viz.records import Event
 
 OBSERVE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
 NO_RAW = frozenset({"/rosout", "/parameter_events"})  # busy infrastructure topics: no metrics
+# Deserialised by rclpy: the log and the parameter events.
+LOGS = {"/rosout": "rcl_interfaces/msg/Log", "/parameter_events": "rcl_interfaces/msg/ParameterEvent"}
+DIAG_TYPE = "diagnostic_msgs/msg/DiagnosticArray"
+DIAGNOSTICS = frozenset({"/diagnostics", "/diagnostics_agg"})  # taken whole and deserialised
+
+# (received ns, source ns, size, sequence number, publisher gid or None, head or payload bytes)
+Sink = Callable[[int, int, int, int, "bytes | None", bytes], None]
 
 
 def import_type(type_name: str) -> type:
@@ -39,7 +57,9 @@ class _Watch:
     sub: Any
     created_ns: int
     window: TopicWindow
-    deserialize: bool = False
+    kind: str  # raw (metrics) | log (rclpy deserialises) | diag (payload kept) | event (service events)
+    stamped: bool  # the type begins with a Header: the message age is read
+    sink: Sink | None  # what the messages of the log, diag and event kinds go to
 
 
 class TopicMonitor:
@@ -52,7 +72,8 @@ class TopicMonitor:
     window_s : float
         Length of the sliding window metrics are computed over.
     metrics : bool
-        Subscribe to every topic for metrics; False keeps only /rosout and /diagnostics.
+        Subscribe to every topic for metrics; False keeps only the event topics (/rosout,
+        /parameter_events, /diagnostics, /diagnostics_agg, service events).
     period_s : float
         Longest time between two drains of the thread. It drains more often when a topic is fast
         enough to fill a quarter of the queue (``OBSERVE_QOS.depth``) in that time; `stats` drains
@@ -61,10 +82,12 @@ class TopicMonitor:
         arrival, so a late drain costs no accuracy; only the queue bounds the period).
     min_period_s : float
         Shortest time between two drains (a very fast topic).
+    gids : bool
+        Take through rcl with the publisher gids (`RclTake`); False: through rclpy, without.
     """
 
     def __init__(self, node: Node, window_s: float = 3.0, metrics: bool = True,
-                 period_s: float = 1.0, min_period_s: float = 0.02) -> None:
+                 period_s: float = 1.0, min_period_s: float = 0.02, gids: bool = True) -> None:
         self.node, self.window_ns, self.metrics = node, int(window_s * 1e9), metrics
         self.max_period_s, self.min_period_s = period_s, min_period_s
         self.period_s = period_s  # the current one, adapted to the fastest topic
@@ -73,53 +96,87 @@ class TopicMonitor:
         self._watches: dict[str, _Watch] = {}
         self._failed: dict[str, str] = {}  # topic -> why it is not measured
         self._types: dict[str, str] = {}
-        self._messages: list[tuple[str, Any, dict]] = []  # deserialised /rosout and /diagnostics
+        self._messages: list[tuple[str, Any, int, bytes | None]] = []  # (topic, msg or payload, recv, gid)
+        self._service_events: list[tuple[str, int, tuple[int, int, bytes, int], bytes | None]] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self.rcl = RclTake(rclpy.get_rmw_implementation_identifier()) if gids else None
         self.taken = 0  # messages taken so far (for the benchmark)
 
     def start(self) -> None:
-        """Subscribe to /rosout and /diagnostics and start draining."""
-        for topic, type_name in (("/rosout", "rcl_interfaces/msg/Log"),
-                                 ("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")):
-            self._subscribe(topic, type_name, deserialize=True)
+        """Subscribe to the log, parameter and diagnostics topics and start draining."""
+        for topic, type_name in LOGS.items():
+            self._subscribe(topic, type_name)
+        self._subscribe("/diagnostics", DIAG_TYPE)
         self._thread = threading.Thread(target=self._run, name="stream-viz-topics", daemon=True)
         self._thread.start()
 
-    def update(self, topics: dict[str, list[str]]) -> None:
-        """Follow the graph: subscribe to new topics, drop vanished ones (keeps the two log topics)."""
-        if not self.metrics:
-            return
-        want = {t: types[0] for t, types in topics.items() if types and t not in NO_RAW}
+    def update(self, topics: dict[str, list[str]], service_events: dict[str, str] | None = None) -> None:
+        """Follow the graph: subscribe to new topics, drop vanished ones (keeps the event topics).
+
+        ``topics``: topic → types (measured when ``metrics``; /diagnostics_agg always);
+        ``service_events``: service → its event topic's type (service introspection).
+        """
+        want = {t: types[0] for t, types in topics.items()
+                if types and t not in NO_RAW and (self.metrics or t in DIAGNOSTICS)}
+        want.update({s + EVENT_SUFFIX: ty for s, ty in (service_events or {}).items()})
         with self._lock:
             for t in list(self._watches):
                 w = self._watches[t]
-                if not w.deserialize and (t not in want or self._types.get(t) != want[t]):
+                keep = t in LOGS or t == "/diagnostics"
+                if not keep and (t not in want or self._types.get(t) != want[t]):
                     self.node.destroy_subscription(w.sub)
                     del self._watches[t]
             for t in list(self._failed):
-                if t not in want:
+                if t not in want and t not in LOGS:
                     del self._failed[t]
         for t, type_name in want.items():
             if t in self._watches or (t in self._failed and self._types.get(t) == type_name):
                 continue  # watched already, or known not to work for this type
             self._subscribe(t, type_name)
 
-    def _subscribe(self, topic: str, type_name: str, deserialize: bool = False) -> None:
+    def _subscribe(self, topic: str, type_name: str) -> None:
         self._types[topic] = type_name
         try:
             cls = import_type(type_name)
         except (ImportError, AttributeError, ValueError) as e:
             self._failed[topic] = f"message type {type_name} is not installed ({e.__class__.__name__})"
             return
+        kind = ("log" if topic in LOGS else "diag" if topic in DIAGNOSTICS
+                else "event" if topic.endswith(EVENT_SUFFIX) and is_service_event(cls) else "raw")
         try:
-            sub = self.node.create_subscription(cls, topic, lambda _m: None, OBSERVE_QOS, raw=not deserialize)
+            sub = self.node.create_subscription(cls, topic, lambda _m: None, OBSERVE_QOS,
+                                                raw=kind != "log")
         except Exception as e:  # rclpy raises plain RuntimeError/RCLError kinds; one topic must not stop us
             self._failed[topic] = f"cannot subscribe: {e}"
             return
+        window = TopicWindow()
         with self._lock:
             self._failed.pop(topic, None)
-            self._watches[topic] = _Watch(sub, time.time_ns(), TopicWindow(), deserialize)
+            self._watches[topic] = _Watch(sub, time.time_ns(), window, kind, has_header(cls),
+                                          self._sink(topic, kind, window))
+
+    def _sink(self, topic: str, kind: str, window: TopicWindow) -> Sink | None:
+        """What to do with each message taken from ``topic``; None: its window's add (raw)."""
+        add = window.add
+        if kind == "event":
+            service, events = topic[: -len(EVENT_SUFFIX)], self._service_events
+
+            def event(recv: int, src: int, size: int, seq: int, gid: bytes | None, head: bytes) -> None:
+                info = service_event_info(head)
+                if info is not None:
+                    events.append((service, recv, info, gid))
+            return event
+        if kind in ("diag", "log"):
+            messages = self._messages
+
+            def keep(recv: int, src: int, size: int, seq: int, gid: bytes | None, msg: Any) -> None:
+                # the diagnostics arrays come as bytes (deserialised later), with a Header
+                stamp = header_stamp_ns(msg) if kind == "diag" else None
+                add(recv, src, size, seq, gid, None if stamp is None else recv - stamp)
+                messages.append((topic, msg, recv, gid))
+            return keep
+        return None
 
     def _run(self) -> None:
         while not self._stop.wait(self.period_s):
@@ -131,33 +188,67 @@ class TopicMonitor:
         with self._lock:
             now = time.monotonic()
             elapsed, self._last_drain = now - self._last_drain, now
-            for topic, w in self._watches.items():
-                raw = not w.deserialize
-                handle, add, taken = w.sub.handle, w.window.add, 0
+            for w in self._watches.values():
                 try:
                     # The handle is held once per topic, not per message: the per-message cost
                     # is what topic metrics cost on a busy system.
+                    handle = w.sub.handle
                     with handle:
-                        take, msg_type = handle.take_message, w.sub.msg_type
-                        while (got := take(msg_type, raw)) is not None:
-                            msg, info = got
-                            taken += 1
-                            add(info["received_timestamp"], info["source_timestamp"],
-                                len(msg) if raw else 0, info.get("publication_sequence_number"))
-                            if not raw:
-                                self._messages.append((topic, msg, info))
+                        taken = self._take(handle, w)
                 except Exception:  # a destroyed handle or a bad message: skip this topic this round
-                    pass
+                    taken = 0
                 self.taken += taken
                 peak = max(peak, taken)
         if elapsed >= self.min_period_s:  # a drain right after another (`stats`) says nothing of rates
             self.period_s = drain_period(peak, elapsed, OBSERVE_QOS.depth, self.min_period_s,
                                          self.max_period_s)
 
-    def take_messages(self) -> list[tuple[str, Any, dict]]:
-        """Return and forget the deserialised /rosout and /diagnostics messages taken so far."""
+    def _take(self, handle: Any, w: _Watch) -> int:
+        """Take what waits on one subscription: through rcl with gids, else through rclpy."""
+        rcl = self.rcl
+        if rcl is not None and rcl.available and w.kind != "log":
+            n = rcl.drain(handle, w.window.add, w.stamped, w.sink, payload=w.kind == "diag")
+            if rcl.available:
+                return n
+        raw, take, msg_type, n = w.kind != "log", handle.take_message, w.sub.msg_type, 0
+        add, sink, stamped = w.window.add, w.sink, w.stamped
+        while (got := take(msg_type, raw)) is not None:
+            msg, info = got
+            n += 1
+            recv, src, seq = info["received_timestamp"], info["source_timestamp"], info.get(
+                "publication_sequence_number")
+            size = len(msg) if raw else 0
+            if sink is not None:
+                sink(recv, src, size, seq, None, msg)
+            elif stamped:
+                stamp = header_stamp_ns(msg)
+                add(recv, src, size, seq, None, None if stamp is None else recv - stamp)
+            else:
+                add(recv, src, size, seq)
+        return n
+
+    def take_messages(self) -> list[tuple[str, Any, int, bytes | None]]:
+        """Return and forget the messages of the event topics taken so far, deserialised:
+        ``(topic, message, received ns, publisher gid or None)``. A diagnostics message that
+        cannot be deserialised is returned as its bytes."""
+        with self._lock:  # the sinks hold the list: empty it, do not replace it
+            out = self._messages[:]
+            self._messages.clear()
+            types = {t: w.sub.msg_type for t, w in self._watches.items() if w.kind == "diag"}
+        for i, (topic, msg, recv, gid) in enumerate(out):
+            if isinstance(msg, bytes) and topic in types:
+                try:
+                    out[i] = (topic, deserialize_message(msg, types[topic]), recv, gid)
+                except Exception:  # a malformed message: the caller reports it
+                    pass
+        return out
+
+    def take_service_events(self) -> list[tuple[str, int, tuple[int, int, bytes, int], bytes | None]]:
+        """Return and forget the service events taken so far: ``(service, received ns,
+        (event type, stamp ns, client gid, sequence number), publisher gid or None)``."""
         with self._lock:
-            out, self._messages = self._messages, []
+            out = self._service_events[:]
+            self._service_events.clear()
         return out
 
     def stats(self, publishers: dict[str, int]) -> dict[str, TopicStats]:
@@ -167,10 +258,12 @@ class TopicMonitor:
         out: dict[str, TopicStats] = {t: TopicStats(False, why) for t, why in self._failed.items()}
         with self._lock:
             for t, w in self._watches.items():
+                if w.kind == "event":
+                    continue
                 w.window.expire(now - self.window_ns)
                 m = w.window.metrics(now, w.created_ns, self.window_ns, publishers.get(t, 0),
-                                     sized=not w.deserialize)
-                out[t] = TopicStats(True, "", m)
+                                     sized=w.kind != "log")
+                out[t] = TopicStats(True, "", m, w.window.publisher_rates(now, w.created_ns, self.window_ns))
         if not self.metrics:
             for t in publishers:
                 out.setdefault(t, TopicStats(False, "topic metrics are off"))
@@ -181,6 +274,8 @@ class TopicMonitor:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
+        if self.rcl is not None and (self._thread is None or not self._thread.is_alive()):
+            self.rcl.close()
 
 
 def drain_period(peak: int, elapsed_s: float, depth: int, shortest: float, longest: float) -> float:
@@ -195,11 +290,9 @@ def drain_period(peak: int, elapsed_s: float, depth: int, shortest: float, longe
 
 
 LOG_LEVELS = {30: "warn", 40: "error", 50: "fatal"}
-DIAG_LEVELS = {0: "info", 1: "warn", 2: "error", 3: "warn"}
-DIAG_NAMES = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
 
 
-def logger_node(logger: str, nodes: set[str]) -> str:
+def logger_node(logger: str, nodes: set[str] | frozenset[str]) -> str:
     """Return the node fqn a /rosout logger name belongs to (``ns.talker.child`` → ``/ns/talker``)."""
     parts = [p for p in logger.replace("/", ".").split(".") if p]
     for k in range(len(parts), 0, -1):
@@ -210,44 +303,25 @@ def logger_node(logger: str, nodes: set[str]) -> str:
     return "/" + "/".join(parts) if parts else "/"
 
 
-def log_event(msg: Any, nodes: set[str]) -> Event | None:
-    """Return a ``log`` Event for a /rosout message of level WARN or higher, else None."""
+def log_event(msg: Any, nodes: set[str] | NodeNames, services: frozenset[str] = frozenset()) -> Event | None:
+    """Return a ``log`` Event for a /rosout message of level WARN or higher, else None.
+
+    When the text names nodes or ``services`` of the graph (`named_in_text`, relative names
+    against the logging node's namespace), the event data lists them as member ids in ``nodes``
+    and ``services``: a client's "service /plan not available" points at the service's server.
+    """
     level = int(msg.level)
     if level < 30:
         return None
+    index = nodes if isinstance(nodes, NodeNames) else NodeNames(nodes)
     sev = LOG_LEVELS.get(level, "fatal" if level > 50 else "warn")
     t = msg.stamp.sec + msg.stamp.nanosec * 1e-9
-    node = logger_node(msg.name, nodes)
-    return Event(t, "log", f"node:{node}", sev, msg.msg,
-                 {"logger": msg.name, "level": level, "file": msg.file, "function": msg.function,
-                  "line": int(msg.line)})
-
-
-def diag_member(status: Any, publishers: list[str], nodes: set[str]) -> str:
-    """Return the member a diagnostics status concerns: the only publisher, else a node it names."""
-    if len(publishers) == 1:
-        return f"node:{publishers[0]}"
-    base = {n.rsplit("/", 1)[-1]: n for n in nodes}
-    for text in (status.name, status.hardware_id):
-        head = text.split(":", 1)[0].strip()
-        for key in (head, "/" + head.lstrip("/")):
-            if key in nodes:
-                return f"node:{key}"
-        if head in base:
-            return f"node:{base[head]}"
-    return "topic:/diagnostics"
-
-
-def diag_events(msg: Any, t: float, publishers: list[str], nodes: set[str]) -> list[Event]:
-    """Return one ``diag`` Event per status of a DiagnosticArray (OK ones at level info)."""
-    out = []
-    for st in msg.status:
-        lvl = st.level
-        lvl = lvl[0] if isinstance(lvl, bytes | bytearray) else int(lvl)
-        out.append(Event(
-            t, "diag", diag_member(st, publishers, nodes), DIAG_LEVELS.get(lvl, "warn"),
-            f"{st.name}: {DIAG_NAMES.get(lvl, lvl)} {st.message}".strip(),
-            {"name": st.name, "hardware_id": st.hardware_id, "level": lvl,
-             "values": {kv.key: kv.value for kv in st.values}},
-        ))
-    return out
+    node = logger_node(msg.name, index.fqns)
+    data = {"logger": msg.name, "level": level, "file": msg.file, "function": msg.function,
+            "line": int(msg.line)}
+    named, called = named_in_text(msg.msg, index, services, node.rsplit("/", 1)[0] or "/", node)
+    if named:
+        data["nodes"] = [f"node:{n}" for n in named]
+    if called:
+        data["services"] = [f"service:{c}" for c in called]
+    return Event(t, "log", f"node:{node}", sev, msg.msg, data)

@@ -1,35 +1,43 @@
 """One topic's messages over a sliding window, with running sums: its metrics cost O(1) a sample.
 
-Every record is ``(received ns, source ns, size bytes, sequence number or None)`` in arrival
-order. All sums are Python ints of nanoseconds, so adding and removing never drifts: the metrics
-equal a fresh computation over the records in the window.
+Every record is ``(received ns, source ns, size bytes, sequence number or None, publisher gid or
+None, message age ns or None)`` in arrival order; the age is received minus the message's own
+``header.stamp`` (None when the type has no Header or the stamp is unset). All sums are Python
+ints of nanoseconds, so adding and removing never drifts: the metrics equal a fresh computation
+over the records in the window.
 """
 
 from __future__ import annotations
 
 import itertools
 import math
-from collections import deque
+from collections import Counter, deque
 
 import numpy as np
 
 RECENT = 5  # intervals behind `rate_recent_hz`
+# (received ns, source ns, size, sequence number, publisher gid, received − header.stamp ns)
+Record = tuple[int, int, int, int | None, bytes | None, int | None]
 WARMUP_S = 1.0  # a fresh subscription has seen too little to call a rate (0 would read as silence)
 
 
 class TopicWindow:
     """Records of one topic, oldest first, and the running sums its metrics need."""
 
-    __slots__ = ("buf", "gaps", "no_seq", "s_d", "s_d2", "s_recv", "s_size", "s_src")
+    __slots__ = ("buf", "by_gid", "gaps", "n_age", "no_seq", "s_age", "s_d", "s_d2", "s_recv", "s_size",
+                 "s_src")
 
     def __init__(self) -> None:
-        self.buf: deque[tuple[int, int, int, int | None]] = deque()
+        self.buf: deque[Record] = deque()
         self.s_recv = self.s_src = self.s_size = 0
         self.s_d = self.s_d2 = 0  # sums of consecutive arrival intervals and of their squares
         self.gaps = 0  # missing sequence numbers between consecutive records
         self.no_seq = 0  # records without a sequence number
+        self.s_age = self.n_age = 0  # sum and count of the message ages (records that have one)
+        self.by_gid: Counter[bytes] = Counter()  # records per publisher gid (those that have one)
 
-    def add(self, recv: int, src: int, size: int, seq: int | None) -> None:
+    def add(self, recv: int, src: int, size: int, seq: int | None, gid: bytes | None = None,
+            age: int | None = None) -> None:
         """Append the newest record."""
         if self.buf:
             last = self.buf[-1]
@@ -38,21 +46,35 @@ class TopicWindow:
             self.s_d2 += d * d
             if seq is not None and last[3] is not None and seq > last[3] + 1:
                 self.gaps += seq - last[3] - 1
-        self.buf.append((recv, src, size, seq))
+        self.buf.append((recv, src, size, seq, gid, age))
         self.s_recv += recv
         self.s_src += src
         self.s_size += size
         self.no_seq += seq is None
+        if age is not None:
+            self.s_age += age
+            self.n_age += 1
+        if gid is not None:
+            self.by_gid[gid] += 1
 
     def expire(self, before_ns: int) -> None:
         """Drop the records received before ``before_ns``."""
         buf = self.buf
         while buf and buf[0][0] < before_ns:
-            recv, src, size, seq = buf.popleft()
+            recv, src, size, seq, gid, age = buf.popleft()
             self.s_recv -= recv
             self.s_src -= src
             self.s_size -= size
             self.no_seq -= seq is None
+            if age is not None:
+                self.s_age -= age
+                self.n_age -= 1
+            if gid is not None:
+                left = self.by_gid[gid] - 1
+                if left:
+                    self.by_gid[gid] = left
+                else:
+                    del self.by_gid[gid]
             if buf:
                 d = buf[0][0] - recv
                 self.s_d -= d
@@ -73,6 +95,8 @@ class TopicWindow:
         m["rate_hz"] = n / span
         if n >= 1:
             m["latency_ms"] = (self.s_recv - self.s_src) / n / 1e6
+            if self.n_age:
+                m["stamp_age_ms"] = self.s_age / self.n_age / 1e6
             if sized:
                 m["bandwidth_kBps"] = self.s_size / span / 1000.0
             if n >= 3:
@@ -89,6 +113,14 @@ class TopicWindow:
             m["drops_per_s"] = self.gaps / span
         return m
 
+    def publisher_rates(self, now_ns: int, created_ns: int, window_ns: int) -> dict[bytes, float]:
+        """Return publisher gid → messages/s over the window (records without a gid left out);
+        empty while the subscription is younger than `WARMUP_S`, as the rate."""
+        span_ns = min(window_ns, now_ns - created_ns)
+        if span_ns < WARMUP_S * 1e9:
+            return {}
+        return {gid: n * 1e9 / span_ns for gid, n in self.by_gid.items()}
+
 
 def _tail(buf: deque, k: int) -> list:
     return [buf[i] for i in range(max(0, len(buf) - k), len(buf))]
@@ -96,7 +128,7 @@ def _tail(buf: deque, k: int) -> list:
 
 def window_metrics(buf: list[tuple], now_ns: int, created_ns: int, window_ns: int,
                    n_publishers: int, sized: bool = True) -> dict[str, float]:
-    """Rate, jitter, latency, bandwidth and drops from ``(recv_ns, src_ns, size, seq)`` records.
+    """Rate, jitter, latency, bandwidth, drops and message age from `Record` records.
 
     The definition, computed afresh over the records (numpy); `TopicWindow.metrics` returns the
     same from running sums without walking them, and is tested against this. Pure: ``span`` is
@@ -108,6 +140,10 @@ def window_metrics(buf: list[tuple], now_ns: int, created_ns: int, window_ns: in
     that stops shows at once, not when the window has emptied), and ``rate_recent_hz``, the rate
     over the last ``RECENT`` intervals up to now (at least 3; the open interval since the newest
     message counts, so a slowed topic shows before the window has turned over).
+
+    ``stamp_age_ms``: the mean of received − ``header.stamp`` over the records that have one (a
+    type beginning with a Header whose stamp is set): the age of the data, beside the transport
+    latency (received − source timestamp, i.e. since it was published).
     """
     span_ns = min(window_ns, now_ns - created_ns)
     m: dict[str, float] = {}
@@ -120,6 +156,9 @@ def window_metrics(buf: list[tuple], now_ns: int, created_ns: int, window_ns: in
         recv = np.array([b[0] for b in buf], dtype=np.int64)
         src = np.array([b[1] for b in buf], dtype=np.int64)
         m["latency_ms"] = float(np.mean(recv - src)) / 1e6
+        ages = [b[5] for b in buf if b[5] is not None]
+        if ages:
+            m["stamp_age_ms"] = sum(ages) / len(ages) / 1e6
         if sized:
             m["bandwidth_kBps"] = sum(b[2] for b in buf) / span / 1000.0
         if n >= 3:

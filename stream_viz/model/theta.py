@@ -16,10 +16,10 @@ SCHEMAS: dict[str, tuple[str, ...]] = {
     ),
     "topic": (
         "rate_hz", "jitter_ms", "latency_ms", "bandwidth_kBps", "drops_per_s",
-        "publishers", "subscribers", "rate_recent_hz", "age_s",
+        "publishers", "subscribers", "rate_recent_hz", "age_s", "stamp_age_ms",
     ),
-    "node": ("publishers", "subscriptions", "services", "clients"),
-    "service": ("servers", "clients"),
+    "node": ("publishers", "subscriptions", "services", "clients", "sent_hz"),
+    "service": ("servers", "clients", "calls_per_s", "response_ms", "waiting", "wait_s"),
     "action": ("servers", "clients"),
     "host": ("cpu_percent", "rss_mb", "threads", "ctx_switches_per_s", "open_files",
              "io_read_kBps", "io_write_kBps"),

@@ -10,8 +10,9 @@ from stream_viz.settings import load, setting
 
 POLICIES = ("downstream", "upstream", "both")
 METHODS = ("trajectory", "pagerank", "hypothesis", "count")
-# Plugins whose alert on a node (or its process) says the fault is IN that member.
-DIRECT_PLUGINS = ("member_gone", "rosout", "diagnostics", "process_resources")
+# Plugins whose alert on a node (or its process) says the fault is IN that member (qos_compat:
+# the subscriber's own QoS cannot match its publishers, so its silence is its own doing).
+DIRECT_PLUGINS = ("member_gone", "rosout", "diagnostics", "process_resources", "qos_compat")
 WEIGHTS = {"topology": 3.0, "direct": 1.0, "cooccurrence": 1.0, "timelag": 1.0, "evidence": 1.0}
 # Anomaly strength of one alert, per severity of the one scale (its keys are the only valid ones).
 SEVERITY_WEIGHTS = dict(zip(SEVERITIES, (0.25, 0.5, 0.8, 1.0), strict=True))

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import math
+from collections import Counter
 
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import Log
+from rclpy.qos import qos_profile_unknown
 
 from stream_viz.collect.build import build_model
 from stream_viz.collect.fastdds import decode_gid
@@ -21,7 +23,7 @@ from stream_viz.collect.readings import (
     TopicStats,
 )
 from stream_viz.collect.rosgraph import is_hidden, is_param_service
-from stream_viz.collect.topics import diag_events, log_event, logger_node
+from stream_viz.collect.topics import log_event, logger_node
 from stream_viz.collect.window import window_metrics
 from stream_viz.model.graph import flow_edges
 from stream_viz.model.theta import theta_dict
@@ -117,10 +119,18 @@ def test_build_model_members_edges_tree():
     assert G.nodes["topic:/image"]["qos"] == [{"node": "/cam", "role": "pub", **QOS},
                                              {"node": "/ns/det", "role": "sub", **QOS}]
     det = theta_dict("node", G.nodes["node:/ns/det"]["theta"])
-    assert det == {"publishers": 0.0, "subscriptions": 1.0, "services": 0.0, "clients": 1.0}
+    assert {k: det[k] for k in ("publishers", "subscriptions", "services", "clients")} == {
+        "publishers": 0.0, "subscriptions": 1.0, "services": 0.0, "clients": 1.0}
+    assert math.isnan(det["sent_hz"])  # publishes nothing measured
+    # The only publisher of /image sent all of its 30 messages/s.
+    assert theta_dict("node", G.nodes["node:/cam"]["theta"])["sent_hz"] == 30.0
     assert theta_dict("process", G.nodes["process:100"]["theta"])["cpu_percent"] == 12.5
     assert np.isnan(G.nodes["process:200"]["theta"]).all()  # dead: no metrics
-    assert theta_dict("service", G.nodes["service:/srv"]["theta"]) == {"servers": 1.0, "clients": 1.0}
+    srv = theta_dict("service", G.nodes["service:/srv"]["theta"])
+    assert (srv["servers"], srv["clients"]) == (1.0, 1.0)
+    # not introspected: no calls observed
+    assert all(math.isnan(srv[k]) for k in ("calls_per_s", "response_ms", "waiting", "wait_s"))
+    assert "calls" not in G.nodes["service:/srv"]
 
 
 def test_build_model_single_top_has_no_root():
@@ -137,6 +147,7 @@ def _both(buf, *args, **kw):
     from stream_viz.collect.window import TopicWindow
 
     w = TopicWindow()
+    buf = [(*r, None, None)[:6] for r in buf]  # records without a publisher gid or a message age
     for r in buf:
         w.add(*r)
     want, got = window_metrics(buf, *args, **kw), w.metrics(*args, **kw)
@@ -192,19 +203,25 @@ def test_log_events():
 
 
 def test_diag_events_member_and_levels():
+    from stream_viz.collect.diagnostics import DiagnosticsReader
+    from stream_viz.collect.naming import NodeNames
+
     msg = DiagnosticArray(status=[
         DiagnosticStatus(level=DiagnosticStatus.ERROR, name="cam: driver", hardware_id="usb1",
                          values=[KeyValue(key="fps", value="0")]),
         DiagnosticStatus(level=DiagnosticStatus.OK, name="other", hardware_id="hw"),
         DiagnosticStatus(level=DiagnosticStatus.STALE, name="nobody", hardware_id="x"),
     ])
-    nodes = {"/cam", "/agg"}
-    evs = diag_events(msg, 1.0, ["/agg", "/cam"], nodes)  # two publishers: match by status name
+    index = NodeNames({"/cam", "/agg"})
+    evs = DiagnosticsReader().events("/diagnostics", msg, 1.0, None, index)  # publisher unknown
     assert [(e.member, e.level) for e in evs] == [
         ("node:/cam", "error"), ("topic:/diagnostics", "info"), ("topic:/diagnostics", "warn")]
-    assert evs[0].data == {"name": "cam: driver", "hardware_id": "usb1", "level": 2, "values": {"fps": "0"}}
-    only = diag_events(msg, 1.0, ["/agg"], nodes)  # the only publisher gets them all
-    assert {e.member for e in only} == {"node:/agg"}
+    assert evs[0].data == {"name": "cam: driver", "hardware_id": "usb1", "level": 2, "values": {"fps": "0"},
+                           "mapped_by": "name", "source": "/diagnostics", "publisher": None}
+    # Published by /agg: the status that names /cam stays on /cam, the others go to /agg.
+    by_agg = DiagnosticsReader().events("/diagnostics", msg, 1.0, "/agg", index)
+    assert [(e.member, e.data["mapped_by"]) for e in by_agg] == [
+        ("node:/cam", "name"), ("node:/agg", "publisher"), ("node:/agg", "publisher")]
 
 
 def test_drain_period_lets_the_fastest_topic_fill_a_quarter_of_its_queue():
@@ -220,12 +237,7 @@ def test_drain_period_lets_the_fastest_topic_fill_a_quarter_of_its_queue():
 class _Info:
     def __init__(self, name: str, gid: int) -> None:
         self.node_name, self.node_namespace, self.topic_type = name, "/", "rcl_interfaces/msg/Log"
-        self.endpoint_gid, self.qos_profile = [gid] * 16, _Qos()
-
-
-class _Qos:
-    history = reliability = durability = type("P", (), {"name": "UNKNOWN"})()
-    depth = 0
+        self.endpoint_gid, self.qos_profile = [gid] * 16, qos_profile_unknown
 
 
 class _GraphNode:
@@ -307,7 +319,9 @@ def test_topic_window_running_sums_equal_a_fresh_computation():
             t += int(rng.integers(1_000_000, 200_000_000))
             seq += 1 + int(rng.random() < 0.1)
             rec = (t, t - int(rng.integers(0, 5_000_000)), int(rng.integers(0, 60_000)),
-                   None if 150 <= step < 170 else seq)
+                   None if 150 <= step < 170 else seq,
+                   None if step % 7 == 0 else bytes([int(rng.integers(0, 3))]) * 16,  # 3 publishers
+                   None if step % 5 == 0 else int(rng.integers(-1_000_000, 400_000_000)))  # ages
             w.add(*rec)
             held.append(rec)
         now = t + int(rng.integers(0, s))
@@ -316,5 +330,7 @@ def test_topic_window_running_sums_equal_a_fresh_computation():
         assert list(w.buf) == held
         got, want = w.metrics(now, 0, 3 * s, 1), window_metrics(held, now, 0, 3 * s, 1)
         assert got.keys() == want.keys(), step
+        per_gid = Counter(r[4] for r in held if r[4] is not None)
+        assert w.publisher_rates(now, 0, 3 * s) == {g: n / 3 for g, n in per_gid.items()}, step
         for k in want:
             assert got[k] == pytest.approx(want[k], rel=1e-9, abs=1e-9), (step, k)

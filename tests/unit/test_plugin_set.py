@@ -14,8 +14,8 @@ from stream_viz.model.graph import add_member, new_graph
 from stream_viz.model.history import History
 from stream_viz.records import Alert
 
-BUILTINS = ["diagnostics", "graph_anomalies", "member_gone", "process_resources", "rosout",
-            "topic_latency", "topic_rate"]
+BUILTINS = ["diagnostics", "graph_anomalies", "member_gone", "message_age", "process_resources",
+            "qos_compat", "rosout", "services", "topic_latency", "topic_rate"]
 
 GOOD = '''
 from stream_viz.detect.api import Plugin
@@ -374,7 +374,8 @@ def test_the_builtins_declare_the_settings_their_helpers_read():
     found, _, _ = discover(cwd_plugins=False)
     uses = {n: [h.__name__ for h in type(p).uses] for p, n, _ in found if type(p).uses}
     assert uses == {"process_resources": ["symptoms"], "topic_latency": ["excess", "confirm"],
-                    "topic_rate": ["cached_baseline"]}
+                    "topic_rate": ["cached_baseline"], "message_age": ["excess", "confirm"],
+                    "services": ["cached_baseline", "rise"]}
     assert all(missing_settings(type(p)) == {} for p, _, _ in found)
 
 

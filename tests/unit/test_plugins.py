@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from stream_viz.detect.api import record_history
 from stream_viz.detect.plugin_set import PluginSet
@@ -233,18 +232,6 @@ def test_graph_anomalies_healthy_graph_is_quiet():
     G = model()
     G.nodes["topic:/img"]["qos"] = [_qos("/camera", "pub"), _qos("/detector", "sub")]
     assert drive("graph_anomalies", [(float(t), G, []) for t in range(10)]) == []
-
-
-@pytest.mark.parametrize(("pub", "sub", "bad"), [
-    (("best_effort", "volatile"), ("reliable", "volatile"), True),
-    (("reliable", "volatile"), ("best_effort", "volatile"), False),
-    (("reliable", "volatile"), ("reliable", "transient_local"), True),
-    (("reliable", "transient_local"), ("reliable", "volatile"), False),
-])
-def test_graph_anomalies_qos(pub, sub, bad):
-    G = model()
-    G.nodes["topic:/img"]["qos"] = [_qos("/camera", "pub", *pub), _qos("/detector", "sub", *sub)]
-    assert drive("graph_anomalies", [(1.0, G, [])]) == ([(1.0, "node:/detector", "error")] if bad else [])
 
 
 def test_graph_anomalies_subscriber_without_publisher_after_grace():

@@ -1,0 +1,90 @@
+"""The age of a topic's data from its messages' header stamps: stale data, or skewed clocks.
+
+The collector measures ``stamp_age_ms`` (received − ``header.stamp``, mean over its window) for
+types that begin with a ``std_msgs/Header`` whose stamp is set. It is the age of the data (since
+the sensor reading or the input it was computed from), beside the transport latency (since it was
+published). It compares two clocks, the publisher's and ours: a negative or implausible age is a
+clock problem, not a delay, and is said so.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from typing import Any, ClassVar
+
+from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, streak
+from stream_viz.records import Alert
+
+
+class MessageAge(Plugin):
+    """Alerts on watched topics whose messages arrive with old or impossible header stamps.
+
+    * ``stale`` (warn): the age rises above the topic's own baseline by ``max(k·σ,
+      min_rise_ms, rise_ratio × baseline)`` for ``confirm`` samples with a new message; with
+      ``max_age_ms`` > 0 also any age above it;
+    * ``clock_skew`` (warn): the age is below ``-skew_ms`` (the stamps are in our future: the
+      publisher's clock runs ahead, another host's or a simulated one) or above ``implausible_s``
+      (stamps not from this clock at all: simulated time, an unset or unsynchronised clock), for
+      ``confirm`` samples. No stale check on such a topic: its ages say nothing about delay.
+    """
+
+    name = "message_age"
+    kinds = ("topic",)
+    uses = (excess, confirm)
+    settings: ClassVar[dict[str, Any]] = {
+        **BASELINE_SETTINGS,
+        "k": 6.0,
+        "confirm": 3,
+        "min_rise_ms": 100.0,
+        "rise_ratio": 0.5,
+        "max_age_ms": 0.0,
+        "skew_ms": 20.0,
+        "implausible_s": 3600.0,
+    }
+
+    def check(self, ctx: PluginContext) -> Iterator[Alert]:
+        s = ctx.settings
+        alerting = ctx.state.setdefault("alerting", set())
+        since = ctx.t - ctx.state.get("t_prev", -math.inf)
+        ctx.state["t_prev"] = ctx.t
+        for topic in ctx.watched():
+            age = ctx.value(topic, "stamp_age_ms")
+            if math.isnan(age):
+                continue
+            newest = ctx.value(topic, "age_s")
+            fresh = math.isnan(newest) or newest < since  # a message since the last sample
+            skewed = age < -s["skew_ms"] or age > s["implausible_s"] * 1000.0
+            if streak(ctx.state, (topic, "skew"), skewed, fresh) >= s["confirm"]:
+                yield _skew(ctx, topic, age)
+                continue
+            if skewed:
+                continue
+            yield from self._stale(ctx, topic, age, fresh, alerting)
+
+    @staticmethod
+    def _stale(ctx: PluginContext, topic: str, age: float, fresh: bool, alerting: set) -> Iterator[Alert]:
+        s = ctx.settings
+        seen = excess(ctx, topic, "stamp_age_ms", s["min_rise_ms"], alerting)
+        if seen is not None:
+            value, med, risen = seen
+            seen = (value, med, risen and value - med >= s["rise_ratio"] * abs(med))
+        risen = confirm(ctx, topic, "stamp_age_ms", seen, alerting, fresh)
+        over = s["max_age_ms"] > 0 and age > s["max_age_ms"]
+        if risen is None and not over:
+            return
+        usual = f", normally {risen[1]:.0f} ms" if risen is not None else f" (limit {s['max_age_ms']:.0f} ms)"
+        yield ctx.alert(topic, "warn", f"stale data: messages arrive {age:.0f} ms after their header "
+                        f"stamp{usual}", symptom="stale", value_ms=age,
+                        baseline_ms=None if risen is None else risen[1])
+
+
+def _skew(ctx: PluginContext, topic: str, age: float) -> Alert:
+    if age < 0:
+        why = (f"header stamps are {-age:.0f} ms ahead of this host's clock: the publisher's clock "
+               "is skewed (another host not synchronised, or simulated time); not a latency")
+    else:
+        why = (f"header stamps are {age / 1000:.0f} s behind this host's clock: they are not from "
+               "the wall clock (simulated time, or an unset clock); not a latency")
+    return ctx.alert(topic, "warn", why, symptom="clock_skew", value_ms=age)

@@ -1,0 +1,219 @@
+"""Incompatible QoS between a topic's publishers and a subscription, as ros2doctor checks it.
+
+ros2doctor's ``QoSCompatibilityCheck`` calls ``rclpy.qos.qos_check_compatible(pub, sub)`` for
+every publisher/subscription pair of every topic, which is rmw's ``qos_profile_check_compatible``
+(rmw_dds_common, Jazzy). `compatibility` is the same rules on the collector's plain QoS dicts
+(``stream_viz.collect.rosgraph.qos_dict``), with the same reasons:
+
+errors (DDS will not match the two: the subscription receives nothing from that publisher)
+  * best-effort publisher, reliable subscription;
+  * volatile publisher, transient-local subscription;
+  * the subscription has a deadline and the publisher none (unspecified), or a shorter one;
+  * automatic liveliness publisher, manual-by-topic subscription;
+  * the subscription has a liveliness lease duration and the publisher none, or a shorter one;
+
+warnings, only without errors (the policy of an end is ``system_default`` or ``unknown``, so
+compatibility cannot be told): reliability, durability, liveliness.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from typing import Any, ClassVar
+
+from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.records import Alert
+
+UNSPECIFIED = 0  # rmw's default deadline / lease duration (RMW_DURATION_UNSPECIFIED)
+_UNKNOWN = ("system_default", "unknown")
+
+
+def compatibility(pub: dict[str, Any], sub: dict[str, Any]) -> tuple[str, list[str]]:
+    """Return ``("ok" | "warning" | "error", reasons)`` for a publisher and a subscription QoS.
+
+    The rules and reason texts of rmw's ``qos_profile_check_compatible`` (module docstring);
+    durations are ns (``deadline_ns``, ``liveliness_lease_ns``; 0 = unspecified). A key missing
+    from a dict (an older model) is not checked.
+    """
+    errors = []
+    p, s = _policies(pub), _policies(sub)
+    if p["reliability"] == "best_effort" and s["reliability"] == "reliable":
+        errors.append("Best effort publisher and reliable subscription")
+    if p["durability"] == "volatile" and s["durability"] == "transient_local":
+        errors.append("Volatile publisher and transient local subscription")
+    _durations(pub, sub, "deadline_ns", errors, "Subscription has a deadline, but publisher does not",
+               "Subscription deadline is less than publisher deadline")
+    if p["liveliness"] == "automatic" and s["liveliness"] == "manual_by_topic":
+        errors.append("Publisher's liveliness is automatic and subscription's is manual by topic")
+    _durations(pub, sub, "liveliness_lease_ns", errors,
+               "Subscription has a liveliness lease duration, but publisher does not",
+               "Subscription liveliness lease duration is less than publisher")
+    if errors:
+        return "error", errors
+    warnings = _warnings(p, s)
+    return ("warning", warnings) if warnings else ("ok", [])
+
+
+def _durations(pub: dict[str, Any], sub: dict[str, Any], key: str, errors: list[str], none: str,
+               less: str) -> None:
+    """rmw's two rules for a requested duration (deadline, lease): the publisher offers none, or
+    a longer one than the subscription requests."""
+    pd, sd = pub.get(key), sub.get(key)
+    if not isinstance(pd, int) or not isinstance(sd, int):
+        return
+    if pd == UNSPECIFIED and sd != UNSPECIFIED:
+        errors.append(none)
+    if pd != UNSPECIFIED and sd != UNSPECIFIED and sd < pd:
+        errors.append(less)
+
+
+def _warnings(p: dict[str, str], s: dict[str, str]) -> list[str]:
+    """rmw's warnings (policies it cannot judge), in its order and words."""
+    out = []
+    # ("durabilty" is rmw's own spelling in that message)
+    for key, both, sub_needs, sub_text, pub_gives, pub_text in (
+        ("reliability", "Publisher reliability is {p} and subscription reliability is {s}", "reliable",
+         "Reliable subscription, but publisher is {p}", "best_effort",
+         "Best effort publisher, but subscription is {s}"),
+        ("durability", "Publisher durabilty is {p} and subscription durability is {s}", "transient_local",
+         "Transient local subscription, but publisher is {p}", "volatile",
+         "Volatile publisher, but subscription is {s}"),
+        ("liveliness", "Publisher liveliness is {p} and subscription liveliness is {s}", "manual_by_topic",
+         "Subscription's liveliness is manual by topic, but publisher's is {p}", "automatic",
+         "Publisher's liveliness is automatic, but subscription's is {s}"),
+    ):
+        pv, sv = p[key], s[key]
+        if not pv or not sv:
+            continue
+        pu, su = pv in _UNKNOWN, sv in _UNKNOWN
+        if pu and su:
+            out.append(both.format(p=pv, s=sv))
+        elif pu and sv == sub_needs:
+            out.append(sub_text.format(p=pv))
+        elif pv == pub_gives and su:
+            out.append(pub_text.format(s=sv))
+    return out
+
+
+def rmw_reason(level: str, reasons: list[str]) -> str:
+    """Return ``reasons`` as rmw writes them (``"ERROR: …;WARNING: …;"``), for comparison."""
+    return "".join(f"{level.upper()}: {r};" for r in reasons) if level != "ok" else ""
+
+
+def _policies(qos: dict[str, Any]) -> dict[str, str]:
+    return {k: _policy(qos, k) for k in ("reliability", "durability", "liveliness")}
+
+
+# rclpy's enum numbers, as older models stored them
+_NUMBERED = {
+    "reliability": dict(enumerate(("system_default", "reliable", "best_effort", "unknown",
+                                   "best_available"))),
+    "durability": dict(enumerate(("system_default", "transient_local", "volatile", "unknown",
+                                  "best_available"))),
+    "liveliness": {0: "system_default", 1: "automatic", 3: "manual_by_topic", 4: "unknown",
+                   5: "best_available"},
+}
+
+
+def _policy(qos: dict[str, Any], key: str) -> str:
+    """A policy as rmw names it (``reliable``, ``best_effort``, ``volatile``, ``automatic``, …); '' if
+    absent. Also reads rclpy's enum numbers and names (``ReliabilityPolicy.RELIABLE``)."""
+    raw = qos.get(key)
+    if isinstance(raw, int) and not isinstance(raw, bool):
+        return _NUMBERED[key].get(raw, "")
+    return str(raw or "").lower().rsplit(".", 1)[-1]
+
+
+class QosCompat(Plugin):
+    """Alerts on a subscription whose QoS cannot match its topic's publishers (`compatibility`).
+
+    On the subscriber node, ``error`` when it matches none of the publishers (it receives
+    nothing: the misconfigured end is the cause of its silence), ``warn`` when it matches only
+    some; the reasons and the publishers in the data. With ``warnings``, rmw's warnings (policies
+    it cannot judge) are ``info`` alerts. A topic is checked when it or the subscriber is
+    watched; topics in ``ignore_topics`` never. Rechecked when the graph or the watchlist
+    changed, or every ``recheck_s`` (the QoS of new endpoints may come a sample late).
+    """
+
+    name = "qos_compat"
+    kinds = ("node", "topic")
+    settings: ClassVar[dict[str, Any]] = {"ignore_topics": [], "warnings": False, "recheck_s": 10.0}
+
+    def check(self, ctx: PluginContext) -> Iterator[Alert]:
+        for topic, sub, level, mismatched, total, reasons in _analyse(ctx):
+            if level == "warning":
+                if ctx.settings["warnings"]:
+                    yield ctx.alert(sub, "info", f"QoS on {_name(topic)} cannot be judged: "
+                                    + "; ".join(reasons),
+                                    symptom="qos_unknown", topic=topic, publishers=mismatched,
+                                    reasons=reasons)
+                continue
+            nothing = len(mismatched) == total
+            what = ("receives nothing" if nothing
+                    else f"receives from {total - len(mismatched)} of {total} publishers")
+            yield ctx.alert(sub, "error" if nothing else "warn",
+                            f"QoS incompatible on {_name(topic)}, {what}: " + "; ".join(reasons),
+                            symptom="qos_incompatible", topic=topic, publishers=mismatched,
+                            reasons=reasons, receives_nothing=nothing)
+
+
+def _analyse(ctx: PluginContext) -> list[tuple[str, str, str, list[str], int, list[str]]]:
+    """``(topic, subscriber, level, mismatched publishers, publishers, reasons)`` per subscriber
+    with an error (or a warning), cached until the graph or the watchlist changes."""
+    cached = ctx.state.get("analysis")
+    if cached is not None and not ctx.diff and cached[0] == ctx.watch and ctx.t < cached[1]:
+        return cached[2]
+    ignore = {t if t.startswith("topic:") else f"topic:{t}" for t in ctx.settings["ignore_topics"]}
+    out = []
+    for topic in ctx.members("topic"):
+        if topic in ignore:
+            continue
+        pubs, subs = endpoints(ctx, topic)
+        for sub in sorted(subs):
+            if not (topic in ctx.watch or sub in ctx.watch) or not pubs:
+                continue
+            found: dict[str, list[tuple[str, list[str]]]] = {}
+            for pub, pqs in pubs.items():
+                for pq in pqs:
+                    for sq in subs[sub]:
+                        level, why = compatibility(pq, sq)
+                        if level != "ok":
+                            found.setdefault(pub, []).append((level, why))
+            errors = sorted(p for p, r in found.items() if any(lv == "error" for lv, _ in r))
+            level = "error" if errors else "warning" if found else "ok"
+            if level == "ok":
+                continue
+            chosen = errors or sorted(found)
+            reasons = sorted({f"{p}: {w}" for p in chosen
+                              for lv, why in found[p] if lv == level for w in why})
+            out.append((topic, sub, level, chosen, len(pubs), reasons))
+    ctx.state["analysis"] = (ctx.watch, ctx.t + ctx.settings["recheck_s"], out)
+    return out
+
+
+def endpoints(ctx: PluginContext, topic: str) -> tuple[dict[str, list[dict]], dict[str, list[dict]]]:
+    """Publisher and subscriber nodes of ``topic`` with their QoS dicts.
+
+    From the topic attribute ``qos`` (one ``{"node", "role", "reliability", …}`` per endpoint, as
+    the collector writes it), else the data-flow edge's ``qos``; a node with neither has none.
+    """
+    pubs: dict[str, list[dict]] = {u: [] for u in ctx.publishers(topic)}
+    subs: dict[str, list[dict]] = {v: [] for v in ctx.subscribers(topic)}
+    for q in ctx.attr(topic, "qos") or ():
+        if not isinstance(q, dict):
+            continue
+        side = pubs if q.get("role") == "pub" else subs if q.get("role") == "sub" else None
+        node = str(q.get("node", ""))
+        member = node if node.startswith("node:") else f"node:{node}"
+        if side is not None and member in side:
+            side[member].append(q)
+    for side, edge in ((pubs, lambda u: (u, topic)), (subs, lambda v: (topic, v))):
+        for m in side:
+            q = ctx.flow_edge(*edge(m)).get("qos")
+            if not side[m] and isinstance(q, dict):
+                side[m] = [q]
+    return pubs, subs
+
+
+def _name(member: str) -> str:
+    return member.partition(":")[2]

@@ -1,0 +1,144 @@
+"""Service clients left waiting: by an introspected call, by their own log, by a server gone.
+
+What the collector observes without calling anything: the calls of services whose event topic
+is on (service introspection: the service's θ ``waiting``/``wait_s``/``response_ms`` and its
+attribute ``calls``, the open calls with their client and server), the /rosout lines of a client
+that name one of its services or their server (``log`` events list ``services`` and ``nodes``),
+and a service's ``servers`` becoming empty while it still has clients.
+
+Every alert is on the client (its symptom) and names the service and the server in its data
+(``service``, ``server``, ``client``): the server is where the fault is looked for.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from typing import Any, ClassVar
+
+from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, rise
+from stream_viz.records import SEVERITY_RANK as RANK
+from stream_viz.records import Alert
+
+
+class Services(Plugin):
+    """Alerts on the clients of a service (or the service, when its waiting client is unknown):
+
+    * ``waiting`` (warn): an observed call has been open ≥ ``max(min_wait_s, wait_factor × the
+      service's usual response time)``; or the client logged (≥ ``log_level``, ERROR: a WARN
+      about a service not ready yet is the usual bring-up) a line naming the service or its server;
+    * ``slow_response`` (warn): the service's mean response time rose above its own baseline by
+      ``max(k·σ, min_rise_ms)`` for ``confirm`` samples;
+    * ``server_gone`` (warn): the service had a server and has none while clients remain.
+
+    A service is checked when it or one of its clients is watched.
+    """
+
+    name = "services"
+    kinds = ("service",)
+    uses = (cached_baseline, rise)
+    settings: ClassVar[dict[str, Any]] = {
+        **BASELINE_SETTINGS,
+        "k": 6.0,
+        "confirm": 2,
+        "min_wait_s": 2.0,
+        "wait_factor": 3.0,
+        "min_rise_ms": 200.0,
+        "log_level": "error",
+        "server_gone": True,
+    }
+
+    def check(self, ctx: PluginContext) -> Iterator[Alert]:
+        alerting = ctx.state.setdefault("alerting", set())
+        had = ctx.state.setdefault("servers", {})
+        for service in ctx.members("service"):
+            clients = ctx.clients(service)
+            if service not in ctx.watch and not any(c in ctx.watch for c in clients):
+                continue
+            servers = ctx.servers(service)
+            yield from _waiting(ctx, service, servers)
+            yield from _slow(ctx, service, servers, clients, alerting)
+            if servers:
+                had[service] = servers
+            elif had.get(service) and clients and ctx.settings["server_gone"]:
+                gone = had[service]
+                for c in clients:
+                    yield ctx.alert(c, "warn", f"{_name(service)} has no server any more (was "
+                                    f"{', '.join(_name(g) for g in gone)})", symptom="server_gone",
+                                    service=service, server=gone[0], servers=gone, client=c)
+        yield from _logged(ctx)
+
+
+def _waiting(ctx: PluginContext, service: str, servers: list[str]) -> Iterator[Alert]:
+    """One alert per client with a call open longer than the service's usual response allows."""
+    s = ctx.settings
+    calls = ctx.attr(service, "calls") or []
+    waiting = ctx.state.setdefault("waiting", set())  # the usual response time stays frozen meanwhile
+    if not calls:
+        waiting.discard(service)
+        return
+    base = cached_baseline(ctx, service, "response_ms", frozen=service in waiting)
+    usual_ms = base[0] if base is not None and not math.isnan(base[0]) else float("nan")
+    limit = s["min_wait_s"] if math.isnan(usual_ms) else max(s["min_wait_s"],
+                                                             s["wait_factor"] * usual_ms / 1e3)
+    longest: dict[str, dict[str, Any]] = {}
+    for call in calls:
+        waited = call.get("waited_s", 0.0)
+        member = call.get("client") or service
+        if waited >= limit and waited > longest.get(member, {}).get("waited_s", -1.0):
+            longest[member] = call
+    waiting.discard(service)
+    if longest:
+        waiting.add(service)
+    for member, call in sorted(longest.items()):
+        server = call.get("server") or (servers[0] if len(servers) == 1 else None)
+        usual = "" if math.isnan(usual_ms) else f", usually answered in {usual_ms:.0f} ms"
+        yield ctx.alert(member, "warn", f"waits {call['waited_s']:.1f} s for {_name(service)} from "
+                        f"{_name(server) if server else 'an unknown server'}{usual}",
+                        symptom="waiting", via="introspection", service=service, server=server,
+                        client=call.get("client"), waited_s=call["waited_s"])
+
+
+def _slow(ctx: PluginContext, service: str, servers: list[str], clients: list[str],
+          alerting: set) -> Iterator[Alert]:
+    risen = rise(ctx, service, "response_ms", ctx.settings["min_rise_ms"], alerting)
+    if risen is None:
+        return
+    value, med = risen
+    server = servers[0] if len(servers) == 1 else None
+    for member in clients or [service]:
+        yield ctx.alert(member, "warn", f"{_name(service)} answers in {value:.0f} ms, normally {med:.0f} ms",
+                        symptom="slow_response", service=service, server=server,
+                        client=member if member != service else None, value_ms=value, baseline_ms=med)
+
+
+def _logged(ctx: PluginContext) -> Iterator[Alert]:
+    """A client's log line naming one of its services, or a server of one: it waits on it."""
+    floor = RANK.get(ctx.settings["log_level"], RANK["warn"])
+    seen: set[tuple[str, str]] = set()
+    for e in ctx.events:
+        if e.kind != "log" or RANK.get(e.level, -1) < floor:
+            continue
+        named_services = set(e.data.get("services", ()))
+        named_nodes = set(e.data.get("nodes", ()))
+        if not named_services and not named_nodes:
+            continue
+        for service in ctx.members("service"):
+            if e.member not in ctx.clients(service):
+                continue
+            servers = ctx.servers(service)
+            hit = [n for n in servers if n in named_nodes]
+            if service not in named_services and not hit:
+                continue
+            if (e.member, service) in seen:
+                continue
+            seen.add((e.member, service))
+            server = hit[0] if hit else (servers[0] if len(servers) == 1 else None)
+            yield ctx.alert(e.member, "warn", f"logged about {_name(service)}: {e.text}",
+                            symptom="waiting", via="log", service=service, server=server,
+                            client=e.member)
+
+
+def _name(member: str | None) -> str:
+    return "?" if member is None else member.partition(":")[2]

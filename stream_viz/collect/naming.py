@@ -1,0 +1,116 @@
+"""Which node or service of the graph a name in free text refers to. Pure.
+
+Robots name their members loosely: a ``diagnostic_updater`` status is ``"<node name>: <task>"``
+with or without the namespace (``use_fqn``; rclpy's fqn form even gives ``"//talker"``), a
+diagnostic aggregator republishes it as ``"/Robot/Sensors/<name with / as spaces>"``, a hardware
+id may be a node's name, a log line says ``"service /plan not available"`` or ``"planner timed
+out"``. `NodeNames` resolves such a name to one node fully qualified name, or to none when it is
+ambiguous.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable
+
+_SEP = re.compile(r"[/\s]+")
+# A ROS-name-like token in free text: an optional ~ or leading /, then name tokens joined by /.
+_NAME = re.compile(r"(?<![\w/~])~?/?[A-Za-z_]\w*(?:/[A-Za-z_]\w*)*")
+MIN_BASE = 3  # a bare word shorter than this is not taken for a node's base name
+
+
+def tokens(name: str) -> list[str]:
+    """Return the name tokens of ``name``, split on ``/`` and whitespace (empty ones dropped)."""
+    return [t for t in _SEP.split(name) if t]
+
+
+def join(namespace: str, toks: list[str]) -> str:
+    """Return the fully qualified name of ``toks`` under ``namespace`` (``/`` for the root)."""
+    ns = namespace.rstrip("/")
+    return ns + "/" + "/".join(toks)
+
+
+class NodeNames:
+    """The node names of a graph, indexed for `resolve`.
+
+    Parameters
+    ----------
+    nodes : iterable of str
+        Fully qualified node names.
+    """
+
+    def __init__(self, nodes: Iterable[str]) -> None:
+        self.fqns = frozenset(nodes)
+        self.by_base: dict[str, list[str]] = {}
+        for fqn in sorted(self.fqns):
+            self.by_base.setdefault(fqn.rsplit("/", 1)[-1], []).append(fqn)
+
+    def resolve(self, name: str, namespace: str = "/", bare: bool = True, tails: bool = True) -> str | None:
+        """Return the node ``name`` refers to, or None.
+
+        In order: the name as a fully qualified name and relative to ``namespace`` (the namespace
+        first for a relative name, as ROS resolves it); with ``tails``,
+        the longest tail of its tokens as a fully qualified name (an aggregator's
+        ``/Robot/Sensors/lidar`` → ``/lidar``) or under ``namespace``; with ``bare``, the last
+        token as the base name of exactly one node (of several, the one under ``namespace``).
+        """
+        toks = tokens(name)
+        if not toks:
+            return None
+        # a relative name resolves in the namespace first, as ROS resolves it
+        if namespace == "/":
+            spaces: tuple[str, ...] = ("/",)
+        else:
+            spaces = ("/", namespace) if name.startswith("/") else (namespace, "/")
+        for k in range(len(toks) if tails else 1):
+            tail = toks[k:]
+            for ns in spaces:
+                fqn = join(ns, tail)
+                if fqn in self.fqns:
+                    return fqn
+        if not bare or len(toks[-1]) < MIN_BASE:
+            return None
+        found = self.by_base.get(toks[-1], [])
+        if len(found) == 1:
+            return found[0]
+        inside = [f for f in found if f.rsplit("/", 1)[0] == namespace.rstrip("/")]
+        return inside[0] if len(inside) == 1 else None
+
+
+def status_head(name: str) -> str:
+    """Return the part of a diagnostic status name before ``": "`` (the updater's node name),
+    or the whole name when it has none."""
+    head, sep, _ = name.partition(": ")
+    return head if sep else name
+
+
+def named_in_text(text: str, index: NodeNames, services: Iterable[str], namespace: str = "/",
+                  node: str | None = None) -> tuple[list[str], list[str]]:
+    """Return ``(nodes, services)`` a line of text names (fully qualified, sorted).
+
+    ``namespace`` and ``node`` are the writer's (relative and private ``~/`` names resolve
+    against them; the writer itself is not listed). Services are matched by their full name,
+    relative or private; nodes as `NodeNames.resolve`, bare base names included.
+    """
+    srv = set(services)
+    found_nodes: set[str] = set()
+    found_services: set[str] = set()
+    for m in _NAME.finditer(text):
+        word = m.group(0)
+        if word.startswith("~"):
+            cands = [join(node or namespace, tokens(word[1:]))]
+        elif word.startswith("/"):
+            cands = [word]
+        else:
+            cands = [join(namespace, tokens(word)), join("/", tokens(word))]
+        hit = next((c for c in cands if c in srv), None)
+        if hit is not None:
+            found_services.add(hit)
+            continue
+        if word.startswith(("~", "/")):  # private or absolute: that name exactly
+            n = cands[0] if cands[0] in index.fqns else None
+        else:
+            n = index.resolve(word, namespace, tails=False)
+        if n is not None and n != node:
+            found_nodes.add(n)
+    return sorted(found_nodes), sorted(found_services)

@@ -1,0 +1,277 @@
+"""Evidence from real robots against real rclpy nodes in subprocesses (issue 16 items 3–6, 8).
+
+Each run starts healthy (no alert of the plugin under test may come then), then the test creates
+a flag file and the child turns sick in one way: header stamps lagging 300 ms, a service server
+answering slowly, one of two publishers of a topic slowing down. The QoS and diagnostics runs are
+sick from the start (a misconfigured subscription, an updater-style ERROR status).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+
+from stream_viz.model.theta import theta_dict
+from stream_viz.testing import wait_for
+from tests.ros.test_plugins_ros import PERIOD, Run, _ready, _sick_after_healthy
+
+pytestmark = pytest.mark.ros
+
+FAST = {
+    "message_age": {"warmup_s": 4.0, "refresh_s": 2.0},
+    "services": {"warmup_s": 4.0, "refresh_s": 2.0},
+}
+
+
+@pytest.fixture
+def run_of(ros_domain):
+    runs = []
+
+    def make(plugins, settings=None):
+        r = Run(ros_domain, plugins, settings or FAST)
+        runs.append(r)
+        return r
+
+    yield make
+    for r in runs:
+        r.close()
+
+
+STAMPED = """
+import os, sys
+import rclpy
+from rclpy.duration import Duration
+from rclpy.node import Node
+from sensor_msgs.msg import Imu
+flag = sys.argv[1]
+rclpy.init()
+n = Node('imu_driver', namespace='/robot')
+pub = n.create_publisher(Imu, '/robot/imu', 10)
+def tick():
+    m = Imu()
+    lag = Duration(seconds=0.3) if os.path.exists(flag) else Duration()
+    m.header.stamp, m.header.frame_id = (n.get_clock().now() - lag).to_msg(), 'imu'
+    pub.publish(m)
+n.create_timer(0.05, tick)
+rclpy.spin(n)
+"""
+
+
+def test_message_age_of_stamps_lagging_300ms(children, tmp_path, run_of):
+    flag = tmp_path / "lag"
+    children.python(STAMPED, str(flag), name="imu")
+    run = run_of(["message_age"])
+    _ready(run, "topic:/robot/imu")
+    wait_for(lambda: (run.step(), not math.isnan(_theta(run, "topic:/robot/imu")["stamp_age_ms"]))[1],
+             timeout=20, period=PERIOD)
+    healthy = _theta(run, "topic:/robot/imu")
+    assert 0.0 <= healthy["stamp_age_ms"] < 50.0, healthy  # stamped at publishing: only transport
+    a = _sick_after_healthy(run, flag, "message_age", "topic:/robot/imu", healthy_s=6.0, symptom="stale")
+    # seen while the 3 s window still holds fresh messages too: the mean is on its way to 300 ms
+    assert a.severity == "warn" and 100.0 <= a.data["value_ms"] <= 400.0, a
+    run.observe(3.5)  # the window has turned over
+    sick = _theta(run, "topic:/robot/imu")
+    # the data's age, beside a transport latency that did not change
+    assert 280.0 <= sick["stamp_age_ms"] <= 400.0 and sick["latency_ms"] < 50.0, sick
+
+
+def _spin(nodes: str) -> str:
+    """The end of a child script: spin ``nodes`` (a Python tuple's items) on one executor."""
+    return f"""
+from rclpy.executors import SingleThreadedExecutor
+ex = SingleThreadedExecutor()
+for n in ({nodes},):
+    ex.add_node(n)
+ex.spin()
+"""
+
+
+QOS = """
+import rclpy
+from rclpy.duration import Duration
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+rclpy.init()
+talker, listener, watchdog = (rclpy.create_node(x) for x in ('talker', 'listener', 'watchdog'))
+best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+pub = talker.create_publisher(String, '/chatter', best_effort)
+status = talker.create_publisher(String, '/status', 10)  # no deadline offered
+listener.create_subscription(String, '/chatter', lambda m: None,
+                             QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+watchdog.create_subscription(String, '/status', lambda m: None,
+                             QoSProfile(depth=10, deadline=Duration(seconds=0.1)))
+talker.create_timer(0.05, lambda: (pub.publish(String(data='x')), status.publish(String(data='ok'))))
+""" + _spin("talker, listener, watchdog")
+
+
+def test_qos_incompatible_subscribers_reliable_and_deadline(children, run_of):
+    children.python(QOS, name="qos")
+    run = run_of(["qos_compat"])
+    _ready(run, "node:/talker", "node:/listener", "node:/watchdog")
+    found = run.until(lambda a: a.member == "node:/watchdog", 20.0)
+    found += run.until(lambda a: a.member == "node:/listener", 10.0)
+    by = {a.member: a for a in found}
+    assert set(by) == {"node:/listener", "node:/watchdog"}, run.alerts
+    assert by["node:/listener"].data["reasons"] == [
+        "node:/talker: Best effort publisher and reliable subscription"]
+    assert by["node:/watchdog"].data["reasons"] == [
+        "node:/talker: Subscription deadline is less than publisher deadline"]
+    assert all(a.severity == "error" and a.data["receives_nothing"] for a in by.values())
+    assert not any(a.member == "node:/talker" for a in run.alerts)
+    assert run.problems == []
+
+
+DIAG = """
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+rclpy.init()
+my_node = rclpy.create_node('my_node', namespace='/robot')
+monitor = rclpy.create_node('monitor', namespace='/robot')
+agg = rclpy.create_node('aggregator', namespace='/robot')
+pub = monitor.create_publisher(DiagnosticArray, '/diagnostics', 10)
+agg_pub = agg.create_publisher(DiagnosticArray, '/diagnostics_agg', 10)
+def status(name):
+    return DiagnosticStatus(level=DiagnosticStatus.ERROR, name=name, hardware_id='motor-ctrl-7',
+                            message='overcurrent')
+def tick():
+    # as diagnostic_updater names it: "<node name>: <task>", published here by another node
+    pub.publish(DiagnosticArray(status=[status('my_node: motor')]))
+    # and as an aggregator republishes it: a copy, and its analyzer's summary
+    agg_pub.publish(DiagnosticArray(status=[
+        DiagnosticStatus(level=DiagnosticStatus.ERROR, name='/Robot/Motors', message='Error'),
+        status('/Robot/Motors/my_node: motor')]))
+monitor.create_timer(0.5, tick)
+""" + _spin("my_node, monitor, agg")
+
+
+def test_diagnostics_updater_status_mapped_to_its_node_by_name(children, run_of):
+    children.python(DIAG, name="diag")
+    run = run_of(["diagnostics"])
+    _ready(run, "node:/robot/my_node", "node:/robot/monitor", "node:/robot/aggregator")
+    events = []
+
+    def step_collect():
+        events.extend(e for e in run.step().events if e.kind == "diag")
+        return [a for a in run.alerts if a.plugin == "diagnostics"]
+
+    found = wait_for(step_collect, timeout=20, period=PERIOD)
+    run.observe(2.0)
+    a = found[0]
+    assert (a.member, a.severity, a.data["mapped_by"]) == ("node:/robot/my_node", "error", "name"), a
+    assert {x.member for x in run.alerts} == {"node:/robot/my_node"}  # not the monitor, not the aggregator
+    assert events and all(e.data["source"] == "/diagnostics" for e in events)  # the copies were not counted
+    assert {e.data["publisher"] for e in events} == {"node:/robot/monitor"}  # the gid told the publisher
+
+
+SERVER = """
+import os, sys, time
+import rclpy
+from rclpy.qos import qos_profile_system_default
+from rclpy.service_introspection import ServiceIntrospectionState
+from std_srvs.srv import Trigger
+flag = sys.argv[1]
+rclpy.init()
+n = rclpy.create_node('planner')
+def plan(req, resp):
+    time.sleep(6.0 if os.path.exists(flag) else 0.05)
+    resp.success = True
+    return resp
+srv = n.create_service(Trigger, '/plan', plan)
+srv.configure_introspection(n.get_clock(), qos_profile_system_default, ServiceIntrospectionState.METADATA)
+rclpy.spin(n)
+"""
+
+CLIENT = """
+import rclpy
+from std_srvs.srv import Trigger
+rclpy.init()
+n = rclpy.create_node('bt_navigator')
+cli = n.create_client(Trigger, '/plan')
+pending = [None]
+def call():
+    if cli.service_is_ready() and (pending[0] is None or pending[0].done()):
+        pending[0] = cli.call_async(Trigger.Request())
+n.create_timer(0.5, call)
+rclpy.spin(n)
+"""
+
+
+def test_services_waiting_client_names_the_slow_server(children, tmp_path, run_of):
+    flag = tmp_path / "slow"
+    children.python(SERVER, str(flag), name="planner")
+    children.python(CLIENT, name="bt")
+    run = run_of(["services"])
+    _ready(run, "node:/planner", "node:/bt_navigator", "service:/plan")
+    wait_for(lambda: (run.step(), _theta(run, "service:/plan")["calls_per_s"] > 0)[1], timeout=20,
+             period=PERIOD)
+    a = _sick_after_healthy(run, flag, "services", "node:/bt_navigator", healthy_s=6.0, symptom="waiting")
+    assert (a.data["service"], a.data["server"], a.data["client"]) == (
+        "service:/plan", "node:/planner", "node:/bt_navigator"), a
+    assert a.data["waited_s"] >= 2.0 and a.data["via"] == "introspection"
+    assert 0 < _theta(run, "service:/plan")["wait_s"] < 7.0
+
+
+PUBLISHER = """
+import os, sys, time
+import rclpy
+from std_msgs.msg import String
+name, flag = sys.argv[1], sys.argv[2]
+rclpy.init()
+n = rclpy.create_node(name)
+pub = n.create_publisher(String, '/cmd_vel', 10)
+def tick():
+    if os.path.exists(flag) and int(time.monotonic() * 10) % 5:
+        return  # one tick in five: 2 Hz
+    pub.publish(String(data=name))
+n.create_timer(0.1, tick)
+rclpy.spin(n)
+"""
+
+
+def test_publisher_rates_of_a_two_publisher_topic_show_which_one_slowed(children, tmp_path, run_of):
+    flag = tmp_path / "slow"
+    children.python(PUBLISHER, "teleop", str(tmp_path / "never"), name="teleop")
+    children.python(PUBLISHER, "nav", str(flag), name="nav")
+    run = run_of(["topic_rate"])  # the collector is what is tested here
+    _ready(run, "node:/teleop", "node:/nav", "topic:/cmd_vel")
+
+    def rates():
+        run.step()
+        return run.G.nodes["topic:/cmd_vel"].get("publisher_rates") or {}
+
+    both = wait_for(lambda: (r := rates()) and len(r) == 2 and min(r.values()) > 7 and r, timeout=20,
+                    period=PERIOD)
+    assert all(7.0 <= hz <= 12.0 for hz in both.values()), both
+    flag.touch()
+    time.sleep(1.0)
+    after = wait_for(lambda: (r := rates()) and r.get("node:/nav", 99) < 3.5 and r, timeout=15, period=PERIOD)
+    assert 7.0 <= after["node:/teleop"] <= 12.0, after
+    # the nodes' own output rates say the same
+    assert _node(run, "node:/nav")["sent_hz"] < 3.5 <= 7.0 <= _node(run, "node:/teleop")["sent_hz"]
+
+
+def _theta(run, member):
+    return theta_dict(run.G.nodes[member]["kind"], run.G.nodes[member]["theta"])
+
+
+def _node(run, member):
+    return _theta(run, member)
+
+
+def test_without_rcl_gids_the_ages_are_still_measured(children, tmp_path, run_of):
+    """Where the rcl take is unavailable (another rmw layout), rclpy takes: no publisher rates,
+    the rest as before, header stamps included."""
+    flag = tmp_path / "lag"
+    flag.touch()
+    children.python(STAMPED, str(flag), name="imu")
+    run = run_of(["topic_rate"])
+    run.collector.topics.rcl.available = False
+    _ready(run, "topic:/robot/imu")
+    wait_for(lambda: (run.step(), _theta(run, "topic:/robot/imu")["stamp_age_ms"] > 280)[1], timeout=20,
+             period=PERIOD)
+    th = _theta(run, "topic:/robot/imu")
+    assert 15.0 <= th["rate_hz"] <= 25.0 and th["stamp_age_ms"] < 400.0, th
+    assert "publisher_rates" not in run.G.nodes["topic:/robot/imu"]
+    assert _node(run, "node:/robot/imu_driver")["sent_hz"] == th["rate_hz"]  # the only publisher

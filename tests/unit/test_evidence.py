@@ -1,0 +1,524 @@
+"""Evidence from real robots on literal data: CDR stamps, QoS rules, diagnostics mapping, service
+calls, log names, and the plugins that turn them into symptoms (issue 16 items 3, 4, 5, 6, 8)."""
+
+from __future__ import annotations
+
+import itertools
+import struct
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import Log, Parameter, ParameterEvent, ParameterValue
+from rclpy.duration import Duration
+from rclpy.qos import (
+    DurabilityPolicy,
+    LivelinessPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_check_compatible,
+)
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Header, String
+from std_srvs.srv import Trigger
+
+from plugins.qos_compat import compatibility, rmw_reason
+from stream_viz.collect.cdr import (
+    REQUEST_RECEIVED,
+    REQUEST_SENT,
+    RESPONSE_RECEIVED,
+    RESPONSE_SENT,
+    has_header,
+    header_stamp_ns,
+    is_service_event,
+    service_event_info,
+)
+from stream_viz.collect.diagnostics import DiagnosticsReader, aggregator_groups, map_status
+from stream_viz.collect.naming import NodeNames, named_in_text
+from stream_viz.collect.rosgraph import INFINITE_NS, qos_dict
+from stream_viz.collect.services import ServiceCalls, party
+from stream_viz.collect.topics import log_event
+from stream_viz.collect.window import TopicWindow, window_metrics
+from stream_viz.model.graph import add_flow_edge, add_member
+from stream_viz.model.theta import make_theta
+from stream_viz.rca import RcaSettings, analyze
+from stream_viz.records import Alert, Event
+from tests.unit.test_plugins import drive, model
+
+S = 1_000_000_000
+
+# --------------------------------------------------------------------------- CDR stamps
+
+
+def test_header_stamp_read_from_the_serialized_bytes():
+    m = Imu()
+    m.header.stamp.sec, m.header.stamp.nanosec, m.header.frame_id = 1_700_000_000, 250_000_000, "imu"
+    assert header_stamp_ns(serialize_message(m)) == 1_700_000_000 * S + 250_000_000
+    h = Header()
+    h.stamp.sec, h.stamp.nanosec = 7, 9
+    assert header_stamp_ns(serialize_message(h)) == 7 * S + 9  # a Header alone begins with its stamp
+    # Big endian, and XCDR2 little endian: the same two fields at the same place.
+    assert header_stamp_ns(b"\x00\x00\x00\x00" + struct.pack(">iI", 5, 6) + b"\x00") == 5 * S + 6
+    assert header_stamp_ns(b"\x00\x07\x00\x00" + struct.pack("<iI", 5, 6)) == 5 * S + 6
+    # An unset stamp says nothing; too short or another encapsulation: not read.
+    assert header_stamp_ns(serialize_message(Imu())) is None
+    assert header_stamp_ns(b"\x00\x01\x00\x00\x01\x00") is None
+    assert header_stamp_ns(b"\x00\x03\x00\x00" + struct.pack("<iI", 5, 6)) is None
+
+
+def test_which_types_begin_with_a_header():
+    assert has_header(Imu) and has_header(DiagnosticArray)
+    assert not has_header(String) and not has_header(Header) and not has_header(Trigger.Event)
+    assert is_service_event(Trigger.Event) and not is_service_event(Imu)
+
+
+def test_service_event_info_read_from_the_serialized_bytes():
+    e = Trigger.Event()
+    e.info.event_type, e.info.stamp.sec, e.info.stamp.nanosec = RESPONSE_SENT, 77, 99
+    e.info.client_gid, e.info.sequence_number = list(range(1, 17)), 123_456_789_012
+    assert service_event_info(serialize_message(e)) == (RESPONSE_SENT, 77 * S + 99, bytes(range(1, 17)),
+                                                        123_456_789_012)
+    # XCDR2: the int64 sequence number aligned to 4, right after the gid.
+    raw = (b"\x00\x07\x00\x00" + bytes([1, 0, 0, 0]) + struct.pack("<iI", 3, 4) + bytes(16)
+           + struct.pack("<q", 42))
+    assert service_event_info(raw) == (REQUEST_RECEIVED, 3 * S + 4, bytes(16), 42)
+    assert service_event_info(raw[:30]) is None
+
+
+def test_window_stamp_age_is_the_mean_of_the_messages_that_have_one():
+    w = TopicWindow()
+    recs = [(1 * S, 1 * S, 10, 1, b"a" * 16, 300_000_000), (2 * S, 2 * S, 10, 2, b"a" * 16, None),
+            (3 * S, 3 * S, 10, 3, b"b" * 16, 100_000_000)]
+    for r in recs:
+        w.add(*r)
+    m = w.metrics(3 * S, 0, 3 * S, 2)
+    assert m["stamp_age_ms"] == pytest.approx(200.0)
+    assert window_metrics(recs, 3 * S, 0, 3 * S, 2)["stamp_age_ms"] == pytest.approx(200.0)
+    assert w.publisher_rates(3 * S, 0, 3 * S) == {b"a" * 16: 2 / 3, b"b" * 16: 1 / 3}
+    w.expire(2 * S)
+    assert w.metrics(3 * S, 0, 3 * S, 2)["stamp_age_ms"] == pytest.approx(100.0)
+    assert w.publisher_rates(3 * S, 0, 3 * S) == {b"a" * 16: 1 / 3, b"b" * 16: 1 / 3}
+    assert "stamp_age_ms" not in window_metrics([(1 * S, 1 * S, 1, 1, None, None)], 2 * S, 0, 2 * S, 1)
+
+
+# --------------------------------------------------------------------------- QoS rules
+
+
+def Q(rel="reliable", dur="volatile", deadline=INFINITE_NS, liv="automatic", lease=INFINITE_NS):
+    return {"reliability": rel, "durability": dur, "history": "unknown", "depth": None,
+            "deadline_ns": deadline, "liveliness": liv, "liveliness_lease_ns": lease}
+
+
+@pytest.mark.parametrize(("pub", "sub", "want"), [
+    # each of rmw's rules (qos_profile_check_compatible), in its words
+    (Q(rel="best_effort"), Q(), ("error", ["Best effort publisher and reliable subscription"])),
+    (Q(), Q(rel="best_effort"), ("ok", [])),
+    (Q(), Q(dur="transient_local"), ("error", ["Volatile publisher and transient local subscription"])),
+    (Q(dur="transient_local"), Q(), ("ok", [])),
+    (Q(deadline=0), Q(deadline=S), ("error", ["Subscription has a deadline, but publisher does not"])),
+    (Q(deadline=2 * S), Q(deadline=S), ("error", ["Subscription deadline is less than publisher deadline"])),
+    (Q(), Q(deadline=S), ("error", ["Subscription deadline is less than publisher deadline"])),  # none set: ∞
+    (Q(deadline=S), Q(deadline=2 * S), ("ok", [])),
+    (Q(), Q(liv="manual_by_topic"),
+     ("error", ["Publisher's liveliness is automatic and subscription's is manual by topic"])),
+    (Q(liv="manual_by_topic"), Q(), ("ok", [])),
+    (Q(lease=0), Q(lease=S),
+     ("error", ["Subscription has a liveliness lease duration, but publisher does not"])),
+    (Q(lease=2 * S), Q(lease=S),
+     ("error", ["Subscription liveliness lease duration is less than publisher"])),
+    (Q(rel="best_effort", dur="volatile"), Q(dur="transient_local"),
+     ("error", ["Best effort publisher and reliable subscription",
+                "Volatile publisher and transient local subscription"])),
+    # warnings: a policy rmw cannot judge, only without errors
+    (Q(rel="unknown"), Q(), ("warning", ["Reliable subscription, but publisher is unknown"])),
+    (Q(rel="system_default"), Q(rel="unknown"),
+     ("warning", ["Publisher reliability is system_default and subscription reliability is unknown"])),
+    (Q(rel="unknown"), Q(dur="transient_local"),
+     ("error", ["Volatile publisher and transient local subscription"])),
+    # an older model without durations: those rules are not checked
+    ({"reliability": "reliable", "durability": "volatile"}, {"reliability": "reliable", "deadline_ns": S},
+     ("ok", [])),
+])
+def test_qos_rules_as_ros2doctor_states_them(pub, sub, want):
+    assert compatibility(pub, sub) == want
+
+
+def _profiles():
+    rel = (ReliabilityPolicy.RELIABLE, ReliabilityPolicy.BEST_EFFORT, ReliabilityPolicy.SYSTEM_DEFAULT)
+    dur = (DurabilityPolicy.VOLATILE, DurabilityPolicy.TRANSIENT_LOCAL, DurabilityPolicy.UNKNOWN)
+    liv = (LivelinessPolicy.AUTOMATIC, LivelinessPolicy.MANUAL_BY_TOPIC, LivelinessPolicy.SYSTEM_DEFAULT)
+    dl = (Duration(), Duration(seconds=1), Duration(seconds=2))
+    for r, d, lv, deadline, lease in itertools.product(rel, dur, liv, dl, dl[:2]):
+        yield QoSProfile(depth=10, reliability=r, durability=d, liveliness=lv, deadline=deadline,
+                         liveliness_lease_duration=lease)
+
+
+def test_qos_rules_agree_with_rclpy_qos_check_compatible_on_every_pair():
+    """The collector's dict of each profile, judged by our rules, equals what rmw says."""
+    profiles = list(_profiles())
+    for pub, sub in itertools.product(profiles, profiles):
+        level, reasons = compatibility(qos_dict(pub), qos_dict(sub))
+        want_level, want_reason = qos_check_compatible(pub, sub)
+        assert (level, rmw_reason(level, reasons)) == (want_level.name.lower(), want_reason), (pub, sub)
+
+
+def _qos_model(pub_qos, sub_qos, extra_pub=None):
+    G = model()
+    qos = [{"node": "/camera", "role": "pub", **pub_qos}, {"node": "/detector", "role": "sub", **sub_qos}]
+    if extra_pub is not None:
+        add_member(G, "node:/replay")
+        add_flow_edge(G, "node:/replay", "topic:/img", "pub")
+        qos.append({"node": "/replay", "role": "pub", **extra_pub})
+    G.nodes["topic:/img"]["qos"] = qos
+    return G
+
+
+def test_qos_compat_alerts_on_the_subscriber_with_the_reason():
+    G = _qos_model(Q(rel="best_effort"), Q())
+    ps = drive_alerts("qos_compat", [(1.0, G, [])])
+    assert [(a.member, a.severity) for a in ps] == [("node:/detector", "error")]
+    a = ps[0]
+    assert a.data["reasons"] == ["node:/camera: Best effort publisher and reliable subscription"]
+    assert a.data["receives_nothing"] is True and a.data["publishers"] == ["node:/camera"]
+    assert "receives nothing" in a.message
+    # matched by one of two publishers: it still receives, from that one
+    G2 = _qos_model(Q(rel="best_effort"), Q(), extra_pub=Q())
+    (a2,) = drive_alerts("qos_compat", [(1.0, G2, [])])
+    assert (a2.member, a2.severity, a2.data["receives_nothing"]) == ("node:/detector", "warn", False)
+    # compatible, and a deadline mismatch on the same shape
+    assert drive("qos_compat", [(float(t), _qos_model(Q(), Q()), []) for t in range(5)]) == []
+    (a3,) = drive_alerts("qos_compat", [(1.0, _qos_model(Q(), Q(deadline=S // 10)), [])])
+    assert "deadline" in a3.message and a3.severity == "error"
+    assert drive("qos_compat", [(1.0, G, [])], settings={"ignore_topics": ["/img"]}) == []
+    assert drive("qos_compat", [(1.0, G, [])], watch={"node:/camera"}) == []  # neither end watched
+
+
+def test_graph_anomalies_no_longer_judges_qos():
+    assert drive("graph_anomalies", [(1.0, _qos_model(Q(rel="best_effort"), Q()), [])]) == []
+
+
+def drive_alerts(plugin, frames, *, settings=None, watch=None):
+    """As `drive`, returning the alerts themselves."""
+    from stream_viz.detect.api import record_history
+    from stream_viz.detect.plugin_set import PluginSet
+    from stream_viz.model.diff import diff
+    from stream_viz.model.graph import new_graph
+    from stream_viz.model.history import History
+
+    ps = PluginSet.load(enable=[plugin], cwd_plugins=False, settings={plugin: settings or {}}, isolate=False)
+    hist, prev, out = History(), new_graph(), []
+    for t, G, events in frames:
+        record_history(hist, G, t)
+        alerts, problems = ps.run(t, G, watch if watch is not None else G.nodes, hist, events, diff(prev, G))
+        assert problems == []
+        out += alerts
+        prev = G
+    return out
+
+
+# --------------------------------------------------------------------------- the RCA and a QoS alert
+
+
+def test_a_qos_alert_on_the_subscriber_ranks_it_above_its_silent_downstream():
+    """camera (best effort) → /img → detector (reliable: receives nothing) → /objects → planner →
+    /cmd: the detector's outputs and the planner's go silent, the planner complains loudly. The
+    subscriber's own QoS alert makes it the cause of the silence."""
+    from stream_viz.model.graph import new_graph
+
+    G = new_graph()
+    for m in ("node:/camera", "node:/detector", "node:/planner", "topic:/img", "topic:/objects",
+              "topic:/cmd"):
+        add_member(G, m)
+    for u, v, k in (("node:/camera", "topic:/img", "pub"), ("topic:/img", "node:/detector", "sub"),
+                    ("node:/detector", "topic:/objects", "pub"), ("topic:/objects", "node:/planner", "sub"),
+                    ("node:/planner", "topic:/cmd", "pub")):
+        add_flow_edge(G, u, v, k)
+    alerts = []
+    for k in range(6):  # an episode's rows every 5 s
+        t = 100.0 + 5 * k
+        alerts += [Alert("node:/detector", "qos_compat", t, "error", "QoS incompatible on /img"),
+                   Alert("topic:/objects", "topic_rate", t + 1, "error", "silent"),
+                   Alert("topic:/cmd", "topic_rate", t + 2, "error", "silent"),
+                   Alert("node:/planner", "rosout", t + 2.5, "error", "no objects for 5 s")]
+    causes = analyze(G, alerts, RcaSettings(), None).root_causes
+    ranked = [rc.member for rc in causes]
+    assert ranked[0] == "node:/detector", ranked
+    assert ranked.index("node:/detector") < ranked.index("node:/planner")
+    assert causes[0].evidence["direct"] == 0.8  # the error-weight of its own alert: direct evidence
+
+
+# --------------------------------------------------------------------------- diagnostics mapping
+
+NODES = NodeNames({"/amr/front_lidar", "/amr/base_driver", "/my_node", "/robot/my_node", "/agg",
+                   "/amr/diagnostic_aggregator", "/imu"})
+
+
+@pytest.mark.parametrize(("name", "hw", "publisher", "want"), [
+    # by name: the updater's "<node name>: <task>" with and without namespace
+    ("front_lidar: scan rate", "sick-7021", "/amr/front_lidar", ("/amr/front_lidar", "name")),
+    ("front_lidar: scan rate", "sick-7021", None, ("/amr/front_lidar", "name")),  # the only such base name
+    ("/amr/front_lidar: scan rate", "", "/agg", ("/amr/front_lidar", "name")),
+    ("//my_node: motor", "", None, ("/my_node", "name")),  # rclpy's use_fqn form in the root namespace
+    ("my_node: motor", "", "/robot/my_node", ("/robot/my_node", "name")),  # two my_node: the publisher's
+    ("my_node: motor", "", None, ("/my_node", "name")),  # in the root namespace
+    ("/AMR/Sensors/Lidar/front_lidar: scan rate", "", None, ("/amr/front_lidar", "name")),  # aggregator path
+    ("/AMR/Sensors/Lidar/ amr front_lidar: scan rate", "", None, ("/amr/front_lidar", "name")),
+    # by hardware id: a node's name
+    ("motor controller", "/amr/base_driver", "/agg", ("/amr/base_driver", "hardware_id")),
+    ("motor controller", "imu", "/agg", ("/imu", "hardware_id")),
+    # by publisher, then none
+    ("motor controller", "roboteq-01", "/amr/base_driver", ("/amr/base_driver", "publisher")),
+    ("CPU usage", "", None, (None, "none")),
+])
+def test_diagnostic_status_mapping_each_path(name, hw, publisher, want):
+    assert map_status(name, hw, NODES, publisher) == want
+
+
+def test_hardware_declared_in_a_parameter_maps_a_status():
+    reader = DiagnosticsReader()
+    reader.hardware.add(ParameterEvent(node="/amr/base_driver", new_parameters=[
+        Parameter(name="motor_controller_id", value=ParameterValue(type=4, string_value="roboteq-01"))]))
+    reader.hardware.add(ParameterEvent(node="/amr/front_lidar", new_parameters=[
+        Parameter(name="frame", value=ParameterValue(type=4, string_value="base_link"))]))
+    reader.hardware.add(ParameterEvent(node="/imu", new_parameters=[
+        Parameter(name="frame", value=ParameterValue(type=4, string_value="base_link"))]))
+    assert reader.hardware.mapping() == {"roboteq-01": "/amr/base_driver"}  # base_link: two nodes
+    msg = DiagnosticArray(status=[DiagnosticStatus(level=b"\x02", name="motors", hardware_id="roboteq-01",
+                                                   message="overcurrent")])
+    (ev,) = reader.events("/diagnostics", msg, 5.0, "/agg", NODES)
+    assert (ev.member, ev.level, ev.data["mapped_by"], ev.data["publisher"]) == (
+        "node:/amr/base_driver", "error", "hardware_id", "node:/agg")
+
+
+def test_hardware_configured_for_the_plugin_maps_a_status():
+    G = model()
+    ev = [Event(1.0, "diag", "node:/detector", "error", "motors: ERROR hot",
+                {"name": "motors", "level": 2, "hardware_id": "roboteq-01", "mapped_by": "publisher"})]
+    (a,) = drive_alerts("diagnostics", [(1.0, G, ev)], settings={"hardware": ["roboteq-01=/camera"]})
+    assert (a.member, a.data["mapped_by"]) == ("node:/camera", "hardware_id")
+    assert "(mapped by hardware_id)" in a.message
+    (b,) = drive_alerts("diagnostics", [(1.0, G, ev)])
+    assert (b.member, b.data["mapped_by"]) == ("node:/detector", "publisher")
+
+
+def _status(name, level=0, hw="", message=""):
+    return DiagnosticStatus(level=bytes([level]), name=name, hardware_id=hw, message=message)
+
+
+def test_aggregator_copies_are_not_counted_twice_and_its_news_is():
+    reader = DiagnosticsReader(copy_s=30.0, stale_s=3.0)
+    direct = DiagnosticArray(status=[_status("front_lidar: scan rate", 2, "sick-7021", "no scans")])
+    (ev,) = reader.events("/diagnostics", direct, 10.0, "/amr/front_lidar", NODES)
+    assert (ev.member, ev.data["mapped_by"]) == ("node:/amr/front_lidar", "name")
+
+    def agg(level, leaf="front_lidar: scan rate", extra=()):
+        return DiagnosticArray(status=[
+            _status("/AMR", level), _status("/AMR/Sensors", level), _status("/AMR/Sensors/Lidar", level),
+            _status(f"/AMR/Sensors/Lidar/{leaf}", level, "sick-7021", "x"), *extra])
+
+    assert aggregator_groups([s.name for s in agg(2).status]) == {"/AMR", "/AMR/Sensors",
+                                                                  "/AMR/Sensors/Lidar"}
+    aggregator = "/amr/diagnostic_aggregator"
+    assert reader.events("/diagnostics_agg", agg(2), 11.0, aggregator, NODES) == []  # a copy
+    # the lidar stopped reporting: the aggregator says STALE, and that is news, mapped as the original
+    (stale,) = reader.events("/diagnostics_agg", agg(3), 20.0, "/amr/diagnostic_aggregator", NODES)
+    d = stale.data
+    assert (stale.member, stale.level, d["level"], d["source"], d["mapped_by"]) == (
+        "node:/amr/front_lidar", "warn", 3, "/diagnostics_agg", "name")
+    # ... unless /diagnostics just told us it is fine
+    assert reader.events("/diagnostics_agg", agg(3), 11.0, "/amr/diagnostic_aggregator", NODES) == []
+    # a status only the aggregator shows (its original never seen): mapped by its own name
+    other = _status("/AMR/Base/base_driver: motors", 1, "roboteq-01", "warm")
+    evs = reader.events("/diagnostics_agg", agg(2, extra=(_status("/AMR/Base", 1), other)), 11.0,
+                        "/amr/diagnostic_aggregator", NODES)
+    assert [(e.member, e.data["mapped_by"]) for e in evs] == [("node:/amr/base_driver", "name")]
+    # a STALE item whose node left the graph: no echo of the absence
+    gone = NodeNames(NODES.fqns - {"/amr/front_lidar"})
+    assert reader.events("/diagnostics_agg", agg(3), 60.0, "/amr/diagnostic_aggregator", gone) == []
+
+
+def test_diagnostics_plugin_says_how_each_alert_was_mapped():
+    G = model()
+    evs = DiagnosticsReader().events("/diagnostics", DiagnosticArray(status=[
+        _status("detector: inference", 2, "gpu0", "CUDA error"), _status("temperature", 1, "", "warm")]),
+        1.0, "/camera", NodeNames({"/camera", "/detector"}))
+    alerts = drive_alerts("diagnostics", [(1.0, G, evs)])
+    assert [(a.member, a.severity, a.data["mapped_by"]) for a in alerts] == [
+        ("node:/camera", "warn", "publisher"), ("node:/detector", "error", "name")]
+    assert alerts[1].message == "diagnostics detector: inference: ERROR CUDA error (mapped by name)"
+    assert alerts[1].data["statuses"] == [{"name": "detector: inference", "level": "error",
+                                           "text": "detector: inference: ERROR CUDA error",
+                                           "mapped_by": "name"}]
+
+
+# --------------------------------------------------------------------------- names in log text
+
+
+def test_log_text_names_services_and_nodes_of_the_graph():
+    index = NodeNames({"/nav/planner", "/nav/bt_navigator", "/camera"})
+    services = {"/nav/plan_path", "/camera/set_mode"}
+    assert named_in_text("service /nav/plan_path not available, waiting again...", index, services,
+                         "/nav", "/nav/bt_navigator") == ([], ["/nav/plan_path"])
+    assert named_in_text("planner timed out; calling 'plan_path'", index, services, "/nav",
+                         "/nav/bt_navigator") == (["/nav/planner"], ["/nav/plan_path"])
+    assert named_in_text("~/set_mode failed", index, services, "/", "/camera") == ([], ["/camera/set_mode"])
+    assert named_in_text("cannot reach /camera", index, services, "/nav", "/nav/bt_navigator") == (
+        ["/camera"], [])
+    # the writer itself, unknown names and topics are not named members
+    assert named_in_text("bt_navigator: goal on /nav/cmd_vel rejected", index, services, "/nav",
+                         "/nav/bt_navigator") == ([], [])
+    ev = log_event(Log(level=40, name="nav.bt_navigator", msg="service /nav/plan_path not available"),
+                   index, frozenset(services))
+    assert (ev.member, ev.data["services"]) == ("node:/nav/bt_navigator", ["service:/nav/plan_path"])
+    assert "nodes" not in ev.data
+
+
+# --------------------------------------------------------------------------- service calls
+
+
+def test_service_calls_open_answered_and_out_of_order():
+    calls = ServiceCalls(window_s=3.0, forget_s=60.0)
+    c1, c2 = b"\x01" * 12 + b"\x00\x00\x01\x04", b"\x02" * 12 + b"\x00\x00\x01\x04"
+    srv = b"\x09" * 12 + b"\x00\x00\x02\x03"
+    calls.add("/plan", 10 * S, REQUEST_SENT, c1, 1)
+    calls.add("/plan", 10 * S + 1000, REQUEST_RECEIVED, c1, 1, srv)  # the server's view of the same call
+    calls.add("/plan", 10 * S + 400_000_000, RESPONSE_SENT, c1, 1, srv)
+    calls.add("/plan", 10 * S + 500_000_000, RESPONSE_RECEIVED, c1, 1)  # the same call's last event
+    calls.add("/plan", 11 * S, REQUEST_RECEIVED, c2, 7, srv)  # c2 waits
+    # a response event that overtook its request event (two writers): no phantom open call
+    calls.add("/plan", 11 * S + 5, RESPONSE_SENT, c1, 2, srv)
+    calls.add("/plan", 11 * S + 9, REQUEST_SENT, c1, 2)
+    st = calls.stats(13 * S)["/plan"]
+    assert st.calls_per_s == pytest.approx(1 / 3)  # one call answered in the window (the other's
+    assert st.response_ms == pytest.approx(400.0)  # request came after its response)
+    assert st.open_calls == [(2.0, c2, srv)]
+    st = calls.stats(72 * S)["/plan"]  # forgotten after 60 s
+    assert st.open_calls == [] and calls.abandoned == 1 and st.calls_per_s == 0.0
+    calls.forget(set())
+    assert calls.stats(73 * S) == {}
+
+
+def test_party_of_a_gid_by_its_participant():
+    prefixes = {b"\x01" * 12: ["/bt", "/helper"], b"\x02" * 12: ["/planner"]}
+    assert party(b"\x01" * 12 + b"\x00\x00\x01\x04", prefixes, ["/bt", "/other"]) == "/bt"
+    assert party(b"\x01" * 12 + b"\x00\x00\x01\x04", prefixes, ["/bt", "/helper"]) is None  # same process
+    assert party(None, prefixes, ["/planner"]) == "/planner"  # the only one
+    assert party(b"\x05" * 16, prefixes, ["/a", "/b"]) is None
+
+
+def _service_model(servers=("/planner",), calls=None, response_ms=100.0):
+    G = model()
+    add_member(G, "node:/planner")
+    add_member(G, "node:/bt")
+    values = {"servers": len(servers), "clients": 1}
+    extra = {}
+    if calls is not None:
+        values.update(calls_per_s=1.0, response_ms=response_ms, waiting=len(calls),
+                      wait_s=max((c["waited_s"] for c in calls), default=0.0))
+        extra = {"introspected": True, "calls": calls}
+    add_member(G, "service:/plan", servers=list(servers), clients=["/bt"],  # fqns, as the collector
+               theta=make_theta("service", values), **extra)
+    return G
+
+
+def test_services_waiting_client_names_the_server():
+    quiet = [(float(t), _service_model(calls=[]), []) for t in range(15)]
+    waiting = [{"client": "node:/bt", "server": "node:/planner", "waited_s": 2.5},
+               {"client": "node:/bt", "server": "node:/planner", "waited_s": 0.2}]
+    frames = [*quiet, (15.0, _service_model(calls=waiting, response_ms=float("nan")), [])]
+    alerts = drive_alerts("services", frames)
+    assert [(a.t, a.member, a.severity) for a in alerts] == [(15.0, "node:/bt", "warn")]
+    assert {k: alerts[0].data[k] for k in ("symptom", "service", "server", "client", "waited_s")} == {
+        "symptom": "waiting", "service": "service:/plan", "server": "node:/planner", "client": "node:/bt",
+        "waited_s": 2.5}
+    assert "usually answered in 100 ms" in alerts[0].message
+    # a service that usually takes 1 s: 2.5 s is not yet waiting (3 × its usual time)
+    slow_usual = [(float(t), _service_model(calls=[], response_ms=1000.0), []) for t in range(15)]
+    assert drive("services", [*slow_usual, (15.0, _service_model(calls=waiting, response_ms=float("nan")),
+                                            [])]) == []
+    # the client is unknown (several in one process): on the service, the server still named
+    anon = [{"client": None, "server": None, "waited_s": 3.0}]
+    (a,) = drive_alerts("services", [(1.0, _service_model(calls=anon), [])])
+    assert (a.member, a.data["server"], a.data["client"]) == ("service:/plan", "node:/planner", None)
+
+
+def test_services_slow_responses_against_their_own_baseline():
+    frames = [(float(t), _service_model(calls=[], response_ms=100.0 + (t % 3)), []) for t in range(15)]
+    frames += [(float(t), _service_model(calls=[], response_ms=900.0), []) for t in range(15, 18)]
+    alerts = drive_alerts("services", frames)
+    assert [(a.t, a.member) for a in alerts] == [(16.0, "node:/bt"), (17.0, "node:/bt")]
+    assert alerts[0].data["symptom"] == "slow_response" and alerts[0].data["server"] == "node:/planner"
+
+
+def test_services_server_gone_while_clients_remain():
+    frames = [(1.0, _service_model(), []), (2.0, _service_model(servers=()), []),
+              (3.0, _service_model(servers=()), [])]
+    alerts = drive_alerts("services", frames)
+    assert [(a.t, a.member, a.data["symptom"], a.data["server"]) for a in alerts] == [
+        (2.0, "node:/bt", "server_gone", "node:/planner"), (3.0, "node:/bt", "server_gone", "node:/planner")]
+    assert drive("services", [(1.0, _service_model(servers=()), [])]) == []  # never had one: late start
+
+
+def test_services_client_log_naming_its_service_or_server():
+    G = _service_model()
+    logs = [Event(1.0, "log", "node:/bt", "warn", "service /plan not available",
+                  {"services": ["service:/plan"]}),
+            Event(1.0, "log", "node:/bt", "error", "planner timed out", {"nodes": ["node:/planner"]}),
+            Event(1.0, "log", "node:/camera", "error", "service /plan not available",  # not its client
+                  {"services": ["service:/plan"]})]
+    alerts = drive_alerts("services", [(1.0, G, logs)])
+    assert [(a.member, a.data["via"], a.data["server"], a.data["service"], a.message) for a in alerts] == [
+        ("node:/bt", "log", "node:/planner", "service:/plan", "logged about /plan: planner timed out")]
+    # a WARN (a service not ready yet at bring-up) counts only when asked for
+    warned = drive_alerts("services", [(1.0, G, logs[:1])], settings={"log_level": "warn"})
+    assert [(a.member, a.data["server"]) for a in warned] == [("node:/bt", "node:/planner")]
+
+
+# --------------------------------------------------------------------------- message age
+
+
+def _aged(age_ms, t, newest=0.05):
+    G = model()
+    theta = G.nodes["topic:/img"]["theta"]
+    G.nodes["topic:/img"]["theta"] = make_theta("topic", {
+        **{k: float(v) for k, v in zip(("rate_hz", "jitter_ms", "latency_ms", "bandwidth_kBps", "drops_per_s",
+                                        "publishers", "subscribers"), theta, strict=False)},
+        "age_s": newest, "stamp_age_ms": age_ms})
+    return (float(t), G, [])
+
+
+def test_message_age_stale_against_its_own_baseline():
+    healthy = [_aged(2.0 + (t % 3) * 0.5, t) for t in range(15)]
+    assert drive("message_age", healthy) == []
+    lagging = healthy + [_aged(302.0, t) for t in range(15, 19)]
+    alerts = drive_alerts("message_age", lagging)
+    assert [(a.t, a.member, a.severity) for a in alerts] == [(17.0, "topic:/img", "warn"),
+                                                             (18.0, "topic:/img", "warn")]
+    assert alerts[0].data["symptom"] == "stale" and alerts[0].data["baseline_ms"] == pytest.approx(2.5)
+    # a pipeline whose data is normally 1 s old: 1.4 s is within half its baseline
+    slow = [_aged(1000.0 + (t % 3), t) for t in range(15)] + [_aged(1400.0, t) for t in range(15, 19)]
+    assert drive("message_age", slow) == []
+    # the same late message held in the window (no newer one): one observation, not three
+    held = healthy + [_aged(302.0, t, newest=1.0 + t) for t in range(15, 19)]
+    assert drive("message_age", held) == []
+
+
+def test_message_age_skewed_or_implausible_clocks_are_said_so_not_called_latency():
+    ahead = [_aged(-250.0, t) for t in range(4)]
+    alerts = drive_alerts("message_age", ahead)
+    assert [(a.t, a.data["symptom"]) for a in alerts] == [(2.0, "clock_skew"), (3.0, "clock_skew")]
+    assert "ahead of this host's clock" in alerts[0].message and "not a latency" in alerts[0].message
+    sim = [_aged(1.7e12, t) for t in range(4)]  # stamps from a simulated clock that started at 0
+    alerts = drive_alerts("message_age", sim)
+    assert alerts and all(a.data["symptom"] == "clock_skew" for a in alerts)
+    assert "not from the wall clock" in alerts[0].message
+
+
+def test_snapshot_text_says_who_sends_on_a_multi_publisher_topic():
+    from stream_viz.collect.snapshot import _member_line
+
+    G = model()
+    G.nodes["topic:/img"]["publisher_rates"] = {"node:/camera": 10.0, "node:/replay": 2.5}
+    assert "from node:/camera 10 Hz, node:/replay 2.5 Hz" in _member_line(G, "topic:/img")
+    G.nodes["topic:/img"]["publisher_rates"] = {"node:/camera": 10.0}
+    assert " from " not in _member_line(G, "topic:/img")
