@@ -37,8 +37,9 @@ def model(rate=10.0, latency=2.0, jitter=1.0, drops=0.0, cpu=5.0, rss=80.0, aliv
     return G
 
 
-def drive(plugin, frames, *, settings=None, expected=None, watch=None):
-    """Run one built-in plugin over ``frames`` = [(t, G, events)]; return alerts as (t, member, severity)."""
+def drive(plugin, frames, *, settings=None, expected=None, watch=None, full=False):
+    """Run one built-in plugin over ``frames`` = [(t, G, events)]; return alerts as (t, member, severity)
+    (``full``: the alerts themselves)."""
     ps = PluginSet.load(enable=[plugin], cwd_plugins=False, settings={plugin: settings or {}}, isolate=False)
     hist = History()
     prev = new_graph()
@@ -48,7 +49,7 @@ def drive(plugin, frames, *, settings=None, expected=None, watch=None):
         alerts, problems = ps.run(t, G, watch if watch is not None else G.nodes, hist, events, diff(prev, G),
                                   expected)
         assert problems == []
-        out += [(a.t, a.member, a.severity) for a in alerts]
+        out += alerts if full else [(a.t, a.member, a.severity) for a in alerts]
         prev = G
     return out
 
@@ -110,6 +111,125 @@ def test_topic_rate_expected_rate_from_config_and_unmeasured():
 def test_topic_rate_only_watched():
     frames = [(float(t), model(rate=0.0 if t > 2 else 10.0), []) for t in range(6)]
     assert drive("topic_rate", frames, watch={"node:/camera"}) == []
+
+
+# ------------------------------------------------- topic_rate: the topic's own rhythm
+
+def seen(msgs, t, span=3.0):
+    """θ the collector shows at ``t`` for messages received at ``msgs`` (its 3 s window): rate,
+    age of the newest, recent rate over the last 5 intervals up to now."""
+    inside = [m for m in msgs if t - span < m <= t]
+    out = {"rate": len(inside) / span}
+    if inside:
+        out["age"] = t - inside[-1]
+    if len(inside) >= 4:
+        k = min(5, len(inside) - 1)
+        out["recent"] = k / (t - inside[-1 - k])
+    return out
+
+
+def sampled(msgs, times, graph=model):
+    """One frame per sample time of a topic whose messages arrive at ``msgs``."""
+    return [(t, graph(**seen(msgs, t)), []) for t in times]
+
+
+def bursts(starts, on=2.0, hz=10):
+    """Messages at ``hz`` for ``on`` s from each start."""
+    return [round(s + i / hz, 3) for s in starts for i in range(int(on * hz))]
+
+
+HALF = [k + 0.5 for k in range(120)]  # samples at 0.5, 1.5, ... (between message times)
+
+
+def test_topic_rate_bursty_topic_is_quiet_when_healthy_and_silent_when_hung_past_its_own_gaps():
+    healthy = bursts(range(0, 120, 8))  # 10 Hz for 2 s, then 6 s without a message, repeated
+    assert drive("topic_rate", sampled(healthy, HALF)) == []
+    # Hung after the burst at 48 (last message 49.9): learned gaps are 6.6 s (8.5 - 1.9), so the
+    # limit is twice that, 13.2 s: silent at the first sample with a quiet of at least 13.2 s.
+    hung = bursts(range(0, 49, 8))
+    alerts = drive("topic_rate", sampled(hung, HALF), full=True)
+    assert [(a.t, a.severity, a.data["symptom"]) for a in alerts][:1] == [(63.5, "error", "silence")]
+    assert round(alerts[0].data["limit_s"], 2) == 13.2 and "longest healthy gap 6.6 s" in alerts[0].message
+
+
+def test_topic_rate_a_continuous_topic_that_starts_to_flap_is_one_flapping_symptom():
+    on = [i / 10 for i in range(200)]  # continuous at 10 Hz for 20 s, then silent 2 s, back 3 s, ...
+    on += bursts([22.0, 27.0, 32.0], on=3.0)
+    alerts = drive("topic_rate", sampled(on, HALF[:36]), full=True)
+    assert [(a.t, a.severity) for a in alerts] == [(21.5, "error"), (26.5, "error"), (31.5, "error")]
+    assert [a.data["flaps"] for a in alerts] == [1, 2, 3]  # counted, never learned as its rhythm:
+    assert [a.data["limit_s"] for a in alerts] == [1.5, 1.5, 1.5]
+    assert all(a.data["episode_hold_s"] == 30.0 for a in alerts)  # one episode in the store
+    assert "silent 3 times in 30 s" in alerts[-1].message
+
+
+def test_topic_rate_a_topic_that_published_once_or_a_few_times_is_not_silent():
+    once = sampled([1.0], HALF[:60])  # a latched topic seen once: no run, no rhythm, no silence
+    assert drive("topic_rate", once) == []
+    few = sampled([1.0, 1.2, 5.0, 9.3], HALF[:60])  # on request, now and then
+    assert drive("topic_rate", few) == []
+
+
+def latched_model(**kw):
+    G = model(**kw)
+    G.nodes["topic:/img"]["qos"] = [_qos("/camera", "pub", dur="transient_local"),
+                                    _qos("/detector", "sub", dur="transient_local")]
+    return G
+
+
+def test_topic_rate_a_latched_topic_that_stops_is_not_silent_unless_asked():
+    msgs = [float(t) for t in range(20)]  # 1 Hz for 20 s, transient-local, then no more changes
+    frames = sampled(msgs, HALF[:40], graph=latched_model)
+    assert drive("topic_rate", frames) == []
+    judged = drive("topic_rate", frames, settings={"judge_latched": True})
+    assert judged[:1] == [(22.5, "topic:/img", "error")]  # 3 periods of 1 Hz after 19.0
+    # The same stream without transient-local publishers is a continuous topic: silent.
+    assert drive("topic_rate", sampled(msgs, HALF[:40]))[:1] == [(22.5, "topic:/img", "error")]
+
+
+def lifecycle_model(transitions, t, **kw):
+    """`model` whose publisher /camera is a lifecycle node with a transition at each of ``transitions``."""
+    G = model(**kw)
+    lc = seen(transitions, t)
+    add_member(G, "topic:/camera/transition_event", theta=make_theta("topic", {
+        "rate_hz": lc["rate"], "publishers": 1, **({"age_s": lc["age"]} if "age" in lc else {})}))
+    add_flow_edge(G, "node:/camera", "topic:/camera/transition_event", "pub")
+    return G
+
+
+def test_topic_rate_a_deactivated_lifecycle_publisher_is_not_silent():
+    # Active 0-20 s, deactivated at 20.0 (last message 19.9), active again at 40; hung at 60.
+    msgs = [i / 10 for i in range(200)] + [40 + i / 10 for i in range(200)]
+    transitions = [20.0, 40.0]
+    frames = [(t, lifecycle_model(transitions, t, **seen(msgs, t)), []) for t in HALF[:110]]
+    alerts = drive("topic_rate", frames, full=True)
+    # The 20 s deactivation is healthy and learned (gap 40.5 - 19.9 = 20.6 s): the hang after 59.9
+    # is a silence only after twice that.
+    assert [(a.t, a.member) for a in alerts][:1] == [(101.5, "topic:/img")]
+    assert round(alerts[0].data["limit_s"], 1) == 41.2
+
+
+def test_topic_rate_a_topic_whose_publisher_left_is_not_silent():
+    def gone(**kw):
+        G = model(**kw)
+        G.remove_edge("node:/camera", "topic:/img", 0)
+        theta = G.nodes["topic:/img"]["theta"]
+        theta[5] = 0.0  # publishers
+        return G
+
+    msgs = [i / 10 for i in range(200)]
+    frames = sampled(msgs, HALF[:20]) + sampled(msgs, HALF[20:40], graph=gone)
+    assert drive("topic_rate", frames) == []  # an orphan: graph_anomalies' case
+
+
+def test_topic_rate_no_drop_on_a_bursty_topic_but_on_a_continuous_one():
+    # Bursts of 20 Hz for 4 s every 6 s: the window's rate swings 0..20 Hz, the recent rate falls
+    # at each burst's end; a rate baseline of such a topic is no basis for a drop.
+    healthy = bursts(range(0, 120, 6), on=4.0, hz=20)
+    assert drive("topic_rate", sampled(healthy, HALF)) == []
+    steady = [i / 20 for i in range(600)] + [30 + i / 5 for i in range(50)]  # 20 Hz, then 5 Hz
+    alerts = drive("topic_rate", sampled(steady, HALF[:36]), full=True)
+    assert alerts and alerts[0].data["symptom"] == "rate_drop" and 30.5 <= alerts[0].t <= 32.5
 
 
 # --------------------------------------------------------------------------- topic_latency
