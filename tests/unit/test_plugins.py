@@ -312,9 +312,80 @@ def test_member_gone_exit_restart_left_and_not_alive():
                      {"old_pid": 100, "pid": 300})]
     G_left = model()
     G_left.remove_node("node:/detector")
+    # A node that leaves the graph while its process runs on was destroyed on purpose: no alert
+    # (it was a warn before issue 16); one whose process cannot be seen (no pid) still warns.
     assert drive("member_gone", [(2.0, G, []), (3.0, G, restart), (4.0, G_left, [])]) == [
-        (3.0, "node:/camera", "warn"), (4.0, "node:/detector", "warn")]
+        (3.0, "node:/camera", "warn")]
+    G_remote = model()
+    G_remote.nodes["node:/detector"]["pid"] = None
+    assert drive("member_gone", [(2.0, G_remote, []), (3.0, G_left, [])]) == [(3.0, "node:/detector", "warn")]
     assert drive("member_gone", [(float(t), G, []) for t in range(5)]) == []
+
+
+def exit_of(t, pid, nodes, still_listed):
+    """The collector's exit events of process ``pid`` (one per node, one for the process)."""
+    data = {"pid": pid, "process": f"process:{pid}", "nodes": nodes, "still_listed": still_listed}
+    return [Event(t, "exit", m, "error" if still_listed else "warn", f"process {pid} exited", data)
+            for m in [*nodes, f"process:{pid}"]]
+
+
+def camera_in(pid):
+    """`model` with /camera in process ``pid`` (None: not running, the node gone from the graph)."""
+    G = model()
+    G.remove_nodes_from(["node:/camera", "process:100"])
+    if pid is not None:
+        add_member(G, f"process:{pid}", pid=pid, alive=True)
+        add_member(G, "node:/camera", pid=pid, alive=True)
+        add_flow_edge(G, "node:/camera", "topic:/img", "pub")
+        add_tree_edge(G, f"process:{pid}", "node:/camera")
+    return G
+
+
+def test_member_gone_a_clean_exit_and_a_process_without_nodes_raise_nothing():
+    # /camera deregisters (t=3), then its process ends (t=4, not listed any more): exit code 0 or
+    # not, a clean exit. A process that hosted no node ends: nothing either.
+    frames = [(2.0, camera_in(100), []), (3.0, camera_in(None), []),
+              (4.0, camera_in(None), exit_of(4.0, 100, [], [])),
+              (5.0, camera_in(None), exit_of(5.0, 777, [], []))]
+    assert drive("member_gone", frames) == []
+    # Both in one sample: the node had left the DDS graph when its process ended.
+    frames = [(2.0, camera_in(100), []), (3.0, camera_in(None), exit_of(3.0, 100, ["node:/camera"], []))]
+    assert drive("member_gone", frames) == []
+
+
+def test_member_gone_a_restart_loop_is_one_escalating_symptom_of_the_node():
+    # /camera crashes (still listed when its process ends) and is started again, 7 times in 35 s.
+    frames, pid = [(0.0, camera_in(100), [])], 100
+    for k in range(1, 8):
+        t = 5.0 * k
+        frames.append((t, camera_in(None), exit_of(t, pid, ["node:/camera"], ["node:/camera"])))
+        pid += 1
+        frames.append((t + 1.0, camera_in(pid), []))
+    alerts = drive("member_gone", frames, full=True)
+    assert {a.member for a in alerts} == {"node:/camera"}  # never a process:<pid> member
+    restarts = [(a.t, a.severity, a.data["restarts"]) for a in alerts if a.data["symptom"] == "restart"]
+    assert restarts == [(6.0, "warn", 1), (11.0, "warn", 2), (16.0, "error", 3), (21.0, "error", 4),
+                        (26.0, "error", 5), (31.0, "fatal", 6), (36.0, "fatal", 7)]
+    assert [a.t for a in alerts if a.data["symptom"] == "exit"] == [5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0]
+    assert "restarted 7 times in 30 s" in alerts[-1].message
+    assert all(a.data["episode_hold_s"] == 60.0 for a in alerts)
+
+
+def test_member_gone_a_node_that_comes_back_cleanly_now_and_then_is_healthy():
+    # A job that runs, exits cleanly, and is started again a minute later, three times.
+    frames, pid = [], 100
+    for k in range(3):
+        t = 70.0 * k
+        frames += [(t, camera_in(pid), []), (t + 10.0, camera_in(None), exit_of(t + 10.0, pid, [], []))]
+        pid += 1
+    assert drive("member_gone", frames) == []
+    # Restarted cleanly but often (every 10 s): a loop all the same.
+    frames, pid = [], 100
+    for k in range(4):
+        t = 10.0 * k
+        frames += [(t, camera_in(pid), []), (t + 5.0, camera_in(None), exit_of(t + 5.0, pid, [], []))]
+        pid += 1
+    assert drive("member_gone", frames) == [(20.0, "node:/camera", "warn"), (30.0, "node:/camera", "error")]
 
 
 # --------------------------------------------------------------------------- diagnostics, rosout
