@@ -446,6 +446,39 @@ def test_graph_anomalies_subscriber_without_publisher_after_grace():
     assert drive("graph_anomalies", frames, settings={"ignore_topics": ["/img"]}) == []
 
 
+def without_camera(alive=True):
+    """`model` after /camera left the graph (its process with it), /detector still subscribed."""
+    G = model(alive=alive)
+    G.remove_nodes_from(["node:/camera", "process:100"])
+    return G
+
+
+def test_graph_anomalies_a_publisher_that_left_cleanly_leaves_no_orphan_fault():
+    # /camera deregisters at t=3 (a job done, a node destroyed on purpose): healthy, for good.
+    frames = [(float(t), model() if t < 3 else without_camera(), []) for t in range(20)]
+    assert drive("graph_anomalies", frames) == []
+    # A publisher that comes and goes (on for 3 s, off for 7 s): healthy too.
+    frames = [(float(t), model() if t % 10 < 3 else without_camera(), []) for t in range(40)]
+    assert drive("graph_anomalies", frames) == []
+
+
+def test_graph_anomalies_a_publisher_that_died_leaves_an_orphan_fault():
+    # /camera's process is killed at t=2: DDS lists the dead node (alive=False) until its lease
+    # ends at t=6, then the topic has no publisher: its subscriber is alerted after the grace.
+    data = {"pid": 100, "process": "process:100", "nodes": ["node:/camera"], "still_listed": ["node:/camera"]}
+    killed = [Event(2.0, "exit", "node:/camera", "error", "process 100 exited", data)]
+    frames = [(0.0, model(), []), (1.0, model(), []), (2.0, model(alive=False), killed)]
+    frames += [(float(t), model(alive=False), []) for t in range(3, 6)]
+    frames += [(float(t), without_camera(), []) for t in range(6, 13)]
+    alerts = drive("graph_anomalies", frames, full=True)
+    assert [(a.t, a.member) for a in alerts] == [(11.0, "node:/detector"), (12.0, "node:/detector")]
+    assert "since its publisher /camera died" in alerts[0].message
+    # Started again under the same name and gone cleanly later: forgiven.
+    frames += [(float(t), model(), []) for t in range(13, 16)]
+    frames += [(float(t), without_camera(), []) for t in range(16, 25)]
+    assert [a.t for a in drive("graph_anomalies", frames, full=True)] == [11.0, 12.0]
+
+
 def test_graph_anomalies_duplicate_names():
     G = model()
     G.nodes["node:/camera"]["instances"] = 2
