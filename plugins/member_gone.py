@@ -87,32 +87,49 @@ def _exited_members(ctx: PluginContext, e: Event) -> list[str]:
 
 
 def _restarts(ctx: PluginContext, crashed: dict[str, float]) -> list[tuple[str, list[float], bool]]:
-    """Return ``(node, its restart times within loop_window_s, respawn?)`` per node that runs in
-    a new process since the last sample.
+    """Return ``(node, its restart times within loop_window_s, respawn?)`` per node that started
+    again in a new process since the last sample.
 
-    A node's process is the pid it was last seen with, kept for ``loop_window_s`` after it left,
-    so a node that left cleanly and came back in a new process counts too. ``respawn``: the
-    collector saw the node change process between two samples, or its last process crashed.
+    A new process of a node shows as a new pid (the pid it was last seen with is kept for
+    ``loop_window_s`` after it left, so a node that left cleanly and came back counts), or, while
+    the old one is still listed (a crashed process stays in DDS until its lease ends, and its pid
+    may stay on the name), as one more ``instances`` of the name; a new pid that follows such a
+    rise is that same process, not another. ``respawn``: the collector saw the node change
+    process between two samples, or its last process crashed.
     """
     window = ctx.settings["loop_window_s"]
-    last = ctx.state.setdefault("pids", {})  # node -> (pid, last seen)
+    seen = ctx.state.setdefault("seen", {})  # node -> (pid, instances, last seen)
+    pending = ctx.state.setdefault("pending", {})  # node -> times of rises whose pid is not seen yet
     times = ctx.state.setdefault("restarts", {})  # node -> restart times
-    moved = {e.member: e.data.get("pid") for e in ctx.events if e.kind == "restart"}
+    moved = {e.member for e in ctx.events if e.kind == "restart"}
     out = []
     for m in ctx.members("node"):
-        pid = ctx.attr(m, "pid")
-        if pid is None or ctx.attr(m, "instances", 1) != 1:
-            continue  # unknown, or two processes behind one name (graph_anomalies' case)
-        old = last.get(m)
-        last[m] = (pid, ctx.t)
-        if m not in moved and (old is None or old[0] == pid):
+        pid, inst = ctx.attr(m, "pid"), ctx.attr(m, "instances", 1)
+        inst = inst if isinstance(inst, int) else 1
+        old = seen.get(m)
+        seen[m] = (pid if pid is not None or old is None else old[0], inst, ctx.t)
+        if old is None:
             continue
-        recent = [x for x in times.get(m, ()) if ctx.t - x <= window] + [ctx.t]
-        times[m] = recent
-        out.append((m, recent, m in moved or ctx.t - crashed.get(m, -window) <= window))
-    for m in [m for m, (_, seen) in last.items() if ctx.t - seen > window]:
-        del last[m]  # gone longer than a loop lasts: forget it
+        waiting = [x for x in pending.get(m, ()) if ctx.t - x <= window]
+        new_pid = m in moved or (pid is not None and old[0] is not None and pid != old[0])
+        rises = 0 if m in ctx.diff.added_members else max(0, inst - old[1])
+        if rises:
+            waiting += [ctx.t] * (rises - new_pid)
+            new = rises
+        elif new_pid and waiting:
+            waiting.pop(0)  # the process a rise of instances already counted
+            new = 0
+        else:
+            new = int(new_pid)
+        pending[m] = waiting
+        if new:
+            recent = [x for x in times.get(m, ()) if ctx.t - x <= window] + [ctx.t] * new
+            times[m] = recent
+            out.append((m, recent, m in moved or ctx.t - crashed.get(m, -window) <= window))
+    for m in [m for m, (_, _, last) in seen.items() if ctx.t - last > window]:
+        del seen[m]  # gone longer than a loop lasts: forget it
         times.pop(m, None)
+        pending.pop(m, None)
     return out
 
 
@@ -139,4 +156,5 @@ def _pid_known(ctx: PluginContext, node: str) -> bool:
     collector would have said so in an exit event (and the node would be in ``exited``); so the
     node deregistered, and its process ended cleanly or runs on.
     """
-    return node in ctx.state.get("pids", {})
+    last = ctx.state.get("seen", {}).get(node)
+    return last is not None and last[0] is not None

@@ -329,13 +329,13 @@ def exit_of(t, pid, nodes, still_listed):
             for m in [*nodes, f"process:{pid}"]]
 
 
-def camera_in(pid):
+def camera_in(pid, alive=True, instances=1):
     """`model` with /camera in process ``pid`` (None: not running, the node gone from the graph)."""
     G = model()
     G.remove_nodes_from(["node:/camera", "process:100"])
     if pid is not None:
-        add_member(G, f"process:{pid}", pid=pid, alive=True)
-        add_member(G, "node:/camera", pid=pid, alive=True)
+        add_member(G, f"process:{pid}", pid=pid, alive=alive)
+        add_member(G, "node:/camera", pid=pid, alive=alive, instances=instances)
         add_flow_edge(G, "node:/camera", "topic:/img", "pub")
         add_tree_edge(G, f"process:{pid}", "node:/camera")
     return G
@@ -369,6 +369,25 @@ def test_member_gone_a_restart_loop_is_one_escalating_symptom_of_the_node():
     assert [a.t for a in alerts if a.data["symptom"] == "exit"] == [5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0]
     assert "restarted 7 times in 30 s" in alerts[-1].message
     assert all(a.data["episode_hold_s"] == 60.0 for a in alerts)
+
+
+def test_member_gone_a_restart_loop_behind_ghosts_of_crashed_processes():
+    # As the collector shows a crash loop: a killed process's node stays listed (alive=False) until
+    # its DDS lease ends, so the next process of the name shows first as one more instance (its
+    # pid still the dead one's), then takes the name's pid (a `restart` event).
+    crash = {"crash": True}
+    frames = [(1.0, camera_in(100), []), (2.0, camera_in(100), []),
+              (4.0, camera_in(100, alive=False), exit_of(4.0, 100, ["node:/camera"], ["node:/camera"])),
+              (9.0, camera_in(100, alive=False, instances=2), []),
+              (10.0, camera_in(200, instances=2), [Event(10.0, "restart", "node:/camera", "warn", "", crash)]),
+              (12.0, camera_in(200, alive=False, instances=2),
+               exit_of(12.0, 200, ["node:/camera"], ["node:/camera"])),
+              (13.0, camera_in(200, alive=False, instances=3), [])]
+    alerts = drive("member_gone", frames, full=True)
+    assert [(a.t, a.data["symptom"], a.severity) for a in alerts] == [
+        (4.0, "exit", "error"), (9.0, "restart", "warn"), (9.0, "not_alive", "error"),
+        (12.0, "exit", "error"), (13.0, "restart", "warn"), (13.0, "not_alive", "error")]
+    assert [a.data["restarts"] for a in alerts if a.data["symptom"] == "restart"] == [1, 2]
 
 
 def test_member_gone_a_node_that_comes_back_cleanly_now_and_then_is_healthy():
