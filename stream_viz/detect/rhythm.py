@@ -26,6 +26,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 GAP_MEMORY = 32  # healthy gaps and runs remembered per topic (the newest)
+# ``t - age_s`` of one message moves between samples by how long the collector took from the
+# sample's time to its topic metrics (graph reads first: milliseconds, more on a loaded host). A
+# newer newest message ends a quiet only when the window holds more messages than before, or when
+# it is this much newer: less than a sample period, far less than any notable quiet.
+SAME_MESSAGE_S = 0.5
 
 
 @dataclass
@@ -40,6 +45,8 @@ class Rhythm:
         The first message of the current run (published without a notable quiet).
     rate : float
         The window's rate the last time it was above zero (Hz).
+    count : int
+        Messages in the window at the last sample.
     gaps, runs : list of float
         Healthy gaps (s) and the runs before them (s), oldest first, at most `GAP_MEMORY`.
     settled : bool
@@ -56,6 +63,7 @@ class Rhythm:
     newest: float | None = None
     run_start: float | None = None
     rate: float = 0.0
+    count: int = 0
     gaps: list[float] = field(default_factory=list)
     runs: list[float] = field(default_factory=list)
     settled: bool = False
@@ -100,8 +108,13 @@ def follow(r: Rhythm, t: float, newest: float | None, rate: float, *, window_s: 
     """
     if rate > 0:
         r.rate = rate
+    count, before = round(rate * window_s), r.count
+    r.count = count
     if newest is not None and (r.newest is None or newest > r.newest):
-        _message(r, newest, notable)
+        if r.newest is None or count > before or newest > r.newest + SAME_MESSAGE_S:
+            _message(r, newest, notable)
+        else:  # the same message seen a little later (or one just after it): no quiet ended
+            r.newest = newest
     if r.newest is None:
         return None
     quiet = t - r.newest if newest is not None else max(t - r.newest, window_s)

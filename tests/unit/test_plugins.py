@@ -375,11 +375,11 @@ def test_member_gone_a_restart_loop_behind_ghosts_of_crashed_processes():
     # As the collector shows a crash loop: a killed process's node stays listed (alive=False) until
     # its DDS lease ends, so the next process of the name shows first as one more instance (its
     # pid still the dead one's), then takes the name's pid (a `restart` event).
-    crash = {"crash": True}
+    moved = [Event(10.0, "restart", "node:/camera", "warn", "now in process 200", {"pid": 200})]
     frames = [(1.0, camera_in(100), []), (2.0, camera_in(100), []),
               (4.0, camera_in(100, alive=False), exit_of(4.0, 100, ["node:/camera"], ["node:/camera"])),
               (9.0, camera_in(100, alive=False, instances=2), []),
-              (10.0, camera_in(200, instances=2), [Event(10.0, "restart", "node:/camera", "warn", "", crash)]),
+              (10.0, camera_in(200, instances=2), moved),
               (12.0, camera_in(200, alive=False, instances=2),
                exit_of(12.0, 200, ["node:/camera"], ["node:/camera"])),
               (13.0, camera_in(200, alive=False, instances=3), [])]

@@ -82,3 +82,15 @@ def test_one_latched_message_never_settles_and_memory_is_bounded():
     r = Rhythm(gaps=[1.0] * GAP_MEMORY, runs=[1.0] * GAP_MEMORY, newest=0.0, run_start=0.0, peak=5.0)
     run([(10.0, 10.0, 1.0)], r)
     assert len(r.gaps) == GAP_MEMORY and r.gaps[-1] == 10.0
+
+
+def test_the_same_message_seen_a_little_later_ends_no_quiet():
+    # t - age of one message moves by how long the collector took to its metrics: 0.2 ms here.
+    samples = [(0.0, 0.0, 3.0), (1.0, 0.95, 6.0), (2.0, 0.95, 6.0), (3.0, 0.9502, 6.0),
+               (4.0, 0.9504, 3.0), (5.0, 4.9, 0.3)]
+    r, quiets = run(samples)
+    assert [round(q, 2) for q in quiets] == [0.0, 0.05, 1.05, 2.05, 3.05, 0.1]
+    assert [round(g, 2) for g in r.gaps] == [3.95]  # one quiet, ended by the message at 4.9
+    # More messages in the window than before: a new one, however close.
+    r, _ = run([(0.0, 0.0, 1.0), (1.0, 0.1, 2.0)])
+    assert r.newest == 0.1 and r.peak == 0.9
