@@ -248,6 +248,18 @@ def test_topic_latency_quiet_then_rise_and_drops():
     assert drive("topic_latency", drops) == [(5.0, "topic:/img", "warn"), (6.0, "topic:/img", "warn")]
 
 
+def test_topic_latency_jitter_a_bursty_topic_often_shows_is_no_rise():
+    # A topic in bursts: its 3 s window holds a gap in some samples (jitter ~400 ms) and not in
+    # others (0). The median is 0; three windows with a gap in a row are its rhythm, not a rise.
+    usual = [0.0, 0.0, 0.0, 420.0, 0.0] * 8 + [410.0, 430.0, 440.0, 0.0, 0.0]
+    frames = [(float(t), model(jitter=j), []) for t, j in enumerate(usual)]
+    assert drive("topic_latency", frames) == []
+    # Past what it often shows (its 90th percentile, 420 ms) by the floor (50 ms at 10 Hz): a rise.
+    sick = [*usual[:40], 480.0, 490.0, 500.0]
+    frames = [(float(t), model(jitter=j), []) for t, j in enumerate(sick)]
+    assert drive("topic_latency", frames) == [(42.0, "topic:/img", "warn")]
+
+
 # --------------------------------------------------------------------------- process_resources
 
 def test_process_resources_quiet_with_idle_noise():
