@@ -31,12 +31,19 @@ period = 1.0
 mode = "all"
 """
 
-# 10 Hz for 2 s, then nothing for 5 s, again and again; its parameter is changed from outside.
-BURSTS = """
-import time, rclpy
+# Every child below starts with this.
+HEAD = """
+import os, sys, time, rclpy
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 rclpy.init()
+LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""
+
+# 10 Hz for 2 s, then nothing for 5 s, again and again; its parameter is changed from outside.
+BURSTS = HEAD + """
 n = Node("detector")
 n.declare_parameter("threshold", 0.5)
 pub = n.create_publisher(String, "/detections", 10)
@@ -50,15 +57,9 @@ rclpy.spin(n)
 """
 
 # Published once (when the first subscriber, the monitor, is there), kept for late joiners.
-LATCHED = """
-import rclpy
-from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import String
-rclpy.init()
+LATCHED = HEAD + """
 n = Node("map_server")
-qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-pub = n.create_publisher(String, "/map", qos)
+pub = n.create_publisher(String, "/map", LATCHED_QOS)
 sent = []
 def once():
     if not sent and pub.get_subscription_count():
@@ -70,11 +71,8 @@ rclpy.spin(n)
 """
 
 # A lifecycle node: its publisher is silent while inactive. Active 12 s, inactive 8 s, ...
-LIFECYCLE = """
-import time, rclpy
+LIFECYCLE = HEAD + """
 from rclpy.lifecycle import LifecycleNode
-from std_msgs.msg import String
-rclpy.init()
 n = LifecycleNode("dock")
 pub = n.create_lifecycle_publisher(String, "/dock_pose", 10)
 n.create_timer(0.2, lambda: pub.publish(String(data="pose")))
@@ -93,11 +91,7 @@ rclpy.spin(n)
 """
 
 # A one-shot job: publishes progress at 5 Hz for 15 s, then ends cleanly with exit code 0.
-JOB = """
-import sys, time, rclpy
-from rclpy.node import Node
-from std_msgs.msg import String
-rclpy.init()
+JOB = HEAD + """
 n = Node("job")
 pub = n.create_publisher(String, "/job_progress", 10)
 n.create_timer(0.2, lambda: pub.publish(String(data="50%")))
@@ -110,28 +104,18 @@ print("done", flush=True)
 sys.exit(0)
 """
 
-LISTENER = """
-import sys, rclpy
-from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from std_msgs.msg import String
-rclpy.init()
+LISTENER = HEAD + """
 n = Node(sys.argv[1])
-latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
 for topic in sys.argv[2:]:
-    n.create_subscription(String, topic, lambda m: None, latched if topic == "/map" else 10)
+    n.create_subscription(String, topic, lambda m: None, LATCHED_QOS if topic == "/map" else 10)
 print("ready", flush=True)
 rclpy.spin(n)
 """
 
 # Sets /detector's parameter every 4 s through its parameter services (/parameter_events traffic).
-TUNER = """
-import rclpy
-from rclpy.node import Node
+TUNER = HEAD + """
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
-rclpy.init()
 n = Node("tuner")
 client = AsyncParameterClient(n, "/detector")
 k = [0]
@@ -213,11 +197,8 @@ def test_healthy_dynamics_raise_no_alert_and_a_hang_past_the_own_gaps_is_a_silen
         mon.close()
 
 
-LOOPER = """
-import os, sys, time, rclpy
-from std_msgs.msg import String
-rclpy.init()
-n = rclpy.create_node(sys.argv[1])
+LOOPER = HEAD + """
+n = Node(sys.argv[1])
 pub = n.create_publisher(String, "/" + sys.argv[1] + "_out", 10)
 n.create_timer(0.1, lambda: pub.publish(String(data="x")))
 end = time.monotonic() + 6.0
