@@ -12,6 +12,7 @@ from stream_viz.detect.rhythm import Rhythm, follow, newest_message, quiet_limit
 from stream_viz.records import Alert
 
 Baseline = tuple[float, float, int] | None
+FORGET_S = 600.0  # as long as the monitor keeps a vanished member by default (forget_gone_s)
 
 
 class TopicRate(Plugin):
@@ -69,6 +70,8 @@ class TopicRate(Plugin):
             rate = ctx.value(topic, "rate_hz")
             if not math.isnan(rate):
                 _follow(ctx, rhythms.setdefault(topic, Rhythm()), topic, rate, None)
+        if ctx.diff.removed_members:
+            _forget(ctx, rhythms)
         transitions = _transitions(ctx)
         for topic in watched:
             rate = ctx.value(topic, "rate_hz")
@@ -86,6 +89,14 @@ class TopicRate(Plugin):
                 yield alert
             else:
                 alerting.discard(topic)
+
+
+def _forget(ctx: PluginContext, rhythms: dict[str, Rhythm]) -> None:
+    """Drop the rhythms of topics gone from the graph with no message for ``FORGET_S`` (a topic
+    back sooner keeps what it showed: its quiet while gone is a gap like any other)."""
+    for topic in [m for m, r in rhythms.items() if m not in ctx.graph
+                  and (r.newest is None or ctx.t - r.newest > FORGET_S)]:
+        del rhythms[topic]
 
 
 def _ref_hz(r: Rhythm, base: Baseline) -> float:

@@ -222,6 +222,17 @@ def test_topic_rate_a_topic_whose_publisher_left_is_not_silent():
     assert drive("topic_rate", frames) == []  # an orphan: graph_anomalies' case
 
 
+def test_topic_rate_forgets_the_rhythm_of_a_topic_gone_for_long():
+    from plugins.topic_rate import FORGET_S, _forget
+    from stream_viz.detect.api import PluginContext
+    from stream_viz.detect.rhythm import Rhythm
+
+    rhythms = {"topic:/img": Rhythm(newest=0.0), "topic:/old": Rhythm(newest=0.0),
+               "topic:/recent": Rhythm(newest=FORGET_S - 1.0), "topic:/never": Rhythm()}
+    _forget(PluginContext(FORGET_S + 1.0, model(), frozenset(), History()), rhythms)
+    assert sorted(rhythms) == ["topic:/img", "topic:/recent"]  # in the graph, or gone lately
+
+
 def test_topic_rate_no_drop_on_a_bursty_topic_but_on_a_continuous_one():
     # Bursts of 20 Hz for 4 s every 6 s: the window's rate swings 0..20 Hz, the recent rate falls
     # at each burst's end; a rate baseline of such a topic is no basis for a drop.
