@@ -17,10 +17,14 @@ class GraphAnomalies(Plugin):
     """Alerts on:
 
     * two nodes with one name (node attribute ``instances`` > 1, as the collector counts them): error;
-    * a subscriber whose topic has had no publisher for ``grace_s``: warn on the subscriber. The
-      grace starts again whenever many nodes appear in one sample (at least ``burst_min`` and
-      ``burst_ratio`` of the nodes): a system still being discovered (bring-up, or the monitor
-      attaching to 500 nodes) shows subscribers seconds before their publishers.
+    * a subscriber whose topic has had no publisher for ``grace_s``, when that is a fault: the
+      topic never had a publisher since it was seen (nobody provides what it waits for), or its
+      publisher died uncleanly (its process ended while DDS listed it, or it was seen not alive).
+      A topic whose publishers left cleanly (deregistered: a job done, a node destroyed on
+      purpose, an on-demand publisher that comes and goes) is healthy. Warn on the subscriber.
+      The grace starts again whenever many nodes appear in one sample (at least ``burst_min``
+      and ``burst_ratio`` of the nodes): a system still being discovered (bring-up, or the
+      monitor attaching to 500 nodes) shows subscribers seconds before their publishers.
 
     A topic is checked when it or the subscriber is watched; topics in ``ignore_topics`` never.
     """
@@ -45,16 +49,54 @@ class GraphAnomalies(Plugin):
             ctx.state["settled_from"] = ctx.t
         settled_from = ctx.state.get("settled_from", -float("inf"))
         orphans = set()
+        had, died = _publishers_seen(ctx)
         for topic, orphan, subs in _analyse(ctx):
             if orphan and s["no_publisher"]:
                 orphans.add(topic)
                 since = max(orphan_since.setdefault(topic, ctx.t), settled_from)
-                if ctx.t - since >= s["grace_s"]:
+                why = orphan_fault(had.get(topic), died)
+                if why is not None and ctx.t - since >= s["grace_s"]:
                     for v in subs:
                         yield ctx.alert(v, "warn", f"subscribes to {topic} which has had no publisher for "
-                                        f"{ctx.t - since:.0f} s", symptom="no_publisher", topic=topic)
+                                        f"{ctx.t - since:.0f} s{why}", symptom="no_publisher", topic=topic)
         for topic in set(orphan_since) - orphans:
             del orphan_since[topic]
+
+
+def _publishers_seen(ctx: PluginContext) -> tuple[dict[str, list[str]], set[str]]:
+    """Return topic → its publishers when it last had any, and the nodes seen to die uncleanly.
+
+    A node died uncleanly when an ``exit`` event says its process ended while DDS still listed it,
+    or it is marked ``alive=False``; it is forgiven when it appears again.
+    """
+    had = ctx.state.setdefault("had_publishers", {})
+    died = ctx.state.setdefault("died", set())
+    died.difference_update(ctx.diff.added_members)
+    for e in ctx.events:
+        if e.kind == "exit":
+            died.update(e.data.get("still_listed", ()))
+    died.update(m for m in ctx.members("node") if ctx.attr(m, "alive") is False)
+    if ctx.diff or "had_publishers_at" not in ctx.state:  # publishers change only with the graph
+        ctx.state["had_publishers_at"] = ctx.t
+        for topic in ctx.members("topic"):
+            pubs = ctx.publishers(topic)
+            if pubs:
+                had[topic] = pubs
+        for topic in ctx.diff.removed_members & had.keys():
+            del had[topic]  # gone with all its endpoints: a new one of that name starts afresh
+    return had, died
+
+
+def orphan_fault(had: list[str] | None, died: set[str]) -> str | None:
+    """Why a topic without a publisher is a fault (a phrase for the alert), or None if it is not.
+
+    ``had``: its publishers when it last had any (None: never since it was seen); ``died``: the
+    nodes seen to die uncleanly. A topic whose publishers all left cleanly is not a fault.
+    """
+    if had is None:
+        return ""
+    dead = [p.removeprefix("node:") for p in had if p in died]
+    return f" since its publisher {', '.join(dead)} died" if dead else None
 
 
 def _analyse(ctx: PluginContext) -> list[tuple[str, bool, list[str]]]:

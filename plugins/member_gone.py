@@ -1,4 +1,4 @@
-"""Nodes that left the graph, processes that died or restarted, nodes marked not alive."""
+"""Nodes whose process died uncleanly, restart loops, nodes marked not alive, nodes gone unseen."""
 
 from __future__ import annotations
 
@@ -6,14 +6,25 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.records import Alert
+from stream_viz.records import Alert, Event
 
 
 class MemberGone(Plugin):
-    """Alerts when a process dies (``exit`` event: error on its node(s), and on the process when
-    it has no node), restarts (``restart`` event: warn), a node leaves the graph without its
-    process having been seen to exit (``left_severity``), or a node carries ``alive=False``
-    (its process is gone while DDS still lists it: error, every sample while it lasts).
+    """Alerts on a node's departure only when it is not a clean one, and on restart loops.
+
+    * exit (error): the node's process ended while DDS still listed the node (the collector's
+      ``still_listed``: a crash or a kill; a node that deregisters and then its process ends,
+      exit code 0 or not, left cleanly and raises nothing); a process without nodes raises
+      nothing;
+    * restart: the node runs in a new process. One restart is news only as a respawn (the node
+      changed process between two samples, or its last process crashed): warn. A node that keeps
+      reappearing is one symptom, ``restarted N times in M s`` over ``loop_window_s``: warn from
+      2, error from ``loop_min``, fatal from ``loop_fatal`` restarts; all its alerts hold one
+      episode for ``loop_window_s`` (``episode_hold_s``);
+    * not alive (error, every sample while it lasts): DDS lists the node, its process is gone;
+    * left (``left_severity``): the node left the graph and its process cannot be seen (no
+      pid): clean or not cannot be told. A node of a known process that leaves deregistered
+      (destroyed on purpose, or its process is ending cleanly) and raises nothing.
 
     Alerts whether or not the member is watched unless ``watched_only``: a death is evidence,
     not an attribute to screen.
@@ -21,44 +32,129 @@ class MemberGone(Plugin):
 
     name = "member_gone"
     kinds = ("node", "process")
-    settings: ClassVar[dict[str, Any]] = {"left_severity": "warn", "watched_only": False}
+    settings: ClassVar[dict[str, Any]] = {
+        "left_severity": "warn", "watched_only": False,
+        "loop_window_s": 60.0, "loop_min": 3, "loop_fatal": 6,
+    }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
-        exited = ctx.state.setdefault("exited", set())
+        s = ctx.settings
+        exited = ctx.state.setdefault("exited", set())  # nodes whose process end was seen
+        crashed = ctx.state.setdefault("crashed", {})  # node -> when its process died uncleanly
+        hold = {"episode_hold_s": s["loop_window_s"]}
 
         def ok(m: str) -> bool:
-            return not ctx.settings["watched_only"] or m in ctx.watch
+            return not s["watched_only"] or m in ctx.watch
 
         said: set[str] = set()
         for e in ctx.events:
-            if e.kind == "exit":
-                for m in _exited_members(ctx, e):
-                    exited.add(m)
-                    if m in said or not ok(m):
-                        continue
+            if e.kind != "exit":
+                continue
+            unclean = set(e.data.get("still_listed", ()))
+            for m in _exited_members(ctx, e):
+                exited.add(m)
+                if m not in unclean or m in said:
+                    continue  # deregistered before its process ended: a clean exit
+                crashed[m] = ctx.t
+                if ok(m):
                     said.add(m)
-                    sev = "error" if ctx.kind(m) == "node" else e.level
-                    yield ctx.alert(m, sev, f"process died: {e.text or 'exited'}", symptom="exit",
-                                    process=e.data.get("process", e.member),
-                                    clean=not e.data.get("still_listed", ()))
-            elif e.kind == "restart" and ok(e.member):
-                yield ctx.alert(e.member, "warn", f"restarted: {e.text or 'new process'}", symptom="restart",
-                                **e.data)
+                    yield ctx.alert(m, "error", f"process died: {e.text or 'exited'}", symptom="exit",
+                                    process=e.data.get("process", e.member), clean=False, **hold)
+        for m, restarts, respawn in _restarts(ctx, crashed):
+            sev = _restart_severity(s, len(restarts), respawn)
+            if sev is not None and ok(m):
+                yield ctx.alert(m, sev, _restart_text(ctx, m, restarts), symptom="restart",
+                                restarts=len(restarts), window_s=ctx.t - restarts[0], pid=ctx.attr(m, "pid"),
+                                **hold)
         for m in sorted(ctx.diff.removed_members):
-            if ctx.kind(m) == "node" and m not in exited and ok(m):
-                yield ctx.alert(m, ctx.settings["left_severity"], "left the graph", symptom="left")
+            if ctx.kind(m) == "node" and m not in exited and ok(m) and not _pid_known(ctx, m):
+                yield ctx.alert(m, s["left_severity"], "left the graph; its process is not visible here",
+                                symptom="left")
         exited.difference_update(ctx.diff.added_members)  # back again: a later departure is news
         for m in ctx.members("node"):
             if ctx.attr(m, "alive") is False and m not in said and ok(m):
-                yield ctx.alert(m, "error", "not alive", symptom="not_alive")
+                yield ctx.alert(m, "error", "not alive", symptom="not_alive", **hold)
 
 
-def _exited_members(ctx: PluginContext, e: Any) -> list[str]:
-    """The members an ``exit`` event is reported on: a process's nodes, else the member itself.
+def _exited_members(ctx: PluginContext, e: Event) -> list[str]:
+    """The nodes an ``exit`` event concerns: a process's nodes, or the node itself.
 
     The collector sends one exit event per node of the process and one for the process.
     """
     if ctx.kind(e.member) != "process":
         return [e.member]
-    nodes = set(ctx.nodes_of(e.member, by_pid=True)) | set(e.data.get("nodes", ()))
-    return sorted(nodes) or [e.member]
+    return sorted(set(ctx.nodes_of(e.member, by_pid=True)) | set(e.data.get("nodes", ())))
+
+
+def _restarts(ctx: PluginContext, crashed: dict[str, float]) -> list[tuple[str, list[float], bool]]:
+    """Return ``(node, its restart times within loop_window_s, respawn?)`` per node that started
+    again in a new process since the last sample.
+
+    A new process of a node shows as a new pid (the pid it was last seen with is kept for
+    ``loop_window_s`` after it left, so a node that left cleanly and came back counts), or, while
+    the old one is still listed (a crashed process stays in DDS until its lease ends, and its pid
+    may stay on the name), as one more ``instances`` of the name; a new pid that follows such a
+    rise is that same process, not another. ``respawn``: the collector saw the node change
+    process between two samples, or its last process crashed.
+    """
+    window = ctx.settings["loop_window_s"]
+    seen = ctx.state.setdefault("seen", {})  # node -> (pid, instances, last seen)
+    pending = ctx.state.setdefault("pending", {})  # node -> times of rises whose pid is not seen yet
+    times = ctx.state.setdefault("restarts", {})  # node -> restart times
+    moved = {e.member for e in ctx.events if e.kind == "restart"}
+    out = []
+    for m in ctx.members("node"):
+        pid, inst = ctx.attr(m, "pid"), ctx.attr(m, "instances", 1)
+        inst = inst if isinstance(inst, int) else 1
+        old = seen.get(m)
+        seen[m] = (pid if pid is not None or old is None else old[0], inst, ctx.t)
+        if old is None:
+            continue
+        waiting = [x for x in pending.get(m, ()) if ctx.t - x <= window]
+        new_pid = m in moved or (pid is not None and old[0] is not None and pid != old[0])
+        rises = 0 if m in ctx.diff.added_members else max(0, inst - old[1])
+        if rises:
+            waiting += [ctx.t] * (rises - new_pid)
+            new = rises
+        elif new_pid and waiting:
+            waiting.pop(0)  # the process a rise of instances already counted
+            new = 0
+        else:
+            new = int(new_pid)
+        pending[m] = waiting
+        if new:
+            recent = [x for x in times.get(m, ()) if ctx.t - x <= window] + [ctx.t] * new
+            times[m] = recent
+            out.append((m, recent, m in moved or ctx.t - crashed.get(m, -window) <= window))
+    for m in [m for m, (_, _, last) in seen.items() if ctx.t - last > window]:
+        del seen[m]  # gone longer than a loop lasts: forget it
+        times.pop(m, None)
+        pending.pop(m, None)
+    return out
+
+
+def _restart_severity(s: dict[str, Any], n: int, respawn: bool) -> str | None:
+    """warn for a respawn or a second restart, error from ``loop_min``, fatal from ``loop_fatal``."""
+    if n >= s["loop_fatal"]:
+        return "fatal"
+    if n >= s["loop_min"]:
+        return "error"
+    return "warn" if n >= 2 or respawn else None
+
+
+def _restart_text(ctx: PluginContext, node: str, restarts: list[float]) -> str:
+    pid = ctx.attr(node, "pid")
+    if len(restarts) == 1:
+        return f"restarted: now in process {pid}"
+    return f"restarted {len(restarts)} times in {ctx.t - restarts[0]:.0f} s (now in process {pid})"
+
+
+def _pid_known(ctx: PluginContext, node: str) -> bool:
+    """True when the process ``node`` was last seen in is known (a local one).
+
+    Its departure is then a clean one: had the process died with the node still listed, the
+    collector would have said so in an exit event (and the node would be in ``exited``); so the
+    node deregistered, and its process ended cleanly or runs on.
+    """
+    last = ctx.state.get("seen", {}).get(node)
+    return last is not None and last[0] is not None

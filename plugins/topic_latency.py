@@ -6,6 +6,8 @@ import math
 from collections.abc import Iterator
 from typing import Any, ClassVar
 
+import numpy as np
+
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, streak
 from stream_viz.records import Alert
@@ -16,8 +18,10 @@ class TopicLatency(Plugin):
 
     A rise counts when ``value - median ≥ max(k·σ, min_rise_ms)`` (σ = 1.4826·MAD of the topic's
     own past after ``warmup_s``; also ≥ ``jitter_period_ratio`` × the period for jitter,
-    ``latency_period_ratio`` × the period for latency) for
-    ``confirm`` samples in a row; drops when
+    ``latency_period_ratio`` × the period for latency) and the value is also that floor above
+    what the topic often shows (the ``usual_quantile`` of the same past: the jitter of a topic
+    that publishes in bursts includes its gaps in some windows and not in others, a two-valued
+    past whose median says nothing) for ``confirm`` samples in a row; drops when
     ``drops_per_s ≥ max(drops_min_per_s, drops_ratio × rate)`` for ``confirm`` samples. Only
     samples with a message newer than the previous sample count (``age_s``): a topic slower than
     the sampling keeps one late message in its window for several samples, which is one
@@ -44,6 +48,7 @@ class TopicLatency(Plugin):
         "drops_ratio": 0.05,
         "common_mode_min": 4,
         "common_mode_ratio": 0.5,
+        "usual_quantile": 0.9,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -58,7 +63,9 @@ class TopicLatency(Plugin):
             fresh = age != age or age < since  # a message since the last sample (age unknown: yes)
             rate = ctx.value(topic, "rate_hz")
             for attr in ("latency_ms", "jitter_ms"):
-                ex = excess(ctx, topic, attr, _least_rise(s, attr, rate), alerting)
+                floor = _least_rise(s, attr, rate)
+                ex = excess(ctx, topic, attr, floor, alerting)
+                ex = _above_usual(ctx, topic, attr, floor, ex, alerting)
                 seen.append((topic, attr, ex, fresh))
             drops += _drops(ctx, topic, rate, fresh)
         stall = common_mode(seen, s["common_mode_min"], s["common_mode_ratio"])
@@ -86,6 +93,24 @@ def _least_rise(s: dict[str, Any], attr: str, rate: float) -> float:
     if rate > 0:
         floor = max(floor, s[f"{what}_period_ratio"] * 1000.0 / rate)
     return floor
+
+
+def _above_usual(ctx: PluginContext, topic: str, attr: str, floor: float,
+                 ex: tuple[float, float, bool] | None, alerting: set) -> tuple[float, float, bool] | None:
+    """`excess` ``ex``, exceeded only if the value is also ``floor`` above the ``usual_quantile`` of
+    the topic's own past (the same samples as the baseline; kept while alerting)."""
+    if ex is None or not ex[2]:
+        return ex
+    s = ctx.settings
+    cache = ctx.state.setdefault("usual", {})
+    hit = cache.get((topic, attr))  # (next refresh time, quantile)
+    if hit is None or (ctx.t >= hit[0] and (topic, attr) not in alerting):
+        _, past = ctx.past(topic, attr, last=s["window"])
+        past = past[np.isfinite(past)]
+        usual = float(np.quantile(past, s["usual_quantile"])) if len(past) else -math.inf
+        hit = cache[(topic, attr)] = (ctx.t + s["refresh_s"], usual)
+    value, med, _ = ex
+    return value, med, value - hit[1] >= floor
 
 
 def _drops(ctx: PluginContext, topic: str, rate: float, fresh: bool) -> list[Alert]:

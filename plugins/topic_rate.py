@@ -1,4 +1,4 @@
-"""Topic rate drop or silence, against the topic's own healthy rate and the configured rate."""
+"""Topic rate drop or silence, against the topic's own rhythm and rate and the configured rate."""
 
 from __future__ import annotations
 
@@ -8,21 +8,35 @@ from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, streak
+from stream_viz.detect.rhythm import Rhythm, follow, newest_message, quiet_limit
 from stream_viz.records import Alert
 
 Baseline = tuple[float, float, int] | None
+FORGET_S = 600.0  # as long as the monitor keeps a vanished member by default (forget_gone_s)
 
 
 class TopicRate(Plugin):
-    """Alerts when a watched topic's rate drops or it goes silent.
+    """Alerts when a watched topic's rate drops or it goes silent, as a departure from its own
+    rhythm (`stream_viz.detect.rhythm`): a bursty topic's gaps are normal, a continuous topic's
+    gap is not.
 
-    * silence (error): no message for ``max(silence_periods / rate, silence_min_s)`` after
-      having had messages, from the age of the newest message (``age_s``); without one, a zero
-      rate means none for the collector's ``rate_window_s``, 3 s;
-    * drop (warn): ``rate < drop_ratio × baseline`` for ``confirm`` samples, the baseline being
-      the median of the topic's own rate after ``warmup_s`` (frozen while alerting); the rate
-      compared is the recent one (``rate_recent_hz``, the last few intervals) where measured, so
-      a slowed topic shows before the collector's window has turned over;
+    * silence (error): quiet (no message, from the age of the newest one, ``age_s``; without one,
+      a zero rate means none for the collector's ``rate_window_s``, 3 s) for longer than
+      ``max(silence_periods / rate, silence_min_s)``, or ``gap_margin`` × the longest healthy gap
+      the topic has shown. Judged only once the topic's rhythm is settled: it published for
+      ``warmup_s`` without such a quiet, or showed ``min_gaps`` healthy gaps. Never while it has
+      no publisher (graph_anomalies' orphans), while all its publishers are transient-local (a
+      latched topic publishes when its data changes; ``judge_latched``), or when a publisher
+      changed lifecycle state (a message on its ``transition_event`` topic) within
+      ``transition_grace_s`` of the last message (a deactivated lifecycle publisher is silent);
+      such a quiet is healthy and learned. A silence again within ``flap_window_s`` of the last
+      alert is the same episode (``episode_hold_s``), counted (``flaps``);
+    * drop (warn): ``rate < drop_ratio × baseline`` and ``≥ drop_k`` σ below it for ``confirm``
+      samples, the baseline being the median of the topic's own rate after ``warmup_s`` (frozen
+      while alerting); only on a continuous topic (settled, no healthy gap: a bursty topic's rate
+      baseline says nothing); the rate compared is the recent one (``rate_recent_hz``, the last
+      few intervals) where measured, so a slowed topic shows before the collector's window has
+      turned over;
     * below expectation (warn): ``rate < (1 - expected_tolerance) × expected_rate_hz`` from the
       config, for ``confirm`` samples.
     """
@@ -33,22 +47,41 @@ class TopicRate(Plugin):
     settings: ClassVar[dict[str, Any]] = {
         **BASELINE_SETTINGS,
         "drop_ratio": 0.5,
+        "drop_k": 3.0,
         "min_baseline_hz": 0.5,
         "confirm": 2,
         "silence_periods": 3.0,
         "silence_min_s": 1.5,
         "expected_tolerance": 0.3,
         "rate_window_s": 3.0,
+        "gap_margin": 2.0,
+        "min_gaps": 3,
+        "flap_window_s": 30.0,
+        "transition_grace_s": 2.0,
+        "judge_latched": False,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         alerting = ctx.state.setdefault("alerting", set())
-        for topic in ctx.watched():
+        rhythms: dict[str, Rhythm] = ctx.state.setdefault("rhythms", {})
+        watched = list(ctx.watched())
+        # Every topic's rhythm is followed, so one the RCA starts watching later is judged at once.
+        for topic in set(ctx.members("topic")).difference(watched):
+            rate = ctx.value(topic, "rate_hz")
+            if not math.isnan(rate):
+                _follow(ctx, rhythms.setdefault(topic, Rhythm()), topic, rate, None)
+        if ctx.diff.removed_members:
+            _forget(ctx, rhythms)
+        transitions = _transitions(ctx)
+        for topic in watched:
             rate = ctx.value(topic, "rate_hz")
             if math.isnan(rate):
                 continue  # not measured
             base = cached_baseline(ctx, topic, "rate_hz", frozen=topic in alerting)
-            alert = _silence(ctx, topic, rate, base) or _drop(ctx, topic, rate, base)
+            r = rhythms.setdefault(topic, Rhythm())
+            quiet = _follow(ctx, r, topic, rate, base)
+            alert = (_silence(ctx, topic, r, quiet, base, transitions)
+                     or _drop(ctx, topic, r, quiet, rate, base))
             expected = _below_expected(ctx, topic, rate)  # its streak counts every sample
             alert = alert or expected  # one alert per topic and sample
             if alert is not None:
@@ -58,38 +91,106 @@ class TopicRate(Plugin):
                 alerting.discard(topic)
 
 
-def _silence(ctx: PluginContext, topic: str, rate: float, base: Baseline) -> Alert | None:
-    """Silent for ``max(silence_periods / rate, silence_min_s)`` after having had messages."""
-    s = ctx.settings
-    last_msg = ctx.state.setdefault("last_msg", {})  # topic: (t, rate) when it last had messages
-    if rate > 0:
-        last_msg[topic] = (ctx.t, rate)
-    if topic not in last_msg:
-        return None
-    t_last, rate_last = last_msg[topic]
-    ref = base[0] if base and base[0] > 0 else rate_last
-    age = ctx.value(topic, "age_s")
-    if age == age:  # measured: seconds since the newest message in the window
-        quiet = age
-    else:  # none in the window: a zero rate means none for the whole rate window
-        quiet = max(ctx.t - t_last, s["rate_window_s"]) if rate == 0 else 0.0
-    if quiet < max(s["silence_periods"] / ref, s["silence_min_s"]):
-        return None
-    return ctx.alert(topic, "error", f"silent for {quiet:.1f} s (was {ref:.3g} Hz)",
-                     symptom="silence", silent_s=quiet, baseline_hz=ref)
+def _forget(ctx: PluginContext, rhythms: dict[str, Rhythm]) -> None:
+    """Drop the rhythms of topics gone from the graph with no message for ``FORGET_S`` (a topic
+    back sooner keeps what it showed: its quiet while gone is a gap like any other)."""
+    for topic in [m for m, r in rhythms.items() if m not in ctx.graph
+                  and (r.newest is None or ctx.t - r.newest > FORGET_S)]:
+        del rhythms[topic]
 
 
-def _drop(ctx: PluginContext, topic: str, rate: float, base: Baseline) -> Alert | None:
-    """The recent rate below ``drop_ratio`` × the baseline for ``confirm`` samples."""
+def _ref_hz(r: Rhythm, base: Baseline) -> float:
+    """The topic's usual rate: its baseline, else the last non-zero rate seen."""
+    return base[0] if base and base[0] > 0 else r.rate
+
+
+def _base_limit(s: dict[str, Any], ref_hz: float) -> float:
+    """The shortest quiet that can be a silence: ``max(silence_periods / rate, silence_min_s)``."""
+    return max(s["silence_periods"] / ref_hz, s["silence_min_s"]) if ref_hz > 0 else s["silence_min_s"]
+
+
+def _follow(ctx: PluginContext, r: Rhythm, topic: str, rate: float, base: Baseline) -> float | None:
+    """Account this sample in the topic's rhythm; return its quiet (s), None before any message."""
     s = ctx.settings
-    if base is None or base[0] < s["min_baseline_hz"]:
+    limit = _base_limit(s, _ref_hz(r, base))
+    newest = newest_message(ctx.t, rate, ctx.value(topic, "age_s"))
+    return follow(r, ctx.t, newest, rate, window_s=s["rate_window_s"], notable=limit,
+                  settle_s=max(s["warmup_s"], limit), margin=s["gap_margin"], min_gaps=s["min_gaps"])
+
+
+def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, base: Baseline,
+             transitions: dict[str, float]) -> Alert | None:
+    """Quiet for longer than the topic's own rhythm allows (see `TopicRate`)."""
+    s = ctx.settings
+    ref = _ref_hz(r, base)
+    if quiet is None or not r.settled or r.explained:
+        return None
+    limit = quiet_limit(r, _base_limit(s, ref), s["gap_margin"])
+    if quiet < limit:
+        return None
+    if not r.departed and _healthy_quiet(ctx, topic, r, transitions):
+        r.explained = True
+        return None
+    if not r.departed:  # a new silence: count it for flapping
+        r.departed = True
+        flaps = ctx.state.setdefault("flaps", {}).setdefault(topic, [])
+        flaps[:] = [f for f in flaps if ctx.t - f <= s["flap_window_s"]] + [ctx.t]
+    flaps = len(ctx.state["flaps"][topic])
+    usual = f"was {ref:.3g} Hz" if not r.gaps else f"its longest healthy gap {max(r.gaps):.1f} s"
+    again = f"; silent {flaps} times in {s['flap_window_s']:.0f} s" if flaps > 1 else ""
+    return ctx.alert(topic, "error", f"silent for {quiet:.1f} s ({usual}){again}", symptom="silence",
+                     silent_s=quiet, baseline_hz=ref, limit_s=limit, flaps=flaps,
+                     episode_hold_s=s["flap_window_s"])
+
+
+def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[str, float]) -> bool:
+    """True when a quiet has a healthy cause: no publisher (an orphan is graph_anomalies' case),
+    only transient-local publishers, or a publisher's lifecycle transition by its last message."""
+    if ctx.value(topic, "publishers") == 0:
+        return True
+    if not ctx.settings["judge_latched"] and latched(ctx.attr(topic, "qos")):
+        return True
+    since = (r.newest or ctx.t) - ctx.settings["transition_grace_s"]
+    return any(transitions.get(p, -math.inf) >= since for p in ctx.publishers(topic))
+
+
+def latched(qos: Any) -> bool:
+    """Return True when every publisher endpoint in the topic attribute ``qos`` (and at least one)
+    is transient-local: a latched topic."""
+    pubs = [q for q in qos or () if isinstance(q, dict) and q.get("role") == "pub"]
+    return bool(pubs) and all(str(q.get("durability", "")).lower() == "transient_local" for q in pubs)
+
+
+def _transitions(ctx: PluginContext) -> dict[str, float]:
+    """Node → receive time of the newest message on a ``…/transition_event`` topic it publishes
+    (a lifecycle node's state change), kept across samples."""
+    last = ctx.state.setdefault("transitions", {})
+    if ctx.diff or "lifecycle_topics" not in ctx.state:
+        ctx.state["lifecycle_topics"] = [m for m in ctx.members("topic") if m.endswith("/transition_event")]
+    for topic in ctx.state["lifecycle_topics"]:
+        age = ctx.value(topic, "age_s")
+        if age == age:
+            for node in ctx.publishers(topic):
+                last[node] = max(last.get(node, -math.inf), ctx.t - age)
+    return last
+
+
+def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: float,
+          base: Baseline) -> Alert | None:
+    """The recent rate below ``drop_ratio`` × the baseline (and ``drop_k`` σ) for ``confirm``
+    samples, on a continuous topic that is not quiet (a quiet is a silence or not: `_silence`)."""
+    s = ctx.settings
+    if base is None or base[0] < s["min_baseline_hz"] or not r.settled or r.gaps:
         return None
     recent = ctx.value(topic, "rate_recent_hz")
     now_rate = recent if recent == recent else rate
-    if streak(ctx.state, (topic, "drop"), now_rate < s["drop_ratio"] * base[0]) < s["confirm"]:
+    med, sigma, _ = base
+    quieting = quiet is not None and quiet >= _base_limit(s, med)
+    low = not quieting and now_rate < s["drop_ratio"] * med and med - now_rate >= s["drop_k"] * sigma
+    if streak(ctx.state, (topic, "drop"), low) < s["confirm"]:
         return None
-    return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {base[0]:.3g} Hz",
-                     symptom="rate_drop", rate_hz=now_rate, baseline_hz=base[0])
+    return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {med:.3g} Hz",
+                     symptom="rate_drop", rate_hz=now_rate, baseline_hz=med)
 
 
 def _below_expected(ctx: PluginContext, topic: str, rate: float) -> Alert | None:

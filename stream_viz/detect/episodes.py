@@ -5,6 +5,10 @@ episode and is stored. While the episode goes on, an alert is stored again only 
 ``repeat_s`` have passed since the last stored one, or when its severity is higher than the
 last stored one's (an escalation is never hidden). Every alert, stored or not, extends the
 episode (``end``, ``count``, ``max_severity``).
+
+A plugin that knows its symptom comes and goes (a topic that flaps, a node in a restart loop)
+says how long it may pause and still be the same episode: ``episode_hold_s`` in the alert's
+data; the longer of it and ``gap_s`` ends the episode.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ class Episode:
     last_stored_t: float
     last_stored_severity: str
     id: int | None = None
+    hold_s: float = 0.0  # the last alert's ``episode_hold_s``: a pause this long does not end it
 
 
 class EpisodeTracker:
@@ -48,11 +53,12 @@ class EpisodeTracker:
         """Account ``alert``; return ``(store it?, its episode, episode is new?)``."""
         key = (alert.member, alert.plugin)
         ep = self.open.get(key)
-        if ep is None or alert.t - ep.end > self.gap_s:
+        if ep is None or alert.t - ep.end > max(self.gap_s, ep.hold_s):
             ep = Episode(alert.member, alert.plugin, alert.t, alert.t, 1, alert.severity,
-                         alert.t, alert.severity)
+                         alert.t, alert.severity, hold_s=hold_of(alert))
             self.open[key] = ep
             return True, ep, True
+        ep.hold_s = hold_of(alert)
         ep.end = max(ep.end, alert.t)
         ep.count += 1
         if SEVERITY_RANK[alert.severity] > SEVERITY_RANK[ep.max_severity]:
@@ -62,3 +68,11 @@ class EpisodeTracker:
         if store:
             ep.last_stored_t, ep.last_stored_severity = alert.t, alert.severity
         return store, ep, False
+
+
+def hold_of(alert: Alert) -> float:
+    """Return the alert's ``episode_hold_s`` (s; 0 when absent or not a finite number ≥ 0)."""
+    hold = alert.data.get("episode_hold_s", 0.0)
+    if isinstance(hold, bool) or not isinstance(hold, int | float) or not 0 <= hold < float("inf"):
+        return 0.0
+    return float(hold)

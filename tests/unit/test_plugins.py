@@ -36,8 +36,9 @@ def model(rate=10.0, latency=2.0, jitter=1.0, drops=0.0, cpu=5.0, rss=80.0, aliv
     return G
 
 
-def drive(plugin, frames, *, settings=None, expected=None, watch=None):
-    """Run one built-in plugin over ``frames`` = [(t, G, events)]; return alerts as (t, member, severity)."""
+def drive(plugin, frames, *, settings=None, expected=None, watch=None, full=False):
+    """Run one built-in plugin over ``frames`` = [(t, G, events)]; return alerts as (t, member, severity)
+    (``full``: the alerts themselves)."""
     ps = PluginSet.load(enable=[plugin], cwd_plugins=False, settings={plugin: settings or {}}, isolate=False)
     hist = History()
     prev = new_graph()
@@ -47,7 +48,7 @@ def drive(plugin, frames, *, settings=None, expected=None, watch=None):
         alerts, problems = ps.run(t, G, watch if watch is not None else G.nodes, hist, events, diff(prev, G),
                                   expected)
         assert problems == []
-        out += [(a.t, a.member, a.severity) for a in alerts]
+        out += alerts if full else [(a.t, a.member, a.severity) for a in alerts]
         prev = G
     return out
 
@@ -111,6 +112,136 @@ def test_topic_rate_only_watched():
     assert drive("topic_rate", frames, watch={"node:/camera"}) == []
 
 
+# ------------------------------------------------- topic_rate: the topic's own rhythm
+
+def seen(msgs, t, span=3.0):
+    """θ the collector shows at ``t`` for messages received at ``msgs`` (its 3 s window): rate,
+    age of the newest, recent rate over the last 5 intervals up to now."""
+    inside = [m for m in msgs if t - span < m <= t]
+    out = {"rate": len(inside) / span}
+    if inside:
+        out["age"] = t - inside[-1]
+    if len(inside) >= 4:
+        k = min(5, len(inside) - 1)
+        out["recent"] = k / (t - inside[-1 - k])
+    return out
+
+
+def sampled(msgs, times, graph=model):
+    """One frame per sample time of a topic whose messages arrive at ``msgs``."""
+    return [(t, graph(**seen(msgs, t)), []) for t in times]
+
+
+def bursts(starts, on=2.0, hz=10):
+    """Messages at ``hz`` for ``on`` s from each start."""
+    return [round(s + i / hz, 3) for s in starts for i in range(int(on * hz))]
+
+
+HALF = [k + 0.5 for k in range(120)]  # samples at 0.5, 1.5, ... (between message times)
+
+
+def test_topic_rate_bursty_topic_is_quiet_when_healthy_and_silent_when_hung_past_its_own_gaps():
+    healthy = bursts(range(0, 120, 8))  # 10 Hz for 2 s, then 6 s without a message, repeated
+    assert drive("topic_rate", sampled(healthy, HALF)) == []
+    # Hung after the burst at 48 (last message 49.9): learned gaps are 6.6 s (8.5 - 1.9), so the
+    # limit is twice that, 13.2 s: silent at the first sample with a quiet of at least 13.2 s.
+    hung = bursts(range(0, 49, 8))
+    alerts = drive("topic_rate", sampled(hung, HALF), full=True)
+    assert [(a.t, a.severity, a.data["symptom"]) for a in alerts][:1] == [(63.5, "error", "silence")]
+    assert round(alerts[0].data["limit_s"], 2) == 13.2 and "longest healthy gap 6.6 s" in alerts[0].message
+
+
+def test_topic_rate_a_continuous_topic_that_starts_to_flap_is_one_flapping_symptom():
+    on = [i / 10 for i in range(200)]  # continuous at 10 Hz for 20 s, then silent 2 s, back 3 s, ...
+    on += bursts([22.0, 27.0, 32.0], on=3.0)
+    alerts = drive("topic_rate", sampled(on, HALF[:36]), full=True)
+    assert [(a.t, a.severity) for a in alerts] == [(21.5, "error"), (26.5, "error"), (31.5, "error")]
+    assert [a.data["flaps"] for a in alerts] == [1, 2, 3]  # counted, never learned as its rhythm:
+    assert [a.data["limit_s"] for a in alerts] == [1.5, 1.5, 1.5]
+    assert all(a.data["episode_hold_s"] == 30.0 for a in alerts)  # one episode in the store
+    assert "silent 3 times in 30 s" in alerts[-1].message
+
+
+def test_topic_rate_a_topic_that_published_once_or_a_few_times_is_not_silent():
+    once = sampled([1.0], HALF[:60])  # a latched topic seen once: no run, no rhythm, no silence
+    assert drive("topic_rate", once) == []
+    few = sampled([1.0, 1.2, 5.0, 9.3], HALF[:60])  # on request, now and then
+    assert drive("topic_rate", few) == []
+
+
+def latched_model(**kw):
+    G = model(**kw)
+    G.nodes["topic:/img"]["qos"] = [_qos("/camera", "pub", dur="transient_local"),
+                                    _qos("/detector", "sub", dur="transient_local")]
+    return G
+
+
+def test_topic_rate_a_latched_topic_that_stops_is_not_silent_unless_asked():
+    msgs = [float(t) for t in range(20)]  # 1 Hz for 20 s, transient-local, then no more changes
+    frames = sampled(msgs, HALF[:40], graph=latched_model)
+    assert drive("topic_rate", frames) == []
+    judged = drive("topic_rate", frames, settings={"judge_latched": True})
+    assert judged[:1] == [(22.5, "topic:/img", "error")]  # 3 periods of 1 Hz after 19.0
+    # The same stream without transient-local publishers is a continuous topic: silent.
+    assert drive("topic_rate", sampled(msgs, HALF[:40]))[:1] == [(22.5, "topic:/img", "error")]
+
+
+def lifecycle_model(transitions, t, **kw):
+    """`model` whose publisher /camera is a lifecycle node with a transition at each of ``transitions``."""
+    G = model(**kw)
+    lc = seen(transitions, t)
+    add_member(G, "topic:/camera/transition_event", theta=make_theta("topic", {
+        "rate_hz": lc["rate"], "publishers": 1, **({"age_s": lc["age"]} if "age" in lc else {})}))
+    add_flow_edge(G, "node:/camera", "topic:/camera/transition_event", "pub")
+    return G
+
+
+def test_topic_rate_a_deactivated_lifecycle_publisher_is_not_silent():
+    # Active 0-20 s, deactivated at 20.0 (last message 19.9), active again at 40; hung at 60.
+    msgs = [i / 10 for i in range(200)] + [40 + i / 10 for i in range(200)]
+    transitions = [20.0, 40.0]
+    frames = [(t, lifecycle_model(transitions, t, **seen(msgs, t)), []) for t in HALF[:110]]
+    alerts = drive("topic_rate", frames, full=True)
+    # The 20 s deactivation is healthy and learned (gap 40.5 - 19.9 = 20.6 s): the hang after 59.9
+    # is a silence only after twice that.
+    assert [(a.t, a.member) for a in alerts][:1] == [(101.5, "topic:/img")]
+    assert round(alerts[0].data["limit_s"], 1) == 41.2
+
+
+def test_topic_rate_a_topic_whose_publisher_left_is_not_silent():
+    def gone(**kw):
+        G = model(**kw)
+        G.remove_edge("node:/camera", "topic:/img", 0)
+        theta = G.nodes["topic:/img"]["theta"]
+        theta[5] = 0.0  # publishers
+        return G
+
+    msgs = [i / 10 for i in range(200)]
+    frames = sampled(msgs, HALF[:20]) + sampled(msgs, HALF[20:40], graph=gone)
+    assert drive("topic_rate", frames) == []  # an orphan: graph_anomalies' case
+
+
+def test_topic_rate_forgets_the_rhythm_of_a_topic_gone_for_long():
+    from plugins.topic_rate import FORGET_S, _forget
+    from stream_viz.detect.api import PluginContext
+    from stream_viz.detect.rhythm import Rhythm
+
+    rhythms = {"topic:/img": Rhythm(newest=0.0), "topic:/old": Rhythm(newest=0.0),
+               "topic:/recent": Rhythm(newest=FORGET_S - 1.0), "topic:/never": Rhythm()}
+    _forget(PluginContext(FORGET_S + 1.0, model(), frozenset(), History()), rhythms)
+    assert sorted(rhythms) == ["topic:/img", "topic:/recent"]  # in the graph, or gone lately
+
+
+def test_topic_rate_no_drop_on_a_bursty_topic_but_on_a_continuous_one():
+    # Bursts of 20 Hz for 4 s every 6 s: the window's rate swings 0..20 Hz, the recent rate falls
+    # at each burst's end; a rate baseline of such a topic is no basis for a drop.
+    healthy = bursts(range(0, 120, 6), on=4.0, hz=20)
+    assert drive("topic_rate", sampled(healthy, HALF)) == []
+    steady = [i / 20 for i in range(600)] + [30 + i / 5 for i in range(50)]  # 20 Hz, then 5 Hz
+    alerts = drive("topic_rate", sampled(steady, HALF[:36]), full=True)
+    assert alerts and alerts[0].data["symptom"] == "rate_drop" and 30.5 <= alerts[0].t <= 32.5
+
+
 # --------------------------------------------------------------------------- topic_latency
 
 def test_topic_latency_quiet_then_rise_and_drops():
@@ -125,6 +256,18 @@ def test_topic_latency_quiet_then_rise_and_drops():
     assert drive("topic_latency", bursty) == [(32.0, "topic:/img", "warn"), (33.0, "topic:/img", "warn")]
     drops = [(float(t), model(drops=0.2 if t < 3 else 4.0), []) for t in range(7)]
     assert drive("topic_latency", drops) == [(5.0, "topic:/img", "warn"), (6.0, "topic:/img", "warn")]
+
+
+def test_topic_latency_jitter_a_bursty_topic_often_shows_is_no_rise():
+    # A topic in bursts: its 3 s window holds a gap in some samples (jitter ~400 ms) and not in
+    # others (0). The median is 0; three windows with a gap in a row are its rhythm, not a rise.
+    usual = [0.0, 0.0, 0.0, 420.0, 0.0] * 8 + [410.0, 430.0, 440.0, 0.0, 0.0]
+    frames = [(float(t), model(jitter=j), []) for t, j in enumerate(usual)]
+    assert drive("topic_latency", frames) == []
+    # Past what it often shows (its 90th percentile, 420 ms) by the floor (50 ms at 10 Hz): a rise.
+    sick = [*usual[:40], 480.0, 490.0, 500.0]
+    frames = [(float(t), model(jitter=j), []) for t, j in enumerate(sick)]
+    assert drive("topic_latency", frames) == [(42.0, "topic:/img", "warn")]
 
 
 # --------------------------------------------------------------------------- process_resources
@@ -191,9 +334,99 @@ def test_member_gone_exit_restart_left_and_not_alive():
                      {"old_pid": 100, "pid": 300})]
     G_left = model()
     G_left.remove_node("node:/detector")
+    # A node that leaves the graph while its process runs on was destroyed on purpose: no alert
+    # (it was a warn before issue 16); one whose process cannot be seen (no pid) still warns.
     assert drive("member_gone", [(2.0, G, []), (3.0, G, restart), (4.0, G_left, [])]) == [
-        (3.0, "node:/camera", "warn"), (4.0, "node:/detector", "warn")]
+        (3.0, "node:/camera", "warn")]
+    G_remote = model()
+    G_remote.nodes["node:/detector"]["pid"] = None
+    assert drive("member_gone", [(2.0, G_remote, []), (3.0, G_left, [])]) == [(3.0, "node:/detector", "warn")]
     assert drive("member_gone", [(float(t), G, []) for t in range(5)]) == []
+
+
+def exit_of(t, pid, nodes, still_listed):
+    """The collector's exit events of process ``pid`` (one per node, one for the process)."""
+    data = {"pid": pid, "process": f"process:{pid}", "nodes": nodes, "still_listed": still_listed}
+    return [Event(t, "exit", m, "error" if still_listed else "warn", f"process {pid} exited", data)
+            for m in [*nodes, f"process:{pid}"]]
+
+
+def camera_in(pid, alive=True, instances=1):
+    """`model` with /camera in process ``pid`` (None: not running, the node gone from the graph)."""
+    G = model()
+    G.remove_nodes_from(["node:/camera", "process:100"])
+    if pid is not None:
+        add_member(G, f"process:{pid}", pid=pid, alive=alive)
+        add_member(G, "node:/camera", pid=pid, alive=alive, instances=instances)
+        add_flow_edge(G, "node:/camera", "topic:/img", "pub")
+        add_tree_edge(G, f"process:{pid}", "node:/camera")
+    return G
+
+
+def test_member_gone_a_clean_exit_and_a_process_without_nodes_raise_nothing():
+    # /camera deregisters (t=3), then its process ends (t=4, not listed any more): exit code 0 or
+    # not, a clean exit. A process that hosted no node ends: nothing either.
+    frames = [(2.0, camera_in(100), []), (3.0, camera_in(None), []),
+              (4.0, camera_in(None), exit_of(4.0, 100, [], [])),
+              (5.0, camera_in(None), exit_of(5.0, 777, [], []))]
+    assert drive("member_gone", frames) == []
+    # Both in one sample: the node had left the DDS graph when its process ended.
+    frames = [(2.0, camera_in(100), []), (3.0, camera_in(None), exit_of(3.0, 100, ["node:/camera"], []))]
+    assert drive("member_gone", frames) == []
+
+
+def test_member_gone_a_restart_loop_is_one_escalating_symptom_of_the_node():
+    # /camera crashes (still listed when its process ends) and is started again, 7 times in 35 s.
+    frames, pid = [(0.0, camera_in(100), [])], 100
+    for k in range(1, 8):
+        t = 5.0 * k
+        frames.append((t, camera_in(None), exit_of(t, pid, ["node:/camera"], ["node:/camera"])))
+        pid += 1
+        frames.append((t + 1.0, camera_in(pid), []))
+    alerts = drive("member_gone", frames, full=True)
+    assert {a.member for a in alerts} == {"node:/camera"}  # never a process:<pid> member
+    restarts = [(a.t, a.severity, a.data["restarts"]) for a in alerts if a.data["symptom"] == "restart"]
+    assert restarts == [(6.0, "warn", 1), (11.0, "warn", 2), (16.0, "error", 3), (21.0, "error", 4),
+                        (26.0, "error", 5), (31.0, "fatal", 6), (36.0, "fatal", 7)]
+    assert [a.t for a in alerts if a.data["symptom"] == "exit"] == [5.0, 10.0, 15.0, 20.0, 25.0, 30.0, 35.0]
+    assert "restarted 7 times in 30 s" in alerts[-1].message
+    assert all(a.data["episode_hold_s"] == 60.0 for a in alerts)
+
+
+def test_member_gone_a_restart_loop_behind_ghosts_of_crashed_processes():
+    # As the collector shows a crash loop: a killed process's node stays listed (alive=False) until
+    # its DDS lease ends, so the next process of the name shows first as one more instance (its
+    # pid still the dead one's), then takes the name's pid (a `restart` event).
+    moved = [Event(10.0, "restart", "node:/camera", "warn", "now in process 200", {"pid": 200})]
+    frames = [(1.0, camera_in(100), []), (2.0, camera_in(100), []),
+              (4.0, camera_in(100, alive=False), exit_of(4.0, 100, ["node:/camera"], ["node:/camera"])),
+              (9.0, camera_in(100, alive=False, instances=2), []),
+              (10.0, camera_in(200, instances=2), moved),
+              (12.0, camera_in(200, alive=False, instances=2),
+               exit_of(12.0, 200, ["node:/camera"], ["node:/camera"])),
+              (13.0, camera_in(200, alive=False, instances=3), [])]
+    alerts = drive("member_gone", frames, full=True)
+    assert [(a.t, a.data["symptom"], a.severity) for a in alerts] == [
+        (4.0, "exit", "error"), (9.0, "restart", "warn"), (9.0, "not_alive", "error"),
+        (12.0, "exit", "error"), (13.0, "restart", "warn"), (13.0, "not_alive", "error")]
+    assert [a.data["restarts"] for a in alerts if a.data["symptom"] == "restart"] == [1, 2]
+
+
+def test_member_gone_a_node_that_comes_back_cleanly_now_and_then_is_healthy():
+    # A job that runs, exits cleanly, and is started again a minute later, three times.
+    frames, pid = [], 100
+    for k in range(3):
+        t = 70.0 * k
+        frames += [(t, camera_in(pid), []), (t + 10.0, camera_in(None), exit_of(t + 10.0, pid, [], []))]
+        pid += 1
+    assert drive("member_gone", frames) == []
+    # Restarted cleanly but often (every 10 s): a loop all the same.
+    frames, pid = [], 100
+    for k in range(4):
+        t = 10.0 * k
+        frames += [(t, camera_in(pid), []), (t + 5.0, camera_in(None), exit_of(t + 5.0, pid, [], []))]
+        pid += 1
+    assert drive("member_gone", frames) == [(20.0, "node:/camera", "warn"), (30.0, "node:/camera", "error")]
 
 
 # --------------------------------------------------------------------------- diagnostics, rosout
@@ -240,6 +473,39 @@ def test_graph_anomalies_subscriber_without_publisher_after_grace():
     frames = [(float(t), G, []) for t in range(8)]
     assert drive("graph_anomalies", frames) == [(t, "node:/detector", "warn") for t in (5.0, 6.0, 7.0)]
     assert drive("graph_anomalies", frames, settings={"ignore_topics": ["/img"]}) == []
+
+
+def without_camera(alive=True):
+    """`model` after /camera left the graph (its process with it), /detector still subscribed."""
+    G = model(alive=alive)
+    G.remove_nodes_from(["node:/camera", "process:100"])
+    return G
+
+
+def test_graph_anomalies_a_publisher_that_left_cleanly_leaves_no_orphan_fault():
+    # /camera deregisters at t=3 (a job done, a node destroyed on purpose): healthy, for good.
+    frames = [(float(t), model() if t < 3 else without_camera(), []) for t in range(20)]
+    assert drive("graph_anomalies", frames) == []
+    # A publisher that comes and goes (on for 3 s, off for 7 s): healthy too.
+    frames = [(float(t), model() if t % 10 < 3 else without_camera(), []) for t in range(40)]
+    assert drive("graph_anomalies", frames) == []
+
+
+def test_graph_anomalies_a_publisher_that_died_leaves_an_orphan_fault():
+    # /camera's process is killed at t=2: DDS lists the dead node (alive=False) until its lease
+    # ends at t=6, then the topic has no publisher: its subscriber is alerted after the grace.
+    data = {"pid": 100, "process": "process:100", "nodes": ["node:/camera"], "still_listed": ["node:/camera"]}
+    killed = [Event(2.0, "exit", "node:/camera", "error", "process 100 exited", data)]
+    frames = [(0.0, model(), []), (1.0, model(), []), (2.0, model(alive=False), killed)]
+    frames += [(float(t), model(alive=False), []) for t in range(3, 6)]
+    frames += [(float(t), without_camera(), []) for t in range(6, 13)]
+    alerts = drive("graph_anomalies", frames, full=True)
+    assert [(a.t, a.member) for a in alerts] == [(11.0, "node:/detector"), (12.0, "node:/detector")]
+    assert "since its publisher /camera died" in alerts[0].message
+    # Started again under the same name and gone cleanly later: forgiven.
+    frames += [(float(t), model(), []) for t in range(13, 16)]
+    frames += [(float(t), without_camera(), []) for t in range(16, 25)]
+    assert [a.t for a in drive("graph_anomalies", frames, full=True)] == [11.0, 12.0]
 
 
 def test_graph_anomalies_duplicate_names():

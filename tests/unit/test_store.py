@@ -72,6 +72,23 @@ def test_episodes_rate_limit_ongoing_symptom(tmp_path):
         assert len(st.episodes()) == 3
 
 
+def test_an_alert_may_hold_its_episode_open_through_a_pause(tmp_path):
+    """A flapping symptom (silent 2 s, back 3 s, ...) with ``episode_hold_s`` is one episode; a
+    pause longer than the hold, or an alert without one, still ends it."""
+    def flap(t, hold=10.0):
+        return Alert("topic:/img", "topic_rate", t, "error", "silent", {"episode_hold_s": hold})
+
+    with AlertStore(tmp_path / "h.sqlite", repeat_s=5.0, gap_s=3.0) as st:
+        rows = st.add([flap(t) for t in (0.0, 1.0, 5.0, 6.0, 10.0, 11.0, 15.0)])
+        assert [a.t for a in rows] == [0.0, 5.0, 10.0, 15.0]  # one row per repeat_s, as before
+        st.add([flap(26.0)])  # 11 s after the last one: longer than the hold
+        st.add([flap(30.0, hold=0.0), flap(34.0)])  # the last alert had no hold: the 3 s gap rules
+        st.add([Alert("node:/cam", "member_gone", 1.0, "warn", "x", {"episode_hold_s": "long"})])
+        eps = [(e.start, e.end, e.count) for e in st.episodes("topic:/img")]
+        assert eps == [(0.0, 15.0, 7), (26.0, 30.0, 2), (34.0, 34.0, 1)]
+        assert len(st.episodes("node:/cam")) == 1  # a malformed hold is ignored, not an error
+
+
 def test_snapshots_only_when_structure_changes(tmp_path):
     path = tmp_path / "s.sqlite"
     with AlertStore(path) as st:

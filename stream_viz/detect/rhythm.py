@@ -1,0 +1,151 @@
+"""A topic's publishing rhythm, learned from its own past: how long it stays quiet when healthy.
+
+A topic that publishes in bursts or on demand (only while something is in view, only on
+request) or once (latched) is quiet most of the time; a continuous topic is never quiet for long.
+Silence is a symptom only as a departure from the topic's own rhythm, so the rhythm is learned
+from what the collector shows every sample (the receive time of the newest message,
+``t - age_s``):
+
+* a **quiet** is the time since the newest message; it is *notable* when it reaches the base
+  silence limit (a few periods, at least a second or two: `stream_viz`'s ``topic_rate``);
+* a notable quiet that ends without having been a symptom is a **healthy gap**, and is learned
+  (its length from the newest message before it to the newest after it: an upper bound, off by at
+  most a sample period, so a repeat of the same gap never exceeds what was learned);
+* a topic is **settled** (its silence can be judged) once it has published without a notable
+  quiet for ``settle_s`` (it is continuous), or has shown ``min_gaps`` healthy gaps (its rhythm is
+  known), or, having shown some, is in a run longer than ``margin`` times its longest earlier run;
+  settled is for good, so a topic that starts to flap stays judged and its flaps are never learned;
+* a settled topic's silence limit is the base limit, or ``margin`` times its longest healthy gap
+  when it has any.
+
+Pure: `Rhythm` is plain data, changed only by `follow`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+GAP_MEMORY = 32  # healthy gaps and runs remembered per topic (the newest)
+# ``t - age_s`` of one message moves between samples by how long the collector took from the
+# sample's time to its topic metrics (graph reads first: milliseconds, more on a loaded host). A
+# newer newest message ends a quiet only when the window holds more messages than before, or when
+# it is this much newer: less than a sample period, far less than any notable quiet.
+SAME_MESSAGE_S = 0.5
+
+
+@dataclass
+class Rhythm:
+    """What a topic's publishing has looked like so far.
+
+    Attributes
+    ----------
+    newest : float or None
+        Receive time of the newest message seen (None: none yet).
+    run_start : float or None
+        The first message of the current run (published without a notable quiet).
+    rate : float
+        The window's rate the last time it was above zero (Hz).
+    count : int
+        Messages in the window at the last sample.
+    gaps, runs : list of float
+        Healthy gaps (s) and the runs before them (s), oldest first, at most `GAP_MEMORY`.
+    settled : bool
+        Its silence can be judged (see the module docstring); for good once true.
+    peak : float
+        The longest quiet seen at a sample during the current quiet.
+    departed : bool
+        The current quiet was a symptom: it is not learned when it ends.
+    explained : bool
+        The current quiet has a healthy cause (its publisher changed lifecycle state): it is not
+        a symptom, and is learned when it ends.
+    """
+
+    newest: float | None = None
+    run_start: float | None = None
+    rate: float = 0.0
+    count: int = 0
+    gaps: list[float] = field(default_factory=list)
+    runs: list[float] = field(default_factory=list)
+    settled: bool = False
+    peak: float = 0.0
+    departed: bool = False
+    explained: bool = False
+
+
+def newest_message(t: float, rate: float, age: float) -> float | None:
+    """Return the receive time of the newest message in the collector's window at ``t``.
+
+    ``t - age`` when the age is measured; ``t`` when the window has messages but no age (a model
+    without it); None when the window has none (``rate`` 0).
+    """
+    if age == age:
+        return t - age
+    return t if rate > 0 else None
+
+
+def follow(r: Rhythm, t: float, newest: float | None, rate: float, *, window_s: float, notable: float,
+           settle_s: float, margin: float, min_gaps: int) -> float | None:
+    """Account one sample of a topic in ``r``; return its quiet now (s), None before any message.
+
+    Parameters
+    ----------
+    r : Rhythm
+        The topic's rhythm, updated in place.
+    t : float
+        The sample time.
+    newest : float or None
+        `newest_message` of this sample.
+    rate : float
+        The window's rate (Hz).
+    window_s : float
+        The collector's rate window: a window without messages means none for at least this long.
+    notable : float
+        A quiet this long is notable (the base silence limit).
+    settle_s : float
+        A run this long without a notable quiet makes the topic continuous.
+    margin, min_gaps : float, int
+        See the module docstring.
+    """
+    if rate > 0:
+        r.rate = rate
+    count, before = round(rate * window_s), r.count
+    r.count = count
+    if newest is not None and (r.newest is None or newest > r.newest):
+        if r.newest is None or count > before or newest > r.newest + SAME_MESSAGE_S:
+            _message(r, newest, notable)
+        else:  # the same message seen a little later (or one just after it): no quiet ended
+            r.newest = newest
+    if r.newest is None:
+        return None
+    quiet = t - r.newest if newest is not None else max(t - r.newest, window_s)
+    r.peak = max(r.peak, quiet)
+    if not r.settled:
+        r.settled = _settles(r, settle_s, margin, min_gaps)
+    return quiet
+
+
+def _message(r: Rhythm, newest: float, notable: float) -> None:
+    """A message newer than any seen: a notable quiet before it ends, and is learned if healthy."""
+    if r.newest is None:
+        r.run_start = newest
+    elif r.peak >= notable:
+        if not r.departed:
+            r.gaps = [*r.gaps, newest - r.newest][-GAP_MEMORY:]
+            start = r.newest if r.run_start is None else r.run_start
+            r.runs = [*r.runs, r.newest - start][-GAP_MEMORY:]
+        r.run_start = newest
+    r.newest = newest
+    r.peak, r.departed, r.explained = 0.0, False, False
+
+
+def _settles(r: Rhythm, settle_s: float, margin: float, min_gaps: int) -> bool:
+    run = r.newest - r.run_start if r.newest is not None and r.run_start is not None else 0.0
+    if not r.gaps:
+        return run >= settle_s
+    return len(r.gaps) >= min_gaps or run >= max(settle_s, margin * max(r.runs))
+
+
+def quiet_limit(r: Rhythm, base_s: float, margin: float) -> float:
+    """Return how long ``r``'s topic may be quiet while healthy: ``base_s``, or ``margin`` × its
+    longest healthy gap when longer."""
+    return max(base_s, margin * max(r.gaps, default=0.0))

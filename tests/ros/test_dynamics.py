@@ -1,0 +1,243 @@
+"""Healthy dynamics are no fault, departures from them are (issue 16 items 1, 7, 9), through the
+real monitor against real rclpy nodes in subprocesses.
+
+A healthy system full of dynamics (a topic published in bursts, a latched topic published once,
+a lifecycle node that deactivates and activates again, a job that ends with exit code 0, a
+parameter changed every few seconds, a console that joins late) raises no alert; then the bursty
+topic's publisher hangs for longer than its own gaps, and that is a silence. A node started four
+times under one name is one symptom of that node.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import pytest
+
+from stream_viz.config import load_config
+from stream_viz.monitor import Monitor
+from stream_viz.progress import Progress
+from stream_viz.testing import wait_for
+
+pytestmark = pytest.mark.ros
+
+CONFIG = """
+[monitor]
+period = 1.0
+
+[watchlist]
+mode = "all"
+"""
+
+# Every child below starts with this.
+HEAD = """
+import os, sys, time, rclpy
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+rclpy.init()
+LATCHED_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""
+
+# 10 Hz for 2 s, then nothing for 5 s, again and again; its parameter is changed from outside.
+BURSTS = HEAD + """
+n = Node("detector")
+n.declare_parameter("threshold", 0.5)
+pub = n.create_publisher(String, "/detections", 10)
+t0 = time.monotonic()
+def tick():
+    if (time.monotonic() - t0) % 7.0 < 2.0:
+        pub.publish(String(data="pallet"))
+n.create_timer(0.1, tick)
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+# Published once (when the first subscriber, the monitor, is there), kept for late joiners.
+LATCHED = HEAD + """
+n = Node("map_server")
+pub = n.create_publisher(String, "/map", LATCHED_QOS)
+sent = []
+def once():
+    if not sent and pub.get_subscription_count():
+        pub.publish(String(data="map"))
+        sent.append(1)
+n.create_timer(0.5, once)
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+# A lifecycle node: its publisher is silent while inactive. Active 12 s, inactive 8 s, ...
+LIFECYCLE = HEAD + """
+from rclpy.lifecycle import LifecycleNode
+n = LifecycleNode("dock")
+pub = n.create_lifecycle_publisher(String, "/dock_pose", 10)
+n.create_timer(0.2, lambda: pub.publish(String(data="pose")))
+n.trigger_configure()
+n.trigger_activate()
+t0, active = time.monotonic(), True
+def cycle():
+    global active
+    want = (time.monotonic() - t0) % 20.0 < 12.0
+    if want != active:
+        active = want
+        (n.trigger_activate if want else n.trigger_deactivate)()
+n.create_timer(0.1, cycle)
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+# A one-shot job: publishes progress at 5 Hz for 15 s, then ends cleanly with exit code 0.
+JOB = HEAD + """
+n = Node("job")
+pub = n.create_publisher(String, "/job_progress", 10)
+n.create_timer(0.2, lambda: pub.publish(String(data="50%")))
+end = time.monotonic() + 15.0
+while time.monotonic() < end:
+    rclpy.spin_once(n, timeout_sec=0.1)
+n.destroy_node()
+rclpy.shutdown()
+print("done", flush=True)
+sys.exit(0)
+"""
+
+LISTENER = HEAD + """
+n = Node(sys.argv[1])
+for topic in sys.argv[2:]:
+    n.create_subscription(String, topic, lambda m: None, LATCHED_QOS if topic == "/map" else 10)
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+# Sets /detector's parameter every 4 s through its parameter services (/parameter_events traffic).
+TUNER = HEAD + """
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+n = Node("tuner")
+client = AsyncParameterClient(n, "/detector")
+k = [0]
+def tune():
+    if client.services_are_ready():
+        k[0] += 1
+        client.set_parameters([Parameter("threshold", value=0.5 + 0.1 * (k[0] % 3))])
+        print("set", k[0], flush=True)
+n.create_timer(4.0, tune)
+rclpy.spin(n)
+"""
+
+
+def _monitor(children, tmp_path) -> Monitor:
+    cfg = tmp_path / "stream-viz.toml"
+    cfg.write_text(CONFIG)
+    return Monitor(load_config(cfg), db=tmp_path / "alerts.sqlite", viewer="none",
+                   domain_id=int(children.env["ROS_DOMAIN_ID"]), progress=Progress(open(os.devnull, "w")))
+
+
+def _observe(mon: Monitor, seconds: float) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        t0 = time.monotonic()
+        mon.step()
+        time.sleep(max(0.0, 1.0 - (time.monotonic() - t0)))
+
+
+def _plugin(mon: Monitor, name: str):
+    (p,) = [p for p in mon.plugins.plugins if p.name == name]
+    return p
+
+
+def test_healthy_dynamics_raise_no_alert_and_a_hang_past_the_own_gaps_is_a_silence(children, tmp_path):
+    bursts = children.python(BURSTS, name="bursts")
+    children.python(LATCHED, name="latched")
+    children.python(LIFECYCLE, name="lifecycle")
+    job = children.python(JOB, name="job")
+    children.python(LISTENER, "listener", "/detections", "/job_progress", "/dock_pose", name="listener")
+    tuner = children.python(TUNER, name="tuner")
+    mon = _monitor(children, tmp_path)
+    try:
+        wait_for(lambda: (mon.step(), {"node:/detector", "node:/job", "node:/dock"} <= set(mon.seen))[1],
+                 timeout=20, period=1.0)
+        _observe(mon, 16.0)
+        console = children.python(LISTENER, "console", "/map", "/detections", name="console")  # joins late
+        _observe(mon, 18.0)
+        assert job.poll() == 0, "the job did not end cleanly"
+        assert "node:/console" in mon.seen and mon.seen.nodes["node:/job"].get("gone")
+        assert "set 3" in (tmp_path / f"tuner_{children.procs.index(tuner)}.log").read_text()
+        assert console.poll() is None
+        alerts = mon.store.alerts()
+        assert alerts == [], "healthy dynamics raised alerts:\n" + "\n".join(
+            f"{a.member} {a.plugin} {a.severity}: {a.message}" for a in alerts)
+        # What was learned: /detections' 5 s gaps, /dock_pose's deactivation (a lifecycle change).
+        rhythms = _plugin(mon, "topic_rate").state["rhythms"]
+        gaps = rhythms["topic:/detections"].gaps
+        assert len(gaps) >= 3 and all(4.5 <= g <= 7.5 for g in gaps), gaps
+        assert rhythms["topic:/dock_pose"].gaps, rhythms["topic:/dock_pose"]
+
+        # The burst publisher hangs: silent for longer than twice its longest gap is a silence.
+        os.killpg(bursts.pid, signal.SIGSTOP)
+        t_stop = time.time()
+        try:
+            found = []
+            deadline = time.monotonic() + 30.0
+            while not found and time.monotonic() < deadline:
+                _observe(mon, 1.0)
+                found = [a for a in mon.store.alerts() if a.member == "topic:/detections"
+                         and a.data.get("symptom") == "silence"]
+        finally:
+            os.killpg(bursts.pid, signal.SIGCONT)
+        assert found, f"no silence of the hung burst topic; alerts: {mon.store.alerts()}"
+        a = found[0]
+        assert a.severity == "error" and a.t > t_stop
+        assert a.data["limit_s"] == pytest.approx(2 * max(gaps), abs=0.01)
+        assert a.data["limit_s"] <= a.data["silent_s"] < a.data["limit_s"] + 3.0
+    finally:
+        mon.close()
+
+
+LOOPER = HEAD + """
+n = Node(sys.argv[1])
+pub = n.create_publisher(String, "/" + sys.argv[1] + "_out", 10)
+n.create_timer(0.1, lambda: pub.publish(String(data="x")))
+end = time.monotonic() + 6.0
+while time.monotonic() < end:
+    rclpy.spin_once(n, timeout_sec=0.1)
+if sys.argv[2] == "kill":
+    os._exit(1)  # as a segfault: no goodbye to DDS, the node stays listed until its lease ends
+raise RuntimeError("lost the device")  # exit code 1, after rclpy said goodbye to DDS
+"""
+
+
+def test_a_node_started_four_times_is_one_restart_loop_symptom_of_that_node(children, tmp_path):
+    mon = _monitor(children, tmp_path)
+    loops = {"looper_raise": "raise", "looper_kill": "kill"}
+    started = dict.fromkeys(loops, 0)
+    procs: dict = {}
+    try:
+        end = time.monotonic() + 55.0
+        while time.monotonic() < end and (min(started.values()) < 4 or any(p.poll() is None for p in
+                                                                             procs.values())):
+            for name, how in loops.items():  # the supervisor: start it again once it has ended
+                if started[name] < 4 and (name not in procs or procs[name].poll() is not None):
+                    procs[name] = children.python(LOOPER, name, how, name=name)
+                    started[name] += 1
+            _observe(mon, 1.0)
+        assert started == dict.fromkeys(loops, 4)
+        _observe(mon, 3.0)
+        gone = [a for a in mon.store.alerts() if a.plugin == "member_gone"]
+        assert not [a for a in gone if a.member.startswith("process:")], gone
+        for name in loops:
+            eps = [e for e in mon.store.episodes(f"node:/{name}") if e.plugin == "member_gone"]
+            assert len(eps) == 1, (name, eps, gone)
+            assert eps[0].max_severity in ("error", "fatal"), (name, eps)
+        # Each process said goodbye to DDS: four lives seen, "restarted 3 times".
+        said = [a.message for a in gone if a.member == "node:/looper_raise"]
+        assert any("restarted 3 times" in m for m in said), said
+        # The killed ones stay listed until their lease ends: their successors were counted all
+        # the same (as more instances of the name), though their alerts are rows only every 5 s.
+        restarts = _plugin(mon, "member_gone").state["restarts"]
+        assert len(restarts.get("node:/looper_kill", ())) >= 2, restarts
+    finally:
+        mon.close()
