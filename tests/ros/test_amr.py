@@ -8,7 +8,6 @@ from contextlib import contextmanager
 
 import pytest
 from rclpy.qos import ReliabilityPolicy
-from rosenv import wait_for
 
 from stream_viz.collect.collector import Collector
 from stream_viz.demo.amr.topology import AMR, LATCHED
@@ -17,6 +16,7 @@ from stream_viz.demo.robot import FaultSpec, Robot
 from stream_viz.model.graph import flow_edges
 from stream_viz.model.queries import nodes_of_process, process_of_node, publishers, subscribers
 from stream_viz.model.theta import theta_dict
+from stream_viz.testing import wait_for
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
