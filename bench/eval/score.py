@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 
-from bench.eval.metrics import aggregate, hit_at, scores, to_blocks
+from bench.eval.metrics import Ranked, aggregate, hit_at, scores, to_blocks
 
 OURS_LIVE = "stream-viz (live)"
 BASELINE = "rate monitor + first alert"
@@ -26,16 +26,21 @@ def truth(run: Mapping, level: str) -> set[str]:
     return set(run[f"truth_{level}"])
 
 
-def method_rankings(run: Mapping, peers: Mapping | None) -> dict[str, list]:
+def ranked(items: Iterable[str | Sequence[str]]) -> list[Ranked]:
+    """A recorded ranking as members and tuples of tied members (JSON keeps a tuple as a list)."""
+    return [x if isinstance(x, str) else tuple(x) for x in items]
+
+
+def method_rankings(run: Mapping, peers: Mapping | None) -> dict[str, list[Ranked]]:
     """Method name → ranking (members or tuples of tied members), ours, baseline and peers."""
     r = run["rankings"]
-    out: dict[str, list] = {OURS_LIVE: r["live"]}
+    out: dict[str, list[Ranked]] = {OURS_LIVE: ranked(r["live"])}
     # ("W0=processes" was an intermediate variant of W0=outputs in a few early runs: not scored)
-    out |= {f"ours {k}": v for k, v in r.items() if "/" in k and "W0=processes" not in k}
-    out[BASELINE] = [tuple(x) for x in r["baseline"]]
+    out |= {f"ours {k}": ranked(v) for k, v in r.items() if "/" in k and "W0=processes" not in k}
+    out[BASELINE] = ranked(r["baseline"])
     for name, res in (peers or {}).items():
         if isinstance(res, dict) and "ranking" in res:
-            out[name] = res["ranking"]
+            out[name] = ranked(res["ranking"])
     return out
 
 
@@ -97,11 +102,12 @@ def latencies(run: Mapping) -> dict[str, float | None]:
         if t_inj is None:
             continue
         for tick in run["ticks"]:
-            if tick["t"] >= t_inj and tick["top"]:
-                p = hit_at(to_blocks(tick["top"][:1], run["expand"]), want, 1)
-                if (p == 1.0) if len(want) == 1 else (p > 0):
-                    out[f"top1_{level}"] = max(0.0, tick["t"] - t_inj)
-                    break
+            if tick["t"] < t_inj or not tick["top"]:
+                continue
+            # first whatever the tie-breaking: every node the first item stands for is true
+            if hit_at(to_blocks(ranked(tick["top"][:1]), run["expand"]), want, 1) == 1.0:
+                out[f"top1_{level}"] = max(0.0, tick["t"] - t_inj)
+                break
     return out
 
 

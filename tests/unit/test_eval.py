@@ -10,7 +10,7 @@ import pytest
 
 from bench.eval.baseline import culprits, flag_times
 from bench.eval.export import column_graph, service_name, wide_table
-from bench.eval.metrics import aggregate, expected_rank, hit_at, scores, to_blocks
+from bench.eval.metrics import aggregate, expected_rank, hit_at, scores, tie_blocks, to_blocks
 from bench.eval.score import accuracy_table, fault_matrix, latencies, score_run
 
 EXPAND = {
@@ -51,6 +51,30 @@ def test_expected_rank_and_scores():
     assert s["Avg@5"] == pytest.approx((0 + 0.5 + 1 + 1 + 1) / 5)
     agg = aggregate([{"AC@1": 1.0, "AC@3": 1.0, "Avg@5": 1.0}, {"AC@1": 0.0, "AC@3": 1.0, "Avg@5": 0.6}])
     assert agg == {"AC@1": 0.5, "AC@3": 1.0, "Avg@5": 0.8, "n": 2}
+
+
+def test_equal_scores_form_tied_blocks():
+    scored = [("node:/a", 0.9), ("node:/b", 0.5), ("node:/c", 0.5), ("process:7", 0.5), ("node:/d", 0.1)]
+    assert tie_blocks(scored) == ["node:/a", ("node:/b", "node:/c", "process:7"), "node:/d"]
+    assert tie_blocks([("x", 1.0), ("y", 1.0)]) == [("x", "y")]
+    assert tie_blocks([]) == []
+
+
+def test_our_tied_ranking_scores_expected_ac_at_k_like_a_peers():
+    run = _run("hang")
+    run["expand"] = {**EXPAND, "node:/d": ["node:/d"]}
+    # as run.json stores it: a tie is a JSON list; /b, /c and /d scored equal, behind /a
+    run["rankings"] = {"live": ["node:/a", ["node:/c", "node:/b", "node:/d"]], "baseline": []}
+    by = {r["level"]: r for r in score_run(run, None) if r["method"] == "stream-viz (live)"}
+    strict = by["strict"]  # /b: one of three tied at ranks 2-4
+    assert [strict[f"AC@{k}"] for k in (1, 2, 3, 4, 5)] == pytest.approx([0, 1 / 3, 2 / 3, 1, 1])
+    assert strict["rank"] == pytest.approx(3.0) and strict["Avg@5"] == pytest.approx(3 / 5)
+    process = by["process"]  # /b or /c: two of the three
+    assert [process[f"AC@{k}"] for k in (1, 2, 3)] == pytest.approx([0, 2 / 3, 1])
+    assert process["rank"] == pytest.approx(2 + 1 / 3)
+    run["ticks"] = [{"t": 101.0, "top": [["node:/b", "node:/c"]]}, {"t": 103.0, "top": ["node:/b"]}]
+    la = latencies(run)  # a tie is first only at the level where every tied node is true
+    assert la["top1_process"] == 1.0 and la["top1_strict"] == 3.0
 
 
 def test_baseline_flags_silent_and_slow_topics_not_healthy_or_never_alive():
@@ -94,6 +118,20 @@ def test_wide_table_aligns_fills_and_names_with_one_underscore():
     cpu = m[:, cols.index("proc.base-group_cpu")]
     assert list(cpu) == [50.0, 50.0, 0.0]  # first value before, 0 after it vanished
     assert service_name("node:/ns/my_node") == "node.ns.my-node"
+
+
+def test_the_processes_of_a_respawned_group_are_one_series():
+    from stream_viz.model.theta import SCHEMAS, make_theta
+
+    def proc(cpu):
+        return make_theta("process", {"cpu_percent": cpu})
+
+    series = {"process:11": (np.array([1.0, 2.0]), np.vstack([proc(10), proc(20)])),
+              "process:12": (np.array([4.0, 5.0]), np.vstack([proc(30), proc(40)]))}
+    times, cols, m, services = wide_table(series, SCHEMAS, {"process:11": "camera", "process:12": "camera"})
+    assert cols.count("proc.camera_cpu") == 1 and services == {"proc.camera": "process:11"}
+    assert list(times) == [1.0, 2.0, 4.0, 5.0]
+    assert list(m[:, cols.index("proc.camera_cpu")]) == [10.0, 20.0, 30.0, 40.0]
 
 
 def test_column_graph_links_metrics_and_drops_cycles():
