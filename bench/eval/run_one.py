@@ -26,7 +26,8 @@ import psutil
 from bench.eval.baseline import culprits, flag_times
 from bench.eval.export import SKIP_TOPICS, service_name, wide_table
 from bench.eval.metrics import tie_blocks
-from bench.eval.systems import expand_map, sink_watchlist, system_topology, truth_sets
+from bench.eval.provenance import code_version, machine
+from bench.eval.systems import expand_map, fault_reach, sink_watchlist, system_topology, truth_sets
 from stream_viz.testing import own_domain
 
 if TYPE_CHECKING:  # imported where used, once this process has its ROS_DOMAIN_ID
@@ -215,7 +216,8 @@ def _record(spec: dict, domain: int, topo: Topology, live: Live, injected: dict,
             expand: dict[str, list[str]], rankings: dict, flags: dict) -> dict:
     """The run's record (``run.json``): truth, rankings, alerts, latencies, cost."""
     t_inj = injected.get("t")
-    strict, proc = truth_sets(topo, spec.get("target")) if spec.get("fault") else (set(), set())
+    faulty = bool(spec.get("fault"))
+    strict, proc = truth_sets(topo, spec["target"]) if faulty else (set(), set())
     alerts = [
         {"member": a.member, "plugin": a.plugin, "t": a.t, "severity": a.severity, "message": a.message[:160]}
         for a in live.stored
@@ -231,6 +233,7 @@ def _record(spec: dict, domain: int, topo: Topology, live: Live, injected: dict,
         "injected": injected,
         "truth_strict": sorted(strict),
         "truth_process": sorted(proc),
+        "reach": sorted(fault_reach(topo, spec["target"], live.pids)) if faulty else [],
         "expand": expand,
         "rankings": rankings,
         "ticks": live.ticks,
@@ -250,6 +253,8 @@ def _record(spec: dict, domain: int, topo: Topology, live: Live, injected: dict,
         "peak_rss_mb": max((x["rss"] for x in live.ticks), default=0) / 2**20,
         "ru_maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "loadavg": os.getloadavg(),
+        "code": code_version(),
+        "machine": machine(),
         "alive_at_end": live.alive,
     }
 

@@ -147,6 +147,7 @@ def _run(fault="crash"):
         "expand": EXPAND,
         "truth_strict": ["node:/b"],
         "truth_process": ["node:/b", "node:/c"],
+        "reach": ["node:/b", "node:/c", "process:7", "topic:/y"],
         "injected": {"t": 100.0},
         "alerts": [{"t": 101.0, "member": "node:/b"}],
         "baseline_first_flag_s": None,
@@ -208,7 +209,8 @@ def test_report_writes_the_results_page_and_the_data_behind_it(tmp_path):
     assert (tmp_path / "results.md").read_text() == text
     lines = text.splitlines()
     assert lines[0].startswith("Runs: 1 with a fault, 1 fault-free; load average (1 min) during runs 0.5–0.5")
-    assert "| demo | crash | /b | 1.0 | 2.0 | 1.0 | 1.0 | – |" in lines  # first alert, top-1 per level
+    # first alert, first alert on a member the fault reaches, top-1 per level, the rate monitor
+    assert "| demo | crash | /b | 1.0 | 1.0 | 2.0 | 1.0 | 1.0 | – |" in lines
     assert "| demo_nofault_b_0 | demo | 40 | 1 | node:/a (topic_rate) | 1 |" in lines
     assert "Faulty runs with alerts before the injection: 0 of 1" in lines
     assert "| demo | 2 | 3.0 % / 4.0 % | 100 | 40 |" in lines  # CPU mean / max, RSS, samples per run
@@ -220,7 +222,7 @@ def test_report_writes_the_results_page_and_the_data_behind_it(tmp_path):
     assert written == [{k: "" if v is None else str(v) for k, v in r.items()} for r in rows]
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["rows"] == rows
-    assert summary["latency"] == [{"system": "demo", "fault": "crash", **latencies(faulty)}]
+    assert summary["latency"] == [{"system": "demo", "fault": "crash", "size": None, **latencies(faulty)}]
     assert [c["cpu_share"] for c in summary["cost"]] == [0.02, 0.04]
     lines = [json.loads(x) for x in (tmp_path / "runs.jsonl").read_text().splitlines()]
     assert [x["latency"] is None for x in lines] == [False, True]
