@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The fault-injection evaluation (docs/evaluation.md). One suite per call, runs one after the other:
-#   bench/eval.sh --short     each demo fault once + 2 fault-free + one generated 20-node run, each AMR
+#   bench/eval.sh --short     each demo fault once + 1 fault-free + one generated 20-node run, each AMR
 #                             fault on its default target + 1 fault-free (~25 min)
 #   bench/eval.sh --control   the AMR's 10-minute healthy-dynamics run (~11 min)
 #   bench/eval.sh --sweep     fault sizes: degrade, delay, leak, cpu, errlog at 2-4 sizes on the AMR (~30 min)

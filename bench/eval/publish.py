@@ -63,7 +63,7 @@ def provenance(runs: list[dict], suite: str, argv: list[str]) -> dict:
     loads = [r["loadavg"][0] for r in runs if r.get("loadavg")]
     return {
         "suite": suite,
-        "command": "bench/eval.sh " + " ".join(argv),
+        "command": "python -m bench.eval.run " + " ".join(argv),
         "runs": len(runs),
         "commits": dict(commits),
         "dirty": dirty,  # commits some runs measured with uncommitted changes on top

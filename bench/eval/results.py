@@ -118,7 +118,7 @@ def _latency_md(faulty: list[dict]) -> list[str]:
         for key in ("first_alert", "detected"):
             if la[key] is not None:
                 firsts.setdefault((s["system"], key), []).append(la[key])
-    md += ["", "Median s after injection (runs with one / faulty runs): "]
+    md += ["", "Median s after injection (runs with one / faulty runs):"]
     for system in sorted({r["spec"]["system"] for r in faulty}):
         n = sum(1 for r in faulty if r["spec"]["system"] == system)
         parts = [f"{label} {median(v):.1f} s ({len(v)}/{n})" if (v := firsts.get((system, key))) else

@@ -20,7 +20,7 @@ def test_short_runs_every_amr_fault_on_its_default_target_beside_the_demo():
     specs = plan("short", 20.0, 25.0, [], 1)
     amr = [s for s in specs if s["system"] == "amr"]
     assert {s["fault"]: s["target"] for s in amr if s["fault"]} == DEFAULT_TARGETS
-    assert Counter(s["system"] for s in specs) == {"demo": 10, "amr": 13, "gen20": 1}
+    assert Counter(s["system"] for s in specs) == {"demo": 9, "amr": 13, "gen20": 1}
     assert sum(1 for s in amr if s["fault"] is None) == 1
     assert all(s["warmup"] == 20.0 and s["post"] == 25.0 for s in specs)
 
@@ -151,6 +151,6 @@ def test_publish_writes_small_files_that_say_what_ran_on_what(tmp_path):
                               "HT": {"error": "boom"}}
     assert len(first["alerts"][0]["message"]) == 120
     about = json.loads((dest / "about.json").read_text())
-    assert about["command"] == "bench/eval.sh --short" and about["commits"] == {"0123456789abcdef": 2}
+    assert about["command"] == "python -m bench.eval.run --short" and about["commits"] == {"0123456789abcdef": 2}
     assert about["dirty"] == ["0123456789abcdef"] and about["machines"] == [machine]
     assert about["load_1min"] == [0.5, 1.5] and about["first_run"] == "1970-01-01T00:00Z"
