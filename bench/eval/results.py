@@ -39,7 +39,8 @@ def results_md(runs: Runs, rows: list[dict]) -> str:
         *_code_md(all_runs),
         *_accuracy_md([r for r in rows if not _sized(r)]),
         *_latency_md([run for run in faulty if run["spec"].get("size") is None]),
-        *_fault_free_md(clean, faulty),
+        *_fault_free_md(clean),
+        *_early_md(faulty),
         *_control_md([run for run in clean if run["spec"].get("control")]),
         *(_sweep_md(sweep) if sweep else []),
         *_cost_md(all_runs),
@@ -100,6 +101,8 @@ def _accuracy_md(rows: list[dict]) -> list[str]:
 
 
 def _latency_md(faulty: list[dict]) -> list[str]:
+    if not faulty:
+        return []
     md = [
         "### Detection latency (s after injection; – = never)",
         "",
@@ -128,11 +131,13 @@ def _latency_md(faulty: list[dict]) -> list[str]:
     return md
 
 
-def _fault_free_md(clean: list[dict], faulty: list[dict]) -> list[str]:
-    """The false alerts: every alert of a fault-free run, and faulty runs' alerts before the injection."""
+def _fault_free_md(clean: list[dict]) -> list[str]:
+    """The false alerts of the fault-free runs (every alert of such a run is one)."""
+    if not clean:
+        return []
     md = [
         "",
-        "### Fault-free runs (false alerts) and the alerts before injection",
+        "### Fault-free runs (false alerts)",
         "",
         "| run | system | duration s | alerts | alerting members | rate-monitor flags |",
         "|---|---|---|---|---|---|",
@@ -142,9 +147,16 @@ def _fault_free_md(clean: list[dict], faulty: list[dict]) -> list[str]:
             f"| {run_id(run['spec'])} | {run['spec']['system']} | {run['wall_s']:.0f} | "
             f"{len(run['alerts'])} | {_members(run['alerts']) or '–'} | {len(run['baseline_flags'])} |"
         )
-    md += [
+    return md
+
+
+def _early_md(faulty: list[dict]) -> list[str]:
+    """The false alerts of the faulty runs: those at least a sample before the injection."""
+    if not faulty:
+        return []
+    md = [
         "",
-        "Alerts before the injection in the faulty runs (at least one sample before it; every run):",
+        "### Alerts before the injection in the faulty runs (every run)",
         "",
         "| system | faulty runs | runs with alerts before | alerts before | alerting members |",
         "|---|---|---|---|---|",

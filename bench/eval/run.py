@@ -104,8 +104,8 @@ def main(argv: list[str] | None = None) -> int:
     for suite in SUITES:
         g.add_argument(f"--{suite}", action="store_const", const=suite, dest="suite")
     ap.add_argument("--out", type=Path, help="output folder (default bench/out/<suite>)")
-    ap.add_argument("--warmup", type=float, default=20.0, help="s from ready to the injection")
-    ap.add_argument("--post", type=float, default=25.0, help="s monitored after the injection")
+    ap.add_argument("--warmup", type=float, help="s from ready to the injection (default 20; AMR 25)")
+    ap.add_argument("--post", type=float, help="s monitored after the injection (default 25; AMR 20)")
     ap.add_argument("--sizes", default="20,100", help="generated system sizes for --full (e.g. 20,100,500)")
     ap.add_argument("--reps", type=int, help="repetitions in --full (default 3) and --sweep (default 1)")
     ap.add_argument("--only", help="run only these systems (comma list: demo, amr, gen100)")

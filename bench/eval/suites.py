@@ -1,11 +1,14 @@
 """The evaluation's suites as data: which runs each one makes (``short``, ``full``, ``control``, ``sweep``).
 
 A run is a spec (a dict): ``system``, ``fault`` (None: fault-free), ``target``, optionally ``size``
-(`FaultSpec.size`), ``warmup`` (s from ready to the injection), ``post`` (s monitored after it),
+(`FaultSpec.size`), ``warmup`` (s from ready to the injection; fault-free runs monitor ``warmup``
++ ``post`` as well), ``post`` (s monitored after it),
 ``rep``, ``seed`` (generated systems), ``control`` (the long healthy run). `run_id` names its folder.
 """
 
 from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
 
 from stream_viz.demo.amr.topology import DEFAULT_TARGETS as AMR_DEFAULT
 from stream_viz.demo.faults import BASIC_FAULTS
@@ -69,16 +72,34 @@ SWEEP: tuple[tuple[str, str, tuple[float, ...]], ...] = (
 )
 
 
-def plan(suite: str, warmup: float, post: float, sizes: list[int], reps: int) -> list[dict]:
-    """The run specs of ``suite``: ``short``, ``full``, ``control`` or ``sweep``."""
-    base = {"warmup": warmup, "post": post}
+# Seconds from ready to the injection, and monitored after it. The AMR waits 5 s longer so that
+# its one-shot job's exit (25 s after start) falls in the healthy part, before the injection.
+TIMING: dict[str, tuple[float, float]] = {"amr": (25.0, 20.0)}
+DEFAULT_TIMING = (20.0, 25.0)
+
+
+def plan(suite: str, warmup: float | None = None, post: float | None = None, sizes: Sequence[int] = (),
+         reps: int = 1) -> list[dict]:
+    """The run specs of ``suite``: ``short``, ``full``, ``control`` or ``sweep``.
+
+    ``warmup`` and ``post`` (s) override every system's own `TIMING` (not the control run's).
+    """
+    specs = _runs(suite, sizes, reps)
+    for spec in specs:
+        if not spec.get("control"):
+            w, p = TIMING.get(spec["system"], DEFAULT_TIMING)
+            spec["warmup"], spec["post"] = (w if warmup is None else warmup), (p if post is None else post)
+    return specs
+
+
+def _runs(suite: str, sizes: Sequence[int], reps: int) -> list[dict]:
     if suite == "short":
-        return [*_demo_short(base), *_amr_runs(AMR_DEFAULT.items(), 0, base)]
+        return [*_demo_short(), *_amr_runs(AMR_DEFAULT.items(), 0)]
     if suite == "control":
         return [control()]
     if suite == "sweep":
         return [
-            {"system": "amr", "fault": f, "target": t, "size": s, "rep": r, **base}
+            {"system": "amr", "fault": f, "target": t, "size": s, "rep": r}
             for r in range(reps)
             for f, t, sizes_ in SWEEP
             for s in sizes_
@@ -87,11 +108,11 @@ def plan(suite: str, warmup: float, post: float, sizes: list[int], reps: int) ->
         raise ValueError(f"unknown suite {suite!r}: short, full, control or sweep")
     runs: list[dict] = []
     for r in range(reps):
-        runs += [{"system": "demo", "fault": f, "target": t, "rep": r, **base}
+        runs += [{"system": "demo", "fault": f, "target": t, "rep": r}
                  for f in BASIC_FAULTS for t in DEMO_FULL[f]]
-        runs.append({"system": "demo", "fault": None, "target": None, "rep": r, **base})
-        runs += _amr_runs(((f, t) for f, ts in AMR_FULL.items() for t in ts), r, base)
-    return [*runs, *_generated(sizes, base), control()]
+        runs.append({"system": "demo", "fault": None, "target": None, "rep": r})
+        runs += _amr_runs(((f, t) for f, ts in AMR_FULL.items() for t in ts), r)
+    return [*runs, *_generated(sizes), control()]
 
 
 def control() -> dict:
@@ -99,30 +120,30 @@ def control() -> dict:
     return {"system": "amr", "fault": None, "target": None, "warmup": CONTROL_S, "post": 0.0, "control": True}
 
 
-def _demo_short(base: dict) -> list[dict]:
+def _demo_short() -> list[dict]:
     from bench.eval.systems import pick_targets, system_topology
 
-    runs = [{"system": "demo", "fault": f, "target": DEMO_SHORT[f], **base} for f in BASIC_FAULTS]
-    runs.append({"system": "demo", "fault": None, "target": None, **base})  # one: ~25 min in all
+    runs = [{"system": "demo", "fault": f, "target": DEMO_SHORT[f]} for f in BASIC_FAULTS]
+    runs.append({"system": "demo", "fault": None, "target": None})  # one: ~25 min in all
     target = pick_targets(system_topology("gen20", 1), 1)[0]
-    return [*runs, {"system": "gen20", "seed": 1, "fault": "hang", "target": target, **base}]
+    return [*runs, {"system": "gen20", "seed": 1, "fault": "hang", "target": target}]
 
 
-def _amr_runs(faults, rep: int, base: dict) -> list[dict]:
-    runs = [{"system": "amr", "fault": f, "target": t, "rep": rep, **base} for f, t in faults]
-    return [*runs, {"system": "amr", "fault": None, "target": None, "rep": rep, **base}]
+def _amr_runs(faults: Iterable[tuple[str, str]], rep: int) -> list[dict]:
+    runs = [{"system": "amr", "fault": f, "target": t, "rep": rep} for f, t in faults]
+    return [*runs, {"system": "amr", "fault": None, "target": None, "rep": rep}]
 
 
-def _generated(sizes: list[int], base: dict) -> list[dict]:
+def _generated(sizes: Sequence[int]) -> list[dict]:
     from bench.eval.systems import LARGE, pick_targets, system_topology
 
     runs = []
     for n in sizes:
         topo = system_topology(f"gen{n}", 1)
         targets = pick_targets(topo, 1 if n >= LARGE else 2)  # a 500-node run takes ~2 min
-        runs += [{"system": f"gen{n}", "seed": 1, "fault": f, "target": t, **base}
+        runs += [{"system": f"gen{n}", "seed": 1, "fault": f, "target": t}
                  for f in BASIC_FAULTS for t in targets]
-        runs.append({"system": f"gen{n}", "seed": 1, "fault": None, "target": None, **base})
+        runs.append({"system": f"gen{n}", "seed": 1, "fault": None, "target": None})
     return runs
 
 
