@@ -147,7 +147,7 @@ def _fault_free_md(clean: list[dict]) -> list[str]:
             f"| {run_id(run['spec'])} | {run['spec']['system']} | {run['wall_s']:.0f} | "
             f"{len(run['alerts'])} | {_members(run['alerts']) or '–'} | {len(run['baseline_flags'])} |"
         )
-    return md
+    return [*md, ""]
 
 
 def _early_md(faulty: list[dict]) -> list[str]:

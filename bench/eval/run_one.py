@@ -27,6 +27,7 @@ from bench.eval.baseline import culprits, flag_times
 from bench.eval.export import SKIP_TOPICS, service_name, wide_table
 from bench.eval.metrics import tie_blocks
 from bench.eval.provenance import code_version, machine
+from bench.eval.suites import DEFAULT_TIMING, TIMING
 from bench.eval.systems import expand_map, fault_reach, sink_watchlist, system_topology, truth_sets
 from stream_viz.testing import own_domain
 
@@ -89,7 +90,8 @@ def _live(spec: dict, topo: Topology, config: Config, domain: int, out: Path) ->
     from stream_viz.demo.robot import FaultSpec, Robot
     from stream_viz.monitor import Monitor
 
-    warmup, post = float(spec.get("warmup", 20.0)), float(spec.get("post", 25.0))
+    w0, p0 = TIMING.get(spec["system"], DEFAULT_TIMING)
+    warmup, post = float(spec.get("warmup", w0)), float(spec.get("post", p0))
     fault = spec.get("fault")
     tmp = Path(tempfile.mkdtemp(prefix="stream_eval_"))
     me = psutil.Process()
