@@ -56,16 +56,8 @@ def wide_table(
     columns: list[str] = []
     cols: list[np.ndarray] = []
     services: dict[str, str] = {}
-    for member in sorted(series):
+    for svc, (member, t, v) in _by_service(series, process_names).items():
         kind = member.partition(":")[0]
-        if kind not in METRICS or member in SKIP_TOPICS:
-            continue
-        t, v = series[member]
-        t = np.asarray(t, float)
-        v = np.asarray(v, float)
-        if len(t) == 0:
-            continue
-        svc = service_name(member, process_names)
         services[svc] = member
         idx = np.searchsorted(t, times, side="right") - 1  # last sample at or before each time
         for attr, short in METRICS[kind].items():
@@ -77,6 +69,30 @@ def wide_table(
             cols.append(np.nan_to_num(out, nan=0.0))
     matrix = np.column_stack(cols) if cols else np.zeros((len(times), 0))
     return times, columns, matrix, services
+
+
+def _by_service(
+    series: Mapping[str, tuple[np.ndarray, np.ndarray]], process_names: Mapping[str, str] | None
+) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
+    """Service name → (its first member, times, values) of the exported members with samples.
+
+    Members with one service name (the processes a respawned group ran as) are one series.
+    """
+    out: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
+    for member in sorted(series):
+        if member.partition(":")[0] not in METRICS or member in SKIP_TOPICS:
+            continue
+        t, v = (np.asarray(x, float) for x in series[member])
+        if len(t) == 0:
+            continue
+        svc = service_name(member, process_names)
+        if svc in out:
+            first, t0, v0 = out[svc]
+            t, v = np.concatenate([t0, t]), np.vstack([v0, v])
+            order = np.argsort(t, kind="stable")
+            member, t, v = first, t[order], v[order]
+        out[svc] = (member, t, v)
+    return out
 
 
 def _ffill(x: np.ndarray) -> np.ndarray:

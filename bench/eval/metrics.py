@@ -2,9 +2,10 @@
 
 A ranking of members (nodes, topics, processes) is first mapped to nodes: a topic stands for its
 publishers, a process for the nodes it hosts. One ranked item may so stand for several nodes at
-once: a *block* of tied nodes. AC@k is the probability that a true node is among the first k
-when ties are broken at random (exact, hypergeometric), so a peer naming a 3-node process gets 1/3
-for the strict target at k=1, not 1 and not 0.
+once, and members of equal score tie (`tie_blocks`): a *block* of tied nodes. AC@k is the
+probability that a true node is among the first k when ties are broken at random (exact,
+hypergeometric), so a peer naming a 3-node process gets 1/3 for the strict target at k=1, not 1
+and not 0; the same holds for stream-viz naming three nodes with equal scores.
 """
 
 from __future__ import annotations
@@ -14,10 +15,34 @@ from math import comb
 
 KS = (1, 2, 3, 4, 5)
 
+Ranked = str | tuple[str, ...]  # a member, or members tied at one rank
 
-def to_blocks(
-    ranked: Iterable[str | tuple[str, ...]], expand: Mapping[str, Sequence[str]]
-) -> list[tuple[str, ...]]:
+
+def tie_blocks(scored: Iterable[tuple[str, float]]) -> list[Ranked]:
+    """A ranking with scores, best first → the ranking with members of equal score tied.
+
+    Parameters
+    ----------
+    scored : iterable of (member, score)
+        Best first, as the RCA reports it (equal scores adjacent; scores already rounded).
+
+    Returns
+    -------
+    list
+        A member alone stays a string; consecutive members of equal score become one tuple.
+    """
+    out: list[list[str]] = []
+    last: float | None = None
+    for member, score in scored:
+        if out and score == last:
+            out[-1].append(member)
+        else:
+            out.append([member])
+        last = score
+    return [b[0] if len(b) == 1 else tuple(b) for b in out]
+
+
+def to_blocks(ranked: Iterable[Ranked], expand: Mapping[str, Sequence[str]]) -> list[tuple[str, ...]]:
     """Map a ranking of members to ordered blocks of tied nodes.
 
     Parameters

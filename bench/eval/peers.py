@@ -8,6 +8,7 @@ time; stream-viz is not. A ranking equal to the input column order is treated as
 
 from __future__ import annotations
 
+import bisect
 import json
 import sys
 import time
@@ -76,6 +77,34 @@ def parents_frame(cols: list[str], service_edges: list[list[str]]) -> pd.DataFra
                 reach.setdefault(a, set()).add(b)
                 adj.loc[by_svc[a], by_svc[b]] = 1
     return adj
+
+
+def walk(graph: dict, start: str, num_steps: int, num_repeats: int, random_seed: int | None = 0) -> dict:
+    """PyRCA's ``RandomWalk._random_walk`` with the same draws, without ``np.random.choice`` per step.
+
+    ``np.random.choice(n, p=probs)`` (legacy RandomState) takes one ``random_sample()`` and finds it
+    in ``cumsum(probs) / its last``; drawing them all at once gives the same numbers in the same
+    order, and the same steps, 20x faster (seconds per run on the AMR's column graph).
+    """
+    if random_seed is not None:
+        np.random.seed(random_seed)
+    cdfs = {}
+    for node, g in graph.items():
+        cdf = np.asarray(g["probs"], dtype=float).cumsum()
+        cdf /= cdf[-1]
+        cdfs[node] = cdf.tolist()
+    draws = np.random.random_sample(num_repeats * num_steps).tolist()
+    counts: dict = {}
+    k = 0
+    for _ in range(num_repeats):
+        node, path = start, []
+        for _ in range(num_steps):
+            node = graph[node]["nodes"][bisect.bisect_right(cdfs[node], draws[k])]
+            k += 1
+            path.append(node)
+        for n in path:
+            counts[n] = counts.get(n, 0) + 1
+    return counts
 
 
 EPS_MAX_COLUMNS = 300  # ε-Diagnosis above this takes minutes per run (docs/evaluation.md)
@@ -155,6 +184,10 @@ def run_peers(run_dir: Path) -> dict:
         g = g.loc[live, live]
         anomalous = [c for c in anomalous if c in live]
         model = RandomWalk(RandomWalkConfig(graph=g, root_cause_top_k=len(live)))
+        # Its explanation paths (every path from a root to every anomaly) explode on deep dense
+        # column graphs (minutes per run on the AMR); the ranking is computed before them.
+        model._get_root_cause_paths = lambda *_: []
+        model._random_walk = walk
         return [r[0] for r in model.find_root_causes(anomalous, data[live], random_seed=0).root_cause_nodes]
 
     record("ε-Diagnosis", eps)

@@ -25,7 +25,10 @@ import psutil
 
 from bench.eval.baseline import culprits, flag_times
 from bench.eval.export import SKIP_TOPICS, service_name, wide_table
-from bench.eval.systems import expand_map, sink_watchlist, system_topology, truth_sets
+from bench.eval.metrics import tie_blocks
+from bench.eval.provenance import code_version, machine
+from bench.eval.suites import DEFAULT_TIMING, TIMING
+from bench.eval.systems import expand_map, fault_reach, sink_watchlist, system_topology, truth_sets
 from stream_viz.testing import own_domain
 
 if TYPE_CHECKING:  # imported where used, once this process has its ROS_DOMAIN_ID
@@ -37,7 +40,7 @@ if TYPE_CHECKING:  # imported where used, once this process has its ROS_DOMAIN_I
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--spec", required=True, help="JSON: system, fault, target, warmup, post, seed")
+    ap.add_argument("--spec", required=True, help="JSON: system, fault, target, size, warmup, post, seed")
     ap.add_argument("--out", required=True, type=Path)
     args = ap.parse_args(argv)
     spec = json.loads(args.spec)
@@ -72,7 +75,7 @@ class Live:
     mon: Monitor
     report: dict  # the monitor's final report (stream-viz.report/v2)
     stored: list[Alert]
-    pids: dict[str, str]  # process member -> the system's process name
+    pids: dict[str, str]  # process member -> the system's process name (every pid a group ever had)
     alive: dict[str, bool]
     ticks: list[dict]
     anomalous: set[str]
@@ -87,7 +90,8 @@ def _live(spec: dict, topo: Topology, config: Config, domain: int, out: Path) ->
     from stream_viz.demo.robot import FaultSpec, Robot
     from stream_viz.monitor import Monitor
 
-    warmup, post = float(spec.get("warmup", 20.0)), float(spec.get("post", 25.0))
+    w0, p0 = TIMING.get(spec["system"], DEFAULT_TIMING)
+    warmup, post = float(spec.get("warmup", w0)), float(spec.get("post", p0))
     fault = spec.get("fault")
     tmp = Path(tempfile.mkdtemp(prefix="stream_eval_"))
     me = psutil.Process()
@@ -101,7 +105,7 @@ def _live(spec: dict, topo: Topology, config: Config, domain: int, out: Path) ->
         robot.wait_ready(timeout=120.0 + 0.5 * len(topo.node_names()))
         t_ready = time.time()
         if fault:
-            robot.inject(FaultSpec(fault, spec["target"], warmup))
+            robot.inject(FaultSpec(fault, spec["target"], warmup, spec.get("size")))
 
         def on_tick() -> None:
             if mon.injected is None and fault:
@@ -111,7 +115,7 @@ def _live(spec: dict, topo: Topology, config: Config, domain: int, out: Path) ->
             ticks.append(
                 {
                     "t": time.time(),
-                    "top": [rc.member for rc in top[:3]],
+                    "top": _tied(top)[:3],
                     "alerts": mon.n_alerts,
                     "rss": me.memory_info().rss,
                 }
@@ -122,7 +126,8 @@ def _live(spec: dict, topo: Topology, config: Config, domain: int, out: Path) ->
         cpu1, wall1 = me.cpu_times(), time.monotonic()
         if fault and mon.injected is None:
             mon.injected = robot.injected() or None
-        pids = {f"process:{pid}": g for g, pid in robot.pids().items()}
+        # a respawned group (the restart fault) ran as several processes: each pid is that group
+        pids = {f"process:{pid}": g for g, history in robot.pid_history.items() for pid in history}
         stored = mon.store.alerts()  # the monitor keeps its alerts in the database only
         alive = robot.alive()
     finally:
@@ -145,8 +150,9 @@ def _rerank(mon: Monitor, stored: list[Alert], report: dict, anomalous: set[str]
     from stream_viz.rca.engine import analyze
     from stream_viz.rca.settings import METHODS, POLICIES
 
-    # Our rankings: live (what the user saw) and offline re-ranks of the same alerts.
-    rankings = {"live": [rc["member"] for rc in report["root_causes"]]}
+    # Our rankings: live (what the user saw) and offline re-ranks of the same alerts; members of
+    # equal score are tied (scored like a peer's multi-node member: expected AC@k).
+    rankings = {"live": tie_blocks((rc["member"], rc["score"]) for rc in report["root_causes"])}
     evidence = {m: 1.0 for m in mon.evidence}
     w0 = {m for m, k in mon.seen.nodes(data="kind") if k == "process"} | anomalous | sink_watchlist(topo)
     for policy in POLICIES:
@@ -154,14 +160,19 @@ def _rerank(mon: Monitor, stored: list[Alert], report: dict, anomalous: set[str]
             s = dataclasses.replace(config.rca, policy=policy, method=method, top_k=30)
             t0 = time.perf_counter()
             res = analyze(mon.seen, stored, s, set(mon.watchlist.external), evidence or None)
-            rankings[f"{policy}/{method}"] = [rc.member for rc in res.root_causes]
+            rankings[f"{policy}/{method}"] = _tied(res.root_causes)
             rankings.setdefault("_cost_ms", {})[f"{policy}/{method}"] = 1e3 * (time.perf_counter() - t0)
             # W_0 as `auto` builds it above its member limit (processes, process anomalies, the
             # configured members — here the system's outputs): on small systems `auto` watches
             # everything and the policy cannot make a difference.
             res = analyze(mon.seen, stored, s, w0, evidence or None)
-            rankings[f"{policy}/{method} W0=outputs"] = [rc.member for rc in res.root_causes]
+            rankings[f"{policy}/{method} W0=outputs"] = _tied(res.root_causes)
     return rankings
+
+
+def _tied(causes: list) -> list:
+    """The RCA's root causes (best first) as a ranking whose members of equal score are tied."""
+    return tie_blocks((rc.member, rc.score) for rc in causes)
 
 
 def _export_metrics(path: Path, mon: Monitor, pids: dict[str, str]) -> tuple[dict, np.ndarray, dict]:
@@ -207,7 +218,8 @@ def _record(spec: dict, domain: int, topo: Topology, live: Live, injected: dict,
             expand: dict[str, list[str]], rankings: dict, flags: dict) -> dict:
     """The run's record (``run.json``): truth, rankings, alerts, latencies, cost."""
     t_inj = injected.get("t")
-    strict, proc = truth_sets(topo, spec.get("target")) if spec.get("fault") else (set(), set())
+    faulty = bool(spec.get("fault"))
+    strict, proc = truth_sets(topo, spec["target"]) if faulty else (set(), set())
     alerts = [
         {"member": a.member, "plugin": a.plugin, "t": a.t, "severity": a.severity, "message": a.message[:160]}
         for a in live.stored
@@ -223,6 +235,7 @@ def _record(spec: dict, domain: int, topo: Topology, live: Live, injected: dict,
         "injected": injected,
         "truth_strict": sorted(strict),
         "truth_process": sorted(proc),
+        "reach": sorted(fault_reach(topo, spec["target"], live.pids)) if faulty else [],
         "expand": expand,
         "rankings": rankings,
         "ticks": live.ticks,
@@ -242,6 +255,8 @@ def _record(spec: dict, domain: int, topo: Topology, live: Live, injected: dict,
         "peak_rss_mb": max((x["rss"] for x in live.ticks), default=0) / 2**20,
         "ru_maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "loadavg": os.getloadavg(),
+        "code": code_version(),
+        "machine": machine(),
         "alive_at_end": live.alive,
     }
 

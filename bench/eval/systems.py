@@ -80,3 +80,25 @@ def sink_watchlist(topo: Topology) -> set[str]:
             out.update(make_id("topic", sub.topic) for sub in n.subs)
             out.update(pubs)
     return out
+
+
+def fault_reach(topo: Topology, target: str, process_names: Mapping[str, str]) -> set[str]:
+    """The members a fault of ``target`` can show on (its alerts there count as detecting it).
+
+    Every node of the target's process and that process (each pid it ran as), and every member
+    downstream of those nodes in the data flow; a server's clients count as downstream of it
+    (they wait for its answers).
+    """
+    group = topo.group_of("/" + target.removeprefix("node:").lstrip("/"))
+    start = {make_id("node", n.name) for n in topo.group(group).nodes}
+    succ: dict[str, set[str]] = {}
+    for src, dst, kind in topo.edges():
+        a, b = (dst, src) if kind == "send" else (src, dst)
+        succ.setdefault(a, set()).add(b)
+    seen, stack = set(start), list(start)
+    while stack:
+        for x in succ.get(stack.pop(), ()):
+            if x not in seen:
+                seen.add(x)
+                stack.append(x)
+    return seen | {p for p, g in process_names.items() if g == group}

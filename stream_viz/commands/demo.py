@@ -27,6 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fault", choices=(*FAULTS, "none"), default="crash",
                    help="what to inject ('none': a healthy run, to see what a calm robot looks like)")
     p.add_argument("--target", metavar="NODE", help="node to fault (default: the robot's usual one)")
+    p.add_argument("--size", type=float, metavar="X",
+                   help="how strong (degrade: fraction of messages kept, leak: MB/s, delay: ms, cpu: share "
+                        "of a core, errlog: lines/s; default: the fault's usual size; docs/demo.md)")
     p.add_argument("--at", type=float, default=12.0, metavar="SECONDS",
                    help="inject this long after the robot is up")
     p.add_argument("--duration", type=float, default=30.0, metavar="SECONDS",
@@ -57,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     config = load_config(args.config)
     robot_name = args.robot
     fault = None if args.fault == "none" else \
-        FaultSpec(args.fault, args.target or default_target(robot_name, args.fault), args.at)
+        FaultSpec(args.fault, args.target or default_target(robot_name, args.fault), args.at, args.size)
     save = args.save or DEFAULT_RECORDING
     viewer = args.viewer or default_viewer()
     stop = threading.Event()
@@ -69,7 +72,8 @@ def run(args: argparse.Namespace) -> int:
     # The monitor checks its outputs before any robot process starts: a bad path costs nothing.
     mon = Monitor(config, db=args.db, save=save, report=args.report, viewer=viewer, domain_id=args.domain)
     try:
-        what = f"{fault.fault} of {fault.target} {fault.at:g} s after it is up" if fault else "no fault"
+        size = "" if fault is None or fault.size is None else f" (size {fault.size:g})"
+        what = f"{fault.fault}{size} of {fault.target} {fault.at:g} s after it is up" if fault else "no fault"
         mon.progress.say(f"demo robot on ROS_DOMAIN_ID={args.domain}: "
                          f"{len(robot.topology.node_names())} nodes; {what}; {args.duration:g} s run")
         robot.start()

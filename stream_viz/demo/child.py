@@ -21,10 +21,10 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, NoReturn
 
-from stream_viz.demo.faults import FAULTS, STOP
+from stream_viz.demo.faults import CPU_SHARE, ERRLOG_PER_S, FAULTS, LEAK_MB_S, STOP
 
-LEAK_RATE = 20 * 2**20  # bytes per second
 LEAK_CAP = 1536 * 2**20
+BURN_PERIOD = 0.1  # s: a partial ``cpu`` fault burns its share of each such period
 
 
 def parser(prog: str, description: str) -> argparse.ArgumentParser:
@@ -36,6 +36,7 @@ def parser(prog: str, description: str) -> argparse.ArgumentParser:
     ap.add_argument("--fault", choices=sorted(FAULTS))
     ap.add_argument("--target", help="fqn of the faulty node")
     ap.add_argument("--at", type=float, help="unix time of the injection")
+    ap.add_argument("--size", type=float, help="the fault's size (FaultSpec.size)")
     return ap
 
 
@@ -63,39 +64,52 @@ def end_on_signals() -> None:
     threading.Thread(target=watch, daemon=True, name="watch-parent").start()
 
 
-def next_fault(args: argparse.Namespace, run_dir: Path) -> tuple[str, str, float] | None:
-    """``(fault, target, at)`` from the command line, else the first ``fault.json``; None on STOP."""
+def next_fault(args: argparse.Namespace, run_dir: Path) -> tuple[str, str, float, float | None] | None:
+    """``(fault, target, at, size)`` from the command line, else the first ``fault.json``; None on STOP."""
     if args.fault and args.target and args.at is not None:
-        return args.fault, args.target, args.at
+        return args.fault, args.target, args.at, args.size
     path = run_dir / "fault.json"
     while not STOP.wait(0.2):
         try:
             spec = json.loads(path.read_text())
         except (OSError, ValueError):
             continue
-        return spec["fault"], spec["target"], spec["at"]
+        return spec["fault"], spec["target"], spec["at"], spec.get("size")
     return None
 
 
-def record_injection(run_dir: Path, fault: str, target: str) -> bool:
+def record_injection(run_dir: Path, fault: str, target: str, size: float | None = None) -> bool:
     """Write ``injected.json`` for ``fault`` into ``target`` now; False if this run has one already."""
     path = run_dir / "injected.json"
     if path.exists():
         return False
-    write_json(path, {"fault": fault, "target": f"node:{target}", "t": time.time(), "pid": os.getpid()})
+    record = {"fault": fault, "target": f"node:{target}", "t": time.time(), "pid": os.getpid()}
+    write_json(path, record if size is None else {**record, "size": size})
     return True
 
 
-def burn(stop: threading.Event) -> None:
-    """Burn a core until ``stop`` (hashlib releases the GIL on large buffers: the executors keep running)."""
+def burn(stop: threading.Event, share: float = CPU_SHARE) -> None:
+    """Burn ``share`` of a core until ``stop``: the ``cpu`` fault.
+
+    hashlib releases the GIL on large buffers, so the executors keep running. Below a whole core
+    the thread burns until it has used its share of each `BURN_PERIOD` (CPU time), then idles.
+    """
     buf = b"\x5a" * 2**20
+    part = buf[: 2**18]  # finer steps for a partial share
     while not stop.is_set():
-        hashlib.sha256(buf).digest()
+        if share >= 1.0:
+            hashlib.sha256(buf).digest()
+            continue
+        wall, cpu = time.monotonic(), time.thread_time()
+        end = wall + BURN_PERIOD
+        while time.thread_time() - cpu < share * BURN_PERIOD and time.monotonic() < end:
+            hashlib.sha256(part).digest()
+        stop.wait(max(0.0, end - time.monotonic()))
 
 
-def leak(stop: threading.Event) -> None:
-    """Allocate and write ``LEAK_RATE`` bytes per second until ``stop`` or ``LEAK_CAP``."""
-    hoard, step = [], LEAK_RATE // 10
+def leak(stop: threading.Event, mb_per_s: float = LEAK_MB_S) -> None:
+    """Allocate and write ``mb_per_s`` MB per second until ``stop`` or ``LEAK_CAP``."""
+    hoard, step = [], int(mb_per_s * 2**20) // 10
     while not stop.wait(0.1) and len(hoard) * step < LEAK_CAP:
         hoard.append(b"\x01" * step)  # written, so resident (RSS grows)
 
@@ -108,12 +122,26 @@ def spin(executor) -> None:
         pass
 
 
-def errlog(logger: Any, stop: threading.Event, text: str) -> None:
-    """Log ``text`` (``{n}``: a counter) at ERROR every 0.5 s until ``stop``: the ``errlog`` fault."""
+def errlog(logger: Any, stop: threading.Event, text: str, per_s: float = ERRLOG_PER_S) -> None:
+    """Log ``text`` (``{n}``: a counter) at ERROR ``per_s`` times a second until ``stop`` (``errlog``)."""
     n = 0
-    while not stop.wait(0.5):
+    while not stop.wait(1.0 / per_s):
         n += 1
         logger.error(text.format(n=n))
+
+
+def process_fault(fault: str, size: float | None, logger: Any, stop: threading.Event, text: str) -> None:
+    """Start the thread of a process-wide fault (``cpu``, ``leak``, else ``errlog`` logging ``text``).
+
+    ``size`` as in ``FaultSpec.size`` (None: the kind's default).
+    """
+    if fault == "cpu":
+        work, args = burn, (stop, CPU_SHARE if size is None else size)
+    elif fault == "leak":
+        work, args = leak, (stop, LEAK_MB_S if size is None else size)
+    else:
+        work, args = errlog, (logger, stop, text, ERRLOG_PER_S if size is None else size)
+    threading.Thread(target=work, args=args, daemon=True, name=f"fault-{fault}").start()
 
 
 def end_process(executors: list, spinners: list[threading.Thread], destroy: Iterable[Callable[[], None]],

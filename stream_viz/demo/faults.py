@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import threading
 from dataclasses import dataclass
 
@@ -26,14 +27,32 @@ FAULTS: dict[str, str] = {
 }
 BASIC_FAULTS = ("crash", "hang", "degrade", "cpu", "leak", "delay", "errlog", "diag")  # every robot has these
 
+# Kinds that take a size (``FaultSpec.size``): what it measures. Without a size a fault acts as
+# described in FAULTS (the defaults below; delay's differs per robot, see `delay_ms`).
+SIZES: dict[str, str] = {
+    "degrade": "fraction of its messages the target still publishes, 0 < size <= 1 (default 0.25)",
+    "leak": "MB allocated per second (default 20)",
+    "delay": "extra delay in ms (default: a random 50-400 ms per callback on the demo, 300 ms on the AMR)",
+    "cpu": "share of one core burnt, 0 < size <= 1 (default 1)",
+    "errlog": "ERROR lines per second (default 2)",
+}
+DEGRADE_KEEP = 0.25
+LEAK_MB_S = 20.0
+CPU_SHARE = 1.0
+ERRLOG_PER_S = 2.0
+
 
 @dataclass(frozen=True)
 class FaultSpec:
-    """A fault to inject: kind ``fault`` into node ``target`` (fqn or ``node:/..``), ``at`` s after start."""
+    """A fault to inject: kind ``fault`` into node ``target`` (fqn or ``node:/..``), ``at`` s after start.
+
+    ``size``: how strong, for the kinds in `SIZES` (None: the kind's default, today's behaviour).
+    """
 
     fault: str
     target: str
     at: float = 5.0
+    size: float | None = None
 
     def __post_init__(self) -> None:
         if self.fault not in FAULTS:
@@ -44,8 +63,29 @@ class FaultSpec:
         object.__setattr__(self, "target", target)
         if not isinstance(self.at, int | float) or self.at < 0:
             raise DemoError(f"fault time must be a number of seconds >= 0, got {self.at!r}")
+        if self.size is not None:
+            check_size(self.fault, self.size)
 
     def check(self, nodes: list[str]) -> None:
         """Raise DemoError unless the target is one of ``nodes`` (fqns)."""
         if self.target not in nodes:
             raise DemoError(f"unknown fault target {self.target!r}; valid targets: {', '.join(nodes)}")
+
+
+def check_size(fault: str, size: object) -> None:
+    """Raise DemoError unless ``size`` is a valid size of fault kind ``fault`` (see `SIZES`)."""
+    if fault not in SIZES:
+        raise DemoError(f"fault {fault!r} takes no size; sized faults: {', '.join(SIZES)}")
+    ok = isinstance(size, int | float) and not isinstance(size, bool) and math.isfinite(size) and size > 0
+    if not ok or (fault in ("degrade", "cpu") and size > 1):
+        raise DemoError(f"bad size {size!r} for {fault}: {SIZES[fault]}")
+
+
+def keeps(count: int, fraction: float) -> bool:
+    """Whether the ``count``-th message (from 1) goes out when only ``fraction`` of them do.
+
+    The kept messages are spread evenly: 0.25 keeps every 4th (the 4th, 8th, ...), 0.5 every 2nd.
+    """
+    eps = 1e-9  # 0.7 * 10 is 7.000000000000001: floor must not depend on such rounding
+    return math.floor(count * fraction + eps) > math.floor((count - 1) * fraction + eps)
+

@@ -80,6 +80,8 @@ class Robot:
             self.fault_at = self.started_at + self.fault.at
             cmd_fault = ["--fault", self.fault.fault, "--target", self.fault.target,
                          "--at", repr(self.fault_at)]
+            if self.fault.size is not None:
+                cmd_fault += ["--size", repr(self.fault.size)]
         self._cmd = [sys.executable, "-m", self.topology.entry, "--topology", str(topo_file),
                      "--run-dir", str(self.run_dir), *cmd_fault]
         atexit.register(self.stop)
@@ -126,7 +128,8 @@ class Robot:
             raise DemoError(f"a fault is already set for this run: {self.fault}")
         self.fault, self.fault_at = fault, time.time() + fault.at
         tmp = self.run_dir / "fault.json.tmp"
-        tmp.write_text(json.dumps({"fault": fault.fault, "target": fault.target, "at": self.fault_at}))
+        tmp.write_text(json.dumps({"fault": fault.fault, "target": fault.target, "at": self.fault_at,
+                                   "size": fault.size}))
         os.replace(tmp, self.run_dir / "fault.json")
         return self.fault_at
 

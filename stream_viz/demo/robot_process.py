@@ -15,13 +15,11 @@ import time
 from pathlib import Path
 
 from stream_viz.demo.child import (
-    burn,
     end_on_signals,
     end_process,
-    errlog,
-    leak,
     next_fault,
     parser,
+    process_fault,
     record_injection,
     spin,
     write_json,
@@ -30,28 +28,27 @@ from stream_viz.demo.faults import STOP
 from stream_viz.demo.topology import DEMO, Topology
 
 
-def _inject(fault: str, target: str, at: float, sims: dict, run_dir: Path, stop: threading.Event) -> None:
-    """Wait until ``at`` (unix s), then inject ``fault`` if this process is concerned."""
+def _inject(fault: str, target: str, at: float, size: float | None, sims: dict, run_dir: Path,
+            stop: threading.Event) -> None:
+    """Wait until ``at`` (unix s), then inject ``fault`` of ``size`` if this process is concerned."""
     monitor = next((s for s in sims.values() if s.spec.diag_monitor), None)
     if fault == "diag":
         if monitor is None:
             return
     elif target not in sims:
         return
-    if stop.wait(max(0.0, at - time.time())) or not record_injection(run_dir, fault, target):
+    if stop.wait(max(0.0, at - time.time())) or not record_injection(run_dir, fault, target, size):
         return
     sim = sims.get(target)
-    print(f"injecting {fault} into {target}", flush=True)
+    print(f"injecting {fault} into {target}" + ("" if size is None else f" (size {size:g})"), flush=True)
     if fault == "crash":
         os.kill(os.getpid(), signal.SIGKILL)
     elif fault in ("hang", "degrade", "delay"):
-        sim.fault = fault
+        sim.set_fault(fault, size)
     elif fault == "diag":
         monitor.diag_errors.add(target)
     else:
-        work = {"cpu": burn, "leak": leak}.get(fault)
-        args = (stop,) if work else (sim.log, stop, "injected error #{n}: sensor read failed")
-        threading.Thread(target=work or errlog, args=args, daemon=True, name=f"fault-{fault}").start()
+        process_fault(fault, size, sim.log, stop, "injected error #{n}: sensor read failed")
 
 
 def _injector(args, sims: dict, run_dir: Path) -> None:

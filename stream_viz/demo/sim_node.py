@@ -16,7 +16,7 @@ from typing import Any
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 
-from stream_viz.demo.faults import STOP
+from stream_viz.demo.faults import DEGRADE_KEEP, STOP, keeps
 from stream_viz.demo.messages import factory, fill_response, load_type
 from stream_viz.demo.topology import NodeSpec, PubSpec
 
@@ -31,7 +31,8 @@ class SimNode:
         self.spec = spec
         self.node = Node(name, namespace=ns or "/", context=context)
         self.log = self.node.get_logger()
-        self.fault: str | None = None  # hang | degrade | delay, set by the fault scheduler
+        self.fault: str | None = None  # hang | degrade | delay, set by the fault scheduler (set_fault)
+        self.fault_size: float | None = None  # FaultSpec.size (None: the kind's default)
         self.diag_errors: set[str] = set()  # nodes this diag monitor reports as ERROR
         self.last: dict[str, float] = {}  # input (topic / service) -> monotonic time of last delivery
         self._seq = 0
@@ -66,13 +67,17 @@ class SimNode:
             self.node.create_timer(1.0, self._on_diag, callback_group=cg)
 
     # -- fault hooks ------------------------------------------------------------------------
+    def set_fault(self, fault: str, size: float | None = None) -> None:
+        """Start ``fault`` (hang, degrade, delay) of ``size`` (FaultSpec.size) in this node."""
+        self.fault, self.fault_size = fault, size
+
     def _gate(self) -> bool:
         """Run at the start of every callback; False means skip it (hang released at shutdown)."""
         if self.fault == "hang":
             STOP.wait()
             return False
-        if self.fault == "delay":
-            time.sleep(self._rng.uniform(0.05, 0.4))
+        if self.fault == "delay":  # a size: exactly that many ms; none: a random 50-400 ms
+            time.sleep(self._rng.uniform(0.05, 0.4) if self.fault_size is None else self.fault_size / 1e3)
         return not STOP.is_set()
 
     def _publish(self, p: PubSpec) -> None:
@@ -82,7 +87,8 @@ class SimNode:
             self.log.warn(f"not publishing {p.topic}: no fresh {', '.join(stale)}", throttle_duration_sec=5.0)
             return
         self._count += 1
-        if self.fault == "degrade" and self._count % 4:
+        keep = DEGRADE_KEEP if self.fault_size is None else self.fault_size
+        if self.fault == "degrade" and not keeps(self._count, keep):
             return
         pub, make = self._pubs[p.topic]
         self._seq += 1

@@ -164,6 +164,8 @@ def test_monitor_ends_on_a_signal_and_writes_the_report(children, tmp_path, sig)
     ("args", "message"),
     [
         (["demo", "--target", "/no_such_node", "--duration", "5"], "unknown fault target '/no_such_node'"),
+        (["demo", "--fault", "crash", "--size", "2", "--duration", "5"], "'crash' takes no size"),
+        (["demo", "--fault", "degrade", "--size", "1.5", "--duration", "5"], "bad size 1.5 for degrade"),
         (["demo", "--config", "{tmp}/missing.toml", "--duration", "5"], "missing.toml"),
         (["demo", "--report", "{tmp}/no/such/dir/r.json", "--duration", "5"], "no/such/dir"),
         (["monitor", "--save", "{tmp}/no/such/dir/m.rrd", "--duration", "2"], "no/such/dir"),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from contextlib import contextmanager
@@ -134,6 +135,18 @@ def test_a_hang_starves_siblings_only_on_a_single_threaded_executor(ros_domain, 
         rates = {t: _rate(G, f"topic:{t}") for t in (*stopped, *flowing)}
         assert all(rates[t] < 0.5 for t in stopped) and all(rates[t] > 1.0 for t in flowing), rates
         assert all(up for g, up in robot.alive().items() if g != "calibration")  # a hang kills nothing
+
+
+def test_a_degrade_of_size_one_half_halves_the_rate(ros_domain):
+    with amr_and_collector(ros_domain) as (robot, col):
+        front, rear = "topic:/amr1/scan_front", "topic:/amr1/scan_rear"
+        _settled(col, {front, rear})
+        robot.inject(FaultSpec("degrade", "/amr1/front_lidar", 0.0, size=0.5))
+        info = wait_for(robot.injected, timeout=10)
+        time.sleep(max(0.0, info["t"] + 6.0 - time.time()))
+        G = col.sample().graph
+        assert 3.5 < _rate(G, front) < 6.5 and _rate(G, rear) > 8.0, (_rate(G, front), _rate(G, rear))
+        assert json.loads((robot.run_dir / "injected.json").read_text())["size"] == 0.5
 
 
 def test_a_crash_removes_every_node_of_the_container(ros_domain):

@@ -10,7 +10,7 @@ import pytest
 
 from bench.eval.baseline import culprits, flag_times
 from bench.eval.export import column_graph, service_name, wide_table
-from bench.eval.metrics import aggregate, expected_rank, hit_at, scores, to_blocks
+from bench.eval.metrics import aggregate, expected_rank, hit_at, scores, tie_blocks, to_blocks
 from bench.eval.score import accuracy_table, fault_matrix, latencies, score_run
 
 EXPAND = {
@@ -51,6 +51,30 @@ def test_expected_rank_and_scores():
     assert s["Avg@5"] == pytest.approx((0 + 0.5 + 1 + 1 + 1) / 5)
     agg = aggregate([{"AC@1": 1.0, "AC@3": 1.0, "Avg@5": 1.0}, {"AC@1": 0.0, "AC@3": 1.0, "Avg@5": 0.6}])
     assert agg == {"AC@1": 0.5, "AC@3": 1.0, "Avg@5": 0.8, "n": 2}
+
+
+def test_equal_scores_form_tied_blocks():
+    scored = [("node:/a", 0.9), ("node:/b", 0.5), ("node:/c", 0.5), ("process:7", 0.5), ("node:/d", 0.1)]
+    assert tie_blocks(scored) == ["node:/a", ("node:/b", "node:/c", "process:7"), "node:/d"]
+    assert tie_blocks([("x", 1.0), ("y", 1.0)]) == [("x", "y")]
+    assert tie_blocks([]) == []
+
+
+def test_our_tied_ranking_scores_expected_ac_at_k_like_a_peers():
+    run = _run("hang")
+    run["expand"] = {**EXPAND, "node:/d": ["node:/d"]}
+    # as run.json stores it: a tie is a JSON list; /b, /c and /d scored equal, behind /a
+    run["rankings"] = {"live": ["node:/a", ["node:/c", "node:/b", "node:/d"]], "baseline": []}
+    by = {r["level"]: r for r in score_run(run, None) if r["method"] == "stream-viz (live)"}
+    strict = by["strict"]  # /b: one of three tied at ranks 2-4
+    assert [strict[f"AC@{k}"] for k in (1, 2, 3, 4, 5)] == pytest.approx([0, 1 / 3, 2 / 3, 1, 1])
+    assert strict["rank"] == pytest.approx(3.0) and strict["Avg@5"] == pytest.approx(3 / 5)
+    process = by["process"]  # /b or /c: two of the three
+    assert [process[f"AC@{k}"] for k in (1, 2, 3)] == pytest.approx([0, 2 / 3, 1])
+    assert process["rank"] == pytest.approx(2 + 1 / 3)
+    run["ticks"] = [{"t": 101.0, "top": [["node:/b", "node:/c"]]}, {"t": 103.0, "top": ["node:/b"]}]
+    la = latencies(run)  # a tie is first only at the level where every tied node is true
+    assert la["top1_process"] == 1.0 and la["top1_strict"] == 3.0
 
 
 def test_baseline_flags_silent_and_slow_topics_not_healthy_or_never_alive():
@@ -96,6 +120,20 @@ def test_wide_table_aligns_fills_and_names_with_one_underscore():
     assert service_name("node:/ns/my_node") == "node.ns.my-node"
 
 
+def test_the_processes_of_a_respawned_group_are_one_series():
+    from stream_viz.model.theta import SCHEMAS, make_theta
+
+    def proc(cpu):
+        return make_theta("process", {"cpu_percent": cpu})
+
+    series = {"process:11": (np.array([1.0, 2.0]), np.vstack([proc(10), proc(20)])),
+              "process:12": (np.array([4.0, 5.0]), np.vstack([proc(30), proc(40)]))}
+    times, cols, m, services = wide_table(series, SCHEMAS, {"process:11": "camera", "process:12": "camera"})
+    assert cols.count("proc.camera_cpu") == 1 and services == {"proc.camera": "process:11"}
+    assert list(times) == [1.0, 2.0, 4.0, 5.0]
+    assert list(m[:, cols.index("proc.camera_cpu")]) == [10.0, 20.0, 30.0, 40.0]
+
+
 def test_column_graph_links_metrics_and_drops_cycles():
     cols = ["a_x", "a_y", "b_x", "c_x"]
     parents = column_graph(cols, [("a", "b"), ("b", "c"), ("c", "a"), ("zz", "a")])
@@ -109,6 +147,7 @@ def _run(fault="crash"):
         "expand": EXPAND,
         "truth_strict": ["node:/b"],
         "truth_process": ["node:/b", "node:/c"],
+        "reach": ["node:/b", "node:/c", "process:7", "topic:/y"],
         "injected": {"t": 100.0},
         "alerts": [{"t": 101.0, "member": "node:/b"}],
         "baseline_first_flag_s": None,
@@ -170,7 +209,8 @@ def test_report_writes_the_results_page_and_the_data_behind_it(tmp_path):
     assert (tmp_path / "results.md").read_text() == text
     lines = text.splitlines()
     assert lines[0].startswith("Runs: 1 with a fault, 1 fault-free; load average (1 min) during runs 0.5–0.5")
-    assert "| demo | crash | /b | 1.0 | 2.0 | 1.0 | 1.0 | – |" in lines  # first alert, top-1 per level
+    # first alert, first alert on a member the fault reaches, top-1 per level, the rate monitor
+    assert "| demo | crash | /b | 1.0 | 1.0 | 2.0 | 1.0 | 1.0 | – |" in lines
     assert "| demo_nofault_b_0 | demo | 40 | 1 | node:/a (topic_rate) | 1 |" in lines
     assert "Faulty runs with alerts before the injection: 0 of 1" in lines
     assert "| demo | 2 | 3.0 % / 4.0 % | 100 | 40 |" in lines  # CPU mean / max, RSS, samples per run
@@ -182,7 +222,7 @@ def test_report_writes_the_results_page_and_the_data_behind_it(tmp_path):
     assert written == [{k: "" if v is None else str(v) for k, v in r.items()} for r in rows]
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["rows"] == rows
-    assert summary["latency"] == [{"system": "demo", "fault": "crash", **latencies(faulty)}]
+    assert summary["latency"] == [{"system": "demo", "fault": "crash", "size": None, **latencies(faulty)}]
     assert [c["cpu_share"] for c in summary["cost"]] == [0.02, 0.04]
     lines = [json.loads(x) for x in (tmp_path / "runs.jsonl").read_text().splitlines()]
     assert [x["latency"] is None for x in lines] == [False, True]

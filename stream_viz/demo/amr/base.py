@@ -3,7 +3,8 @@
 Every callback goes through :meth:`Behaviour.gate` (``hang`` blocks there, ``slow_service`` sleeps
 in the service callback) and every publish through :meth:`Behaviour.send` (``degrade`` keeps
 every 4th message, ``flap`` drops everything during its off phases, ``delay`` hands the already
-stamped message to a thread that publishes it 300 ms later). ``qos`` re-creates the node's
+stamped message to a thread that publishes it 300 ms later; a ``FaultSpec.size`` changes the
+fraction kept and the delay). ``qos`` re-creates the node's
 best-effort subscriptions as reliable (:meth:`Behaviour.misconfigure_qos`); ``diag`` turns the
 node's first updater task to ERROR. The process-wide faults are in :mod:`.process`.
 """
@@ -21,11 +22,11 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 from stream_viz.demo.amr.topology import BEST_EFFORT, DIAG, LATCHED, UPDATERS, T
-from stream_viz.demo.faults import STOP
+from stream_viz.demo.faults import DEGRADE_KEEP, STOP, keeps
 from stream_viz.demo.messages import load_type
 from stream_viz.demo.topology import NodeSpec
 
-DELAY_S = 0.3  # the "delay" fault: how much older than usual messages arrive
+DELAY_S = 0.3  # the "delay" fault without a size: how much older than usual messages arrive
 FLAP_S = 4.0  # the "flap" fault: seconds off, then seconds on
 SLOW_SERVICE_S = 5.0  # the "slow_service" fault: time per call (clients give up after 3 s)
 
@@ -44,14 +45,15 @@ def qos_for(topic: str) -> QoSProfile:
 
 
 class Delayer:
-    """Publishes handed-over messages ``DELAY_S`` after they were handed over, in order, from a thread."""
+    """Publishes handed-over messages ``delay_s`` after they were handed over, in order, from a thread."""
 
-    def __init__(self) -> None:
+    def __init__(self, delay_s: float = DELAY_S) -> None:
+        self.delay_s = delay_s
         self._q: queue.Queue = queue.Queue()
         threading.Thread(target=self._run, daemon=True, name="delay").start()
 
     def put(self, pub: Any, msg: Any) -> None:
-        self._q.put((time.monotonic() + DELAY_S, pub, msg))
+        self._q.put((time.monotonic() + self.delay_s, pub, msg))
 
     def _run(self) -> None:
         while not STOP.is_set():
@@ -87,6 +89,7 @@ class Behaviour:
         self._pubs: dict[str, Any] = {}
         self._subs: dict[str, tuple[Any, Callable, str]] = {}
         self._count: dict[str, int] = {}
+        self._keep = DEGRADE_KEEP  # the "degrade" fault: fraction of messages still published
         self._delayer: Delayer | None = None
         self._flap_since = 0.0
         self._flap_off = False
@@ -147,7 +150,7 @@ class Behaviour:
         pub = self._pubs[topic]
         if self.fault == "degrade":
             self._count[topic] = self._count.get(topic, 0) + 1
-            if self._count[topic] % 4:
+            if not keeps(self._count[topic], self._keep):
                 return
         elif self.fault == "flap":
             off = int((time.monotonic() - self._flap_since) / FLAP_S) % 2 == 0
@@ -161,10 +164,15 @@ class Behaviour:
             return
         pub.publish(msg)
 
-    def set_fault(self, fault: str) -> None:
-        """Start ``fault`` (hang, degrade, delay, flap, slow_service, qos, diag) in this node."""
+    def set_fault(self, fault: str, size: float | None = None) -> None:
+        """Start ``fault`` (hang, degrade, delay, flap, slow_service, qos, diag) of ``size`` in this node.
+
+        ``size`` (FaultSpec.size, None: the default): degrade's fraction kept, delay's ms.
+        """
         if fault == "delay":
-            self._delayer = Delayer()
+            self._delayer = Delayer(DELAY_S if size is None else size / 1e3)
+        elif fault == "degrade" and size is not None:
+            self._keep = size
         elif fault == "flap":
             self._flap_since = time.monotonic()
         elif fault == "qos":

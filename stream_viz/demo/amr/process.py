@@ -17,13 +17,11 @@ from pathlib import Path
 
 from stream_viz.demo.amr.topology import AMR, PROCESSES
 from stream_viz.demo.child import (
-    burn,
     end_on_signals,
     end_process,
-    errlog,
-    leak,
     next_fault,
     parser,
+    process_fault,
     record_injection,
     spin,
     write_json,
@@ -37,8 +35,9 @@ NODE_FAULTS = ("hang", "degrade", "delay", "flap", "slow_service", "qos", "diag"
 _exit_code = 0
 
 
-def _inject(fault: str, target: str, at: float, nodes: dict, run_dir: Path, up: float) -> None:
-    """At ``at`` (unix s) inject ``fault`` if its target runs in this process (nodes up since ``up``)."""
+def _inject(fault: str, target: str, at: float, size: float | None, nodes: dict, run_dir: Path,
+            up: float) -> None:
+    """At ``at`` (unix s) inject ``fault`` of ``size`` if its target runs here (nodes up since ``up``)."""
     global _exit_code
     if target not in nodes:
         return
@@ -50,18 +49,16 @@ def _inject(fault: str, target: str, at: float, nodes: dict, run_dir: Path, up: 
         _exit_code = 1
         STOP.set()
         return
-    if STOP.wait(max(0.0, at - time.time())) or not record_injection(run_dir, fault, target):
+    if STOP.wait(max(0.0, at - time.time())) or not record_injection(run_dir, fault, target, size):
         return
-    print(f"injecting {fault} into {target}", flush=True)
+    print(f"injecting {fault} into {target}" + ("" if size is None else f" (size {size:g})"), flush=True)
     behaviour = nodes[target]
     if fault == "crash":
         os.kill(os.getpid(), signal.SIGKILL)
     elif fault in NODE_FAULTS:
-        behaviour.set_fault(fault)
+        behaviour.set_fault(fault, size)
     else:
-        work = {"cpu": burn, "leak": leak}.get(fault)
-        args = (STOP,) if work else (behaviour.log, STOP, ERRLOG)
-        threading.Thread(target=work or errlog, args=args, daemon=True, name=f"fault-{fault}").start()
+        process_fault(fault, size, behaviour.log, STOP, ERRLOG)
 
 
 def _injector(args, nodes: dict, run_dir: Path, up: float) -> None:
