@@ -105,21 +105,16 @@ def _analyse(ctx: PluginContext) -> list[tuple[str, bool, list[str]]]:
     The structure only changes with the graph, so this is redone only when the diff or the
     watchlist changed, or every ``recheck_s``; cheap on 1,000 members.
     """
-    cached = ctx.state.get("analysis")
-    if cached is not None and not ctx.diff and cached[0] == ctx.watch and ctx.t < cached[1]:
-        return cached[2]
-    ignore = {t if t.startswith("topic:") else f"topic:{t}" for t in ctx.settings["ignore_topics"]}
-    out = []
-    for topic in ctx.members("topic"):
-        if topic in ignore:
-            continue
-        pubs = ctx.publishers(topic)
-        subs = [v for v in ctx.subscribers(topic) if topic in ctx.watch or v in ctx.watch]
-        if not subs:
-            continue
-        out.append((topic, not pubs, subs))
-    ctx.state["analysis"] = (ctx.watch, ctx.t + ctx.settings["recheck_s"], out)
-    return out
+    def compute() -> list[tuple[str, bool, list[str]]]:
+        ignore = ctx.topic_ids(ctx.settings["ignore_topics"])
+        out = []
+        for topic in ctx.members("topic"):
+            subs = [v for v in ctx.subscribers(topic) if topic in ctx.watch or v in ctx.watch]
+            if subs and topic not in ignore:
+                out.append((topic, not ctx.publishers(topic), subs))
+        return out
+
+    return ctx.structural(compute, ctx.settings["recheck_s"])
 
 
 def discovery_burst(G: nx.MultiDiGraph, added: Any, least: int, ratio: float) -> bool:

@@ -47,8 +47,7 @@ class MessageAge(Plugin):
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         s = ctx.settings
         alerting = ctx.state.setdefault("alerting", set())
-        since = ctx.t - ctx.state.get("t_prev", -math.inf)
-        ctx.state["t_prev"] = ctx.t
+        since = ctx.since_last_call()
         for topic in ctx.watched():
             age = ctx.value(topic, "stamp_age_ms")
             if math.isnan(age):

@@ -160,34 +160,35 @@ class QosCompat(Plugin):
 def _analyse(ctx: PluginContext) -> list[tuple[str, str, str, list[str], int, list[str]]]:
     """``(topic, subscriber, level, mismatched publishers, publishers, reasons)`` per subscriber
     with an error (or a warning), cached until the graph or the watchlist changes."""
-    cached = ctx.state.get("analysis")
-    if cached is not None and not ctx.diff and cached[0] == ctx.watch and ctx.t < cached[1]:
-        return cached[2]
-    ignore = {t if t.startswith("topic:") else f"topic:{t}" for t in ctx.settings["ignore_topics"]}
+    def compute() -> list[tuple[str, str, str, list[str], int, list[str]]]:
+        ignore = ctx.topic_ids(ctx.settings["ignore_topics"])
+        topics = [t for t in ctx.members("topic") if t not in ignore]
+        return [row for topic in topics for row in _mismatches(ctx, topic)]
+
+    return ctx.structural(compute, ctx.settings["recheck_s"])
+
+
+def _mismatches(ctx: PluginContext, topic: str) -> list[tuple[str, str, str, list[str], int, list[str]]]:
+    """The rows of `_analyse` for one topic: its watched subscribers that some publisher cannot serve."""
+    pubs, subs = endpoints(ctx, topic)
     out = []
-    for topic in ctx.members("topic"):
-        if topic in ignore:
+    for sub in sorted(subs):
+        if not (topic in ctx.watch or sub in ctx.watch) or not pubs:
             continue
-        pubs, subs = endpoints(ctx, topic)
-        for sub in sorted(subs):
-            if not (topic in ctx.watch or sub in ctx.watch) or not pubs:
-                continue
-            found: dict[str, list[tuple[str, list[str]]]] = {}
-            for pub, pqs in pubs.items():
-                for pq in pqs:
-                    for sq in subs[sub]:
-                        level, why = compatibility(pq, sq)
-                        if level != "ok":
-                            found.setdefault(pub, []).append((level, why))
-            errors = sorted(p for p, r in found.items() if any(lv == "error" for lv, _ in r))
-            level = "error" if errors else "warning" if found else "ok"
-            if level == "ok":
-                continue
-            chosen = errors or sorted(found)
-            reasons = sorted({f"{p}: {w}" for p in chosen
-                              for lv, why in found[p] if lv == level for w in why})
-            out.append((topic, sub, level, chosen, len(pubs), reasons))
-    ctx.state["analysis"] = (ctx.watch, ctx.t + ctx.settings["recheck_s"], out)
+        found: dict[str, list[tuple[str, list[str]]]] = {}
+        for pub, pqs in pubs.items():
+            for pq in pqs:
+                for sq in subs[sub]:
+                    level, why = compatibility(pq, sq)
+                    if level != "ok":
+                        found.setdefault(pub, []).append((level, why))
+        errors = sorted(p for p, r in found.items() if any(lv == "error" for lv, _ in r))
+        level = "error" if errors else "warning" if found else "ok"
+        if level == "ok":
+            continue
+        chosen = errors or sorted(found)
+        reasons = sorted({f"{p}: {w}" for p in chosen for lv, why in found[p] if lv == level for w in why})
+        out.append((topic, sub, level, chosen, len(pubs), reasons))
     return out
 
 

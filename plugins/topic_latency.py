@@ -54,8 +54,7 @@ class TopicLatency(Plugin):
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         s = ctx.settings
         alerting = ctx.state.setdefault("alerting", set())
-        since = ctx.t - ctx.state.get("t_prev", -math.inf)
-        ctx.state["t_prev"] = ctx.t
+        since = ctx.since_last_call()
         seen = []  # (topic, attr, excess, fresh)
         drops = []
         for topic in ctx.watched():

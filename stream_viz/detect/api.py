@@ -10,6 +10,7 @@ questions (`PluginContext.nodes_of`, `PluginContext.publishers`, ...), and makes
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeVar
@@ -28,6 +29,7 @@ from stream_viz.records import Alert, Event
 
 API_VERSION = 1
 F = TypeVar("F", bound=Callable[..., Any])
+T = TypeVar("T")
 _INDEX = {kind: {name: i for i, name in enumerate(names)} for kind, names in SCHEMAS.items()}
 
 
@@ -178,6 +180,28 @@ class PluginContext:
         empty when there is none."""
         data = self.graph.get_edge_data(source, target, FLOW)
         return {} if data is None else data
+
+    # -- what plugins keep between calls ---------------------------------------------------------
+    def since_last_call(self) -> float:
+        """Seconds since this plugin's previous call (inf on the first): a topic whose newest
+        message is older than that had no message since, so this sample is no new observation."""
+        since = self.t - self.state.get("_t_prev", -math.inf)
+        self.state["_t_prev"] = self.t
+        return since
+
+    def structural(self, compute: Callable[[], T], recheck_s: float) -> T:
+        """Return ``compute()``, redone only when the graph or the watchlist changed, or every
+        ``recheck_s``: an analysis of the structure alone stays cheap on 1,000 members."""
+        cached = self.state.get("_structural")
+        if cached is not None and not self.diff and cached[0] == self.watch and self.t < cached[1]:
+            return cached[2]
+        out = compute()
+        self.state["_structural"] = (self.watch, self.t + recheck_s, out)
+        return out
+
+    def topic_ids(self, names: Iterable[str]) -> set[str]:
+        """Return the topic member ids of topic names or ids (a setting such as ``ignore_topics``)."""
+        return {n if n.startswith("topic:") else f"topic:{n}" for n in names}
 
     # -- the answer -----------------------------------------------------------------------------
     def alert(self, member: str, severity: str, message: str, **data: Any) -> Alert:

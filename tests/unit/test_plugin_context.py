@@ -68,3 +68,27 @@ def test_members_attributes_and_edges():
     assert ctx.attr("node:/map", "alive", "?") == "?" and ctx.attr("node:/nope", "alive") is None
     assert ctx.flow_edge("node:/camera", "topic:/img")["qos"] == {"reliability": "reliable"}
     assert ctx.flow_edge("topic:/img", "node:/camera") == {}
+
+
+def test_what_plugins_keep_between_calls():
+    from stream_viz.model.diff import GraphDiff
+
+    G, state, calls = _graph(), {}, []
+
+    def ctx(t, watch=("topic:/img",), diff=None):
+        return PluginContext(t, G, frozenset(watch), History(), diff=diff or GraphDiff(), state=state,
+                             plugin="p")
+
+    def compute():
+        calls.append(1)
+        return len(calls)
+
+    c = ctx(1.0)
+    assert c.since_last_call() == float("inf") and ctx(1.5).since_last_call() == 0.5
+    assert ctx(2.0).structural(compute, 10.0) == 1
+    assert ctx(3.0).structural(compute, 10.0) == 1  # same graph and watchlist: cached
+    assert ctx(4.0, watch=("node:/camera",)).structural(compute, 10.0) == 2  # watchlist changed
+    assert ctx(5.0, watch=("node:/camera",), diff=GraphDiff(frozenset({"node:/x"}))).structural(
+        compute, 10.0) == 3  # the graph changed
+    assert ctx(16.0, watch=("node:/camera",)).structural(compute, 10.0) == 4  # recheck_s passed
+    assert c.topic_ids(["/a", "topic:/b"]) == {"topic:/a", "topic:/b"}
