@@ -108,6 +108,7 @@ def test_services_named_as_the_collector_names_them_sit_beside_their_server():
 
 
 def test_metrics_batch_grows_with_the_members_to_bound_chunks_per_second():
+    from stream_viz.model.theta import SCHEMAS
     from stream_viz.viz.live import metrics_batch_s
     from stream_viz.viz.metrics import MetricBatch
 
@@ -121,6 +122,6 @@ def test_metrics_batch_grows_with_the_members_to_bound_chunks_per_second():
     assert len(batch) == sum(1 for _, k in G.nodes(data="kind") if k in ("process", "topic")) == 25
     assert batch.first_t == 10.0
     ts, xs = batch.columns()["topic:/scan"]
-    assert ts.tolist() == [10.0, 11.0] and xs.shape == (2, 9)
+    assert ts.tolist() == [10.0, 11.0] and xs.shape == (2, len(SCHEMAS["topic"]))
     batch.clear()
     assert len(batch) == 0 and batch.first_t is None
