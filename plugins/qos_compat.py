@@ -22,6 +22,8 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.model.ids import name_of
+from stream_viz.model.qos import qos_policy
 from stream_viz.records import Alert
 
 UNSPECIFIED = 0  # rmw's default deadline / lease duration (RMW_DURATION_UNSPECIFIED)
@@ -101,27 +103,7 @@ def rmw_reason(level: str, reasons: list[str]) -> str:
 
 
 def _policies(qos: dict[str, Any]) -> dict[str, str]:
-    return {k: _policy(qos, k) for k in ("reliability", "durability", "liveliness")}
-
-
-# rclpy's enum numbers, as older models stored them
-_NUMBERED = {
-    "reliability": dict(enumerate(("system_default", "reliable", "best_effort", "unknown",
-                                   "best_available"))),
-    "durability": dict(enumerate(("system_default", "transient_local", "volatile", "unknown",
-                                  "best_available"))),
-    "liveliness": {0: "system_default", 1: "automatic", 3: "manual_by_topic", 4: "unknown",
-                   5: "best_available"},
-}
-
-
-def _policy(qos: dict[str, Any], key: str) -> str:
-    """A policy as rmw names it (``reliable``, ``best_effort``, ``volatile``, ``automatic``, …); '' if
-    absent. Also reads rclpy's enum numbers and names (``ReliabilityPolicy.RELIABLE``)."""
-    raw = qos.get(key)
-    if isinstance(raw, int) and not isinstance(raw, bool):
-        return _NUMBERED[key].get(raw, "")
-    return str(raw or "").lower().rsplit(".", 1)[-1]
+    return {k: qos_policy(qos, k) for k in ("reliability", "durability", "liveliness")}
 
 
 class QosCompat(Plugin):
@@ -143,7 +125,7 @@ class QosCompat(Plugin):
         for topic, sub, level, mismatched, total, reasons in _analyse(ctx):
             if level == "warning":
                 if ctx.settings["warnings"]:
-                    yield ctx.alert(sub, "info", f"QoS on {_name(topic)} cannot be judged: "
+                    yield ctx.alert(sub, "info", f"QoS on {name_of(topic)} cannot be judged: "
                                     + "; ".join(reasons),
                                     symptom="qos_unknown", topic=topic, publishers=mismatched,
                                     reasons=reasons)
@@ -152,7 +134,7 @@ class QosCompat(Plugin):
             what = ("receives nothing" if nothing
                     else f"receives from {total - len(mismatched)} of {total} publishers")
             yield ctx.alert(sub, "error" if nothing else "warn",
-                            f"QoS incompatible on {_name(topic)}, {what}: " + "; ".join(reasons),
+                            f"QoS incompatible on {name_of(topic)}, {what}: " + "; ".join(reasons),
                             symptom="qos_incompatible", topic=topic, publishers=mismatched,
                             reasons=reasons, receives_nothing=nothing)
 
@@ -215,6 +197,3 @@ def endpoints(ctx: PluginContext, topic: str) -> tuple[dict[str, list[dict]], di
                 side[m] = [q]
     return pubs, subs
 
-
-def _name(member: str) -> str:
-    return member.partition(":")[2]

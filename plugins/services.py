@@ -18,6 +18,7 @@ from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, rise
+from stream_viz.model.ids import name_of
 from stream_viz.records import SEVERITY_RANK as RANK
 from stream_viz.records import Alert
 
@@ -64,8 +65,8 @@ class Services(Plugin):
             elif had.get(service) and clients and ctx.settings["server_gone"]:
                 gone = had[service]
                 for c in clients:
-                    yield ctx.alert(c, "warn", f"{_name(service)} has no server any more (was "
-                                    f"{', '.join(_name(g) for g in gone)})", symptom="server_gone",
+                    yield ctx.alert(c, "warn", f"{name_of(service)} has no server any more (was "
+                                    f"{', '.join(name_of(g) for g in gone)})", symptom="server_gone",
                                     service=service, server=gone[0], servers=gone, client=c)
         yield from _logged(ctx)
 
@@ -94,8 +95,8 @@ def _waiting(ctx: PluginContext, service: str, servers: list[str]) -> Iterator[A
     for member, call in sorted(longest.items()):
         server = call.get("server") or (servers[0] if len(servers) == 1 else None)
         usual = "" if math.isnan(usual_ms) else f", usually answered in {usual_ms:.0f} ms"
-        yield ctx.alert(member, "warn", f"waits {call['waited_s']:.1f} s for {_name(service)} from "
-                        f"{_name(server) if server else 'an unknown server'}{usual}",
+        yield ctx.alert(member, "warn", f"waits {call['waited_s']:.1f} s for {name_of(service)} from "
+                        f"{name_of(server) if server else 'an unknown server'}{usual}",
                         symptom="waiting", via="introspection", service=service, server=server,
                         client=call.get("client"), waited_s=call["waited_s"])
 
@@ -108,7 +109,8 @@ def _slow(ctx: PluginContext, service: str, servers: list[str], clients: list[st
     value, med = risen
     server = servers[0] if len(servers) == 1 else None
     for member in clients or [service]:
-        yield ctx.alert(member, "warn", f"{_name(service)} answers in {value:.0f} ms, normally {med:.0f} ms",
+        yield ctx.alert(member, "warn",
+                        f"{name_of(service)} answers in {value:.0f} ms, normally {med:.0f} ms",
                         symptom="slow_response", service=service, server=server,
                         client=member if member != service else None, value_ms=value, baseline_ms=med)
 
@@ -135,10 +137,7 @@ def _logged(ctx: PluginContext) -> Iterator[Alert]:
                 continue
             seen.add((e.member, service))
             server = hit[0] if hit else (servers[0] if len(servers) == 1 else None)
-            yield ctx.alert(e.member, "warn", f"logged about {_name(service)}: {e.text}",
+            yield ctx.alert(e.member, "warn", f"logged about {name_of(service)}: {e.text}",
                             symptom="waiting", via="log", service=service, server=server,
                             client=e.member)
 
-
-def _name(member: str | None) -> str:
-    return "?" if member is None else member.partition(":")[2]

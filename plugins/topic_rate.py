@@ -9,6 +9,7 @@ from typing import Any, ClassVar
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, streak
 from stream_viz.detect.rhythm import Rhythm, follow, newest_message, quiet_limit
+from stream_viz.model.qos import qos_policy
 from stream_viz.records import Alert
 
 Baseline = tuple[float, float, int] | None
@@ -66,7 +67,9 @@ class TopicRate(Plugin):
         rhythms: dict[str, Rhythm] = ctx.state.setdefault("rhythms", {})
         watched = list(ctx.watched())
         # Every topic's rhythm is followed, so one the RCA starts watching later is judged at once.
-        for topic in set(ctx.members("topic")).difference(watched):
+        if ctx.diff or "topics" not in ctx.state:  # the topics change only with the graph
+            ctx.state["topics"] = list(ctx.members("topic"))
+        for topic in set(ctx.state["topics"]).difference(watched):
             rate = ctx.value(topic, "rate_hz")
             if not math.isnan(rate):
                 _follow(ctx, rhythms.setdefault(topic, Rhythm()), topic, rate, None)
@@ -158,7 +161,7 @@ def latched(qos: Any) -> bool:
     """Return True when every publisher endpoint in the topic attribute ``qos`` (and at least one)
     is transient-local: a latched topic."""
     pubs = [q for q in qos or () if isinstance(q, dict) and q.get("role") == "pub"]
-    return bool(pubs) and all(str(q.get("durability", "")).lower() == "transient_local" for q in pubs)
+    return bool(pubs) and all(qos_policy(q, "durability") == "transient_local" for q in pubs)
 
 
 def _transitions(ctx: PluginContext) -> dict[str, float]:

@@ -23,7 +23,7 @@ from stream_viz.model import queries
 from stream_viz.model.diff import GraphDiff
 from stream_viz.model.graph import FLOW
 from stream_viz.model.history import History
-from stream_viz.model.ids import kind_of
+from stream_viz.model.ids import kind_of, make_id
 from stream_viz.model.theta import SCHEMAS
 from stream_viz.records import Alert, Event
 
@@ -201,7 +201,7 @@ class PluginContext:
 
     def topic_ids(self, names: Iterable[str]) -> set[str]:
         """Return the topic member ids of topic names or ids (a setting such as ``ignore_topics``)."""
-        return {n if n.startswith("topic:") else f"topic:{n}" for n in names}
+        return {n if n.startswith("topic:") else make_id("topic", n) for n in names}
 
     # -- the answer -----------------------------------------------------------------------------
     def alert(self, member: str, severity: str, message: str, **data: Any) -> Alert:
