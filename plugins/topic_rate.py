@@ -67,9 +67,8 @@ class TopicRate(Plugin):
         rhythms: dict[str, Rhythm] = ctx.state.setdefault("rhythms", {})
         watched = list(ctx.watched())
         # Every topic's rhythm is followed, so one the RCA starts watching later is judged at once.
-        if ctx.diff or "topics" not in ctx.state:  # the topics change only with the graph
-            ctx.state["topics"] = list(ctx.members("topic"))
-        for topic in set(ctx.state["topics"]).difference(watched):
+        topics = ctx.structural(lambda: set(ctx.members("topic")), key="topics")
+        for topic in topics.difference(watched):
             rate = ctx.value(topic, "rate_hz")
             if not math.isnan(rate):
                 _follow(ctx, rhythms.setdefault(topic, Rhythm()), topic, rate, None)
@@ -168,9 +167,9 @@ def _transitions(ctx: PluginContext) -> dict[str, float]:
     """Node → receive time of the newest message on a ``…/transition_event`` topic it publishes
     (a lifecycle node's state change), kept across samples."""
     last = ctx.state.setdefault("transitions", {})
-    if ctx.diff or "lifecycle_topics" not in ctx.state:
-        ctx.state["lifecycle_topics"] = [m for m in ctx.members("topic") if m.endswith("/transition_event")]
-    for topic in ctx.state["lifecycle_topics"]:
+    lifecycle = ctx.structural(lambda: [m for m in ctx.members("topic") if m.endswith("/transition_event")],
+                               key="lifecycle")
+    for topic in lifecycle:
         age = ctx.value(topic, "age_s")
         if age == age:
             for node in ctx.publishers(topic):

@@ -189,14 +189,16 @@ class PluginContext:
         self.state["_t_prev"] = self.t
         return since
 
-    def structural(self, compute: Callable[[], T], recheck_s: float) -> T:
+    def structural(self, compute: Callable[[], T], recheck_s: float = math.inf, key: str = "") -> T:
         """Return ``compute()``, redone only when the graph or the watchlist changed, or every
-        ``recheck_s``: an analysis of the structure alone stays cheap on 1,000 members."""
-        cached = self.state.get("_structural")
+        ``recheck_s``: an analysis of the structure alone stays cheap on 1,000 members. ``key``
+        names the analysis when a plugin keeps several."""
+        slot = ("_structural", key)
+        cached = self.state.get(slot)
         if cached is not None and not self.diff and cached[0] == self.watch and self.t < cached[1]:
             return cached[2]
         out = compute()
-        self.state["_structural"] = (self.watch, self.t + recheck_s, out)
+        self.state[slot] = (self.watch, self.t + recheck_s, out)
         return out
 
     def topic_ids(self, names: Iterable[str]) -> set[str]:

@@ -91,4 +91,7 @@ def test_what_plugins_keep_between_calls():
     assert ctx(5.0, watch=("node:/camera",), diff=GraphDiff(frozenset({"node:/x"}))).structural(
         compute, 10.0) == 3  # the graph changed
     assert ctx(16.0, watch=("node:/camera",)).structural(compute, 10.0) == 4  # recheck_s passed
+    # another analysis of the same plugin is kept apart, and both stay cached
+    assert ctx(17.0, watch=("node:/camera",)).structural(lambda: "other", key="b") == "other"
+    assert ctx(18.0, watch=("node:/camera",)).structural(compute, 10.0) == 4
     assert c.topic_ids(["/a", "topic:/b"]) == {"topic:/a", "topic:/b"}
