@@ -97,11 +97,6 @@ def _warnings(p: dict[str, str], s: dict[str, str]) -> list[str]:
     return out
 
 
-def rmw_reason(level: str, reasons: list[str]) -> str:
-    """Return ``reasons`` as rmw writes them (``"ERROR: …;WARNING: …;"``), for comparison."""
-    return "".join(f"{level.upper()}: {r};" for r in reasons) if level != "ok" else ""
-
-
 def _policies(qos: dict[str, Any]) -> dict[str, str]:
     return {k: qos_policy(qos, k) for k in ("reliability", "durability", "liveliness")}
 

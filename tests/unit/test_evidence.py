@@ -22,7 +22,7 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Header, String
 from std_srvs.srv import Trigger
 
-from plugins.qos_compat import compatibility, rmw_reason
+from plugins.qos_compat import compatibility
 from stream_viz.collect.cdr import (
     REQUEST_RECEIVED,
     REQUEST_SENT,
@@ -48,6 +48,11 @@ from tests.unit.test_plugins import drive, model
 S = 1_000_000_000
 
 # --------------------------------------------------------------------------- CDR stamps
+
+
+def rmw_reason(level: str, reasons: list[str]) -> str:
+    """``reasons`` as rmw writes them (``"ERROR: …;WARNING: …;"``), to compare with rclpy's check."""
+    return "".join(f"{level.upper()}: {r};" for r in reasons) if level != "ok" else ""
 
 
 def test_header_stamp_read_from_the_serialized_bytes():
