@@ -164,7 +164,11 @@ def test_a_crash_removes_every_node_of_the_container(ros_domain):
         assert robot.procs["navigation"].wait(5) == -9
         for m in navigation:  # still listed by DDS for ~20 s after a SIGKILL, but dead
             assert m not in s.graph or s.graph.nodes[m]["alive"] is False
-        assert s.graph.nodes["node:/amr1/bt_navigator"]["alive"] is True
+        # Another container's node lives on (one graph read can miss a node under load: read again).
+        def navigator_alive():
+            g = col.sample().graph
+            return "node:/amr1/bt_navigator" in g and g.nodes["node:/amr1/bt_navigator"]["alive"] is True
+        assert wait_for(navigator_alive, timeout=5, period=0.3)
 
 
 def test_a_restart_loop_brings_the_node_back_in_new_processes(ros_domain):
