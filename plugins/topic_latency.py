@@ -9,7 +9,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, streak
+from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, held, streak
 from stream_viz.records import Alert
 
 
@@ -25,7 +25,10 @@ class TopicLatency(Plugin):
     ``drops_per_s ≥ max(drops_min_per_s, drops_ratio × rate)`` for ``confirm`` samples. Only
     samples with a message newer than the previous sample count (``age_s``): a topic slower than
     the sampling keeps one late message in its window for several samples, which is one
-    observation, not ``confirm``.
+    observation, not ``confirm``. A jitter rise must also have held for ``jitter_hold_s``: the
+    collector's jitter is the spread of the intervals in its 3 s window, so one gap (a mux
+    switching sources, a process stalled for a moment) holds it up for the whole window; only a
+    rise that outlasts the window is a change of the topic's rhythm.
 
     Common mode: when at least ``common_mode_min`` topics and ``common_mode_ratio`` of the topics
     measured in a sample rise at once, the sample is a stall of the host or of the monitor (the
@@ -49,6 +52,7 @@ class TopicLatency(Plugin):
         "common_mode_min": 4,
         "common_mode_ratio": 0.5,
         "usual_quantile": 0.9,
+        "jitter_hold_s": 4.0,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -71,8 +75,10 @@ class TopicLatency(Plugin):
         if stall:
             ctx.state["common_mode"] = ctx.state.get("common_mode", 0) + 1
         for topic, attr, ex, fresh in seen:
-            risen = confirm(ctx, topic, attr, ex, alerting, fresh and not stall)
-            if risen is not None:
+            counts = fresh and not stall
+            risen = confirm(ctx, topic, attr, ex, alerting, counts)
+            lasted = held(ctx.state, (topic, attr), ex is not None and ex[2], ctx.t, counts)
+            if risen is not None and (attr != "jitter_ms" or lasted >= s["jitter_hold_s"]):
                 value, med = risen
                 what = attr.removesuffix("_ms")
                 yield ctx.alert(topic, "warn", f"{what} {value:.1f} ms, normally {med:.1f} ms",

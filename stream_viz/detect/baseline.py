@@ -105,6 +105,19 @@ def streak(state: dict[str, Any], key: Any, condition: bool, fresh: bool = True)
     return 0
 
 
+def held(state: dict[str, Any], key: Any, condition: bool, t: float, fresh: bool = True) -> float:
+    """Return how long (s) ``condition`` has held for ``key`` at time ``t`` (0 once it is false).
+
+    A call that is not ``fresh`` neither starts nor breaks the run, as in `streak`.
+    """
+    since = state.setdefault("_held", {})
+    if fresh and condition:
+        since.setdefault(key, t)
+    elif fresh:
+        since.pop(key, None)
+    return t - since[key] if key in since else 0.0
+
+
 @reads_settings("k", *BASELINE_SETTINGS)
 def excess(ctx: Any, member: str, attr: str, floor: float, alerting: set) -> tuple[float, float, bool] | None:
     """Return ``(value, median, exceeded)`` of ``member``'s ``attr`` against its own baseline.

@@ -252,8 +252,9 @@ def test_topic_latency_quiet_then_rise_and_drops():
     # Jitter must rise by half the period (50 ms at 10 Hz), not just by 20 ms.
     busy = healthy[:30] + [(float(t), model(jitter=40.0), []) for t in range(30, 34)]
     assert drive("topic_latency", busy) == []
-    bursty = healthy[:30] + [(float(t), model(jitter=90.0), []) for t in range(30, 34)]
-    assert drive("topic_latency", bursty) == [(32.0, "topic:/img", "warn"), (33.0, "topic:/img", "warn")]
+    # A jitter rise counts once it has outlasted the collector's 3 s window (jitter_hold_s 4 s).
+    bursty = healthy[:30] + [(float(t), model(jitter=90.0), []) for t in range(30, 36)]
+    assert drive("topic_latency", bursty) == [(34.0, "topic:/img", "warn"), (35.0, "topic:/img", "warn")]
     drops = [(float(t), model(drops=0.2 if t < 3 else 4.0), []) for t in range(7)]
     assert drive("topic_latency", drops) == [(5.0, "topic:/img", "warn"), (6.0, "topic:/img", "warn")]
 
@@ -265,9 +266,24 @@ def test_topic_latency_jitter_a_bursty_topic_often_shows_is_no_rise():
     frames = [(float(t), model(jitter=j), []) for t, j in enumerate(usual)]
     assert drive("topic_latency", frames) == []
     # Past what it often shows (its 90th percentile, 420 ms) by the floor (50 ms at 10 Hz): a rise.
-    sick = [*usual[:40], 480.0, 490.0, 500.0]
+    sick = [*usual[:40], 480.0, 490.0, 500.0, 510.0, 520.0]
     frames = [(float(t), model(jitter=j), []) for t, j in enumerate(sick)]
-    assert drive("topic_latency", frames) == [(42.0, "topic:/img", "warn")]
+    assert drive("topic_latency", frames) == [(44.0, "topic:/img", "warn")]
+
+
+def test_topic_latency_one_gap_held_by_the_window_is_no_jitter_rise():
+    # One gap (a mux switching sources, a container stalled for a moment) stays in the 3 s window
+    # for 3-4 samples: the jitter is up for that long, fresh messages in every sample. No alert.
+    healthy = [(float(t), model(jitter=noisy(1.0, 0.3)), []) for t in range(30)]
+    twice = healthy + [(float(t), model(jitter=90.0 if t % 10 < 4 else noisy(1.0, 0.3)), [])
+                       for t in range(30, 50)]  # gaps at 30-33 and 40-43
+    assert drive("topic_latency", twice) == []
+    # Held past the window, it is a change of the topic's rhythm.
+    longer = [(float(t), model(jitter=90.0), []) for t in range(30, 35)]
+    assert drive("topic_latency", healthy + longer) == [(34.0, "topic:/img", "warn")]
+    # Latency is a mean, not held up by one message: it keeps its 3-sample confirmation.
+    late = [(float(t), model(latency=150.0), []) for t in range(30, 33)]
+    assert drive("topic_latency", healthy + late) == [(32.0, "topic:/img", "warn")]
 
 
 # --------------------------------------------------------------------------- process_resources
