@@ -20,9 +20,13 @@ from typing import Protocol
 import networkx as nx
 
 from stream_viz.model.queries import process_of_node
+from stream_viz.rca.causal import causes
 
 INF = float("inf")
 EPS = 1e-9
+
+
+HOPS = 6  # how far upstream a stalled node's inputs are followed to a fellow (a few topics/nodes)
 
 
 class OwnChange(Protocol):
@@ -33,6 +37,7 @@ class OwnChange(Protocol):
     own_kinds: set[str]
     upstream: float
     implied: bool
+    logged: float
 
 
 @dataclass
@@ -66,14 +71,62 @@ def _before(a: OwnChange, b: OwnChange, tol: float) -> bool:
     return len(a.own_kinds) > len(b.own_kinds)
 
 
+def stalls(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> dict[str, set[str]]:
+    """Return node → the fellow nodes of its process that went silent with it in one stall.
+
+    Nodes of one process whose outputs went silent together (own onsets within ``tol``) are one
+    stall of their executor when at least two of them are independent: neither is fed, through
+    the data flow, by another of them (a lidar and an IMU driver that share nothing but the
+    thread). Then the data flow between them explains nothing — a hung merger starves the
+    drivers that feed it — and only what came before the stall tells them apart.
+    """
+    by_process: dict[str, list[str]] = {}
+    for n, v in views.items():
+        if not v.implied and "output" in v.own_kinds and (p := process_of_node(G, n)) is not None:
+            by_process.setdefault(p, []).append(n)
+    out: dict[str, set[str]] = {}
+    for nodes in by_process.values():
+        start = min(views[n].own_onset for n in nodes)
+        group = {n for n in nodes if _close(views[n].own_onset, start, tol)}
+        independent = [n for n in group if not _fed_by(G, n, group - {n})]
+        if len(independent) >= 2:
+            for n in group:
+                out[n] = group - {n}
+    return out
+
+
+def _spoke(v: OwnChange, tol: float) -> bool:
+    """True when ``v`` logged by the time its outputs stopped: it ran while a stall starved the
+    others (a starved node cannot log)."""
+    return v.logged <= v.own_onset + tol
+
+
+def _fed_by(G: nx.MultiDiGraph, n: str, others: set[str]) -> bool:
+    """True when one of ``others`` is upstream of ``n`` within `HOPS` causal steps."""
+    seen, frontier = {n}, [n]
+    for _ in range(HOPS):
+        frontier = [p for m in frontier for p in causes(G, m) if p not in seen]
+        if any(p in others for p in frontier):
+            return True
+        seen.update(frontier)
+        if not frontier:
+            break
+    return False
+
+
 def _same(a: OwnChange, b: OwnChange, tol: float) -> bool:
     """Same own change, and explained as much by their inputs (else the data flow tells them apart)."""
     return (_close(a.own_onset, b.own_onset, tol) and abs(a.own_anomaly - b.own_anomaly) <= EPS
             and len(a.own_kinds) == len(b.own_kinds) and abs(a.upstream - b.upstream) <= EPS)
 
 
-def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> dict[str, Verdict]:
+def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float,
+          stalled: Mapping[str, set[str]] | None = None) -> dict[str, Verdict]:
     """Return a `Verdict` for every candidate that shares its process with another candidate.
+
+    Fellows in one stall (``stalled``, from `stalls`) are told apart only by an own change that
+    came before the stall, or by one that shows it was running (its own log lines): whatever
+    else came with the stall (silent outputs, a stale diagnostic) is its consequence on all.
 
     Parameters
     ----------
@@ -84,7 +137,10 @@ def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> dic
         only because of its client) take no part.
     tol : float
         Seconds counted as simultaneous.
+    stalled : mapping, optional
+        Node → the fellows of its stall.
     """
+    stalled = stalled or {}
     groups: dict[str, list[str]] = {}
     for n, v in views.items():
         p = None if v.implied else process_of_node(G, n)
@@ -101,7 +157,12 @@ def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> dic
                 if m == n:
                     continue
                 w = views[m]
-                if _before(w, v, tol):
+                if m in stalled.get(n, ()):
+                    if w.own_onset < v.own_onset - tol or (_spoke(w, tol) and not _spoke(v, tol)):
+                        verdict.excuse = max(verdict.excuse, w.own_anomaly * (1.0 - w.upstream))
+                    elif _close(w.own_onset, v.own_onset, tol) and _spoke(w, tol) == _spoke(v, tol):
+                        verdict.indistinguishable.append(m)
+                elif _before(w, v, tol):
                     # a sibling explained by its own inputs explains its siblings less
                     verdict.excuse = max(verdict.excuse, w.own_anomaly * (1.0 - w.upstream))
                 elif _same(w, v, tol):

@@ -40,8 +40,9 @@ class Symptoms:
     last one open, end INF, for a member that is gone); ``own_anomaly``/``own_onset`` the same
     as ``anomaly``/``onset`` without the alerts a node got for its process (``data["process"]``);
     ``named`` the names alerts give of what to blame: ``(alert member, name)`` → (first time,
-    strongest severity weight); ``latest`` the latest alert time; ``count`` how many alerts
-    they come from.
+    strongest severity weight); ``logged`` when a member's own log lines (symptom ``log``) began
+    to alert — a node that logs is running, which a starved one is not; ``latest`` the latest
+    alert time; ``count`` how many alerts they come from.
     """
 
     times: dict[str, np.ndarray] = field(default_factory=dict)
@@ -54,6 +55,7 @@ class Symptoms:
     own_anomaly: dict[str, float] = field(default_factory=dict)
     own_onset: dict[str, float] = field(default_factory=dict)
     named: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict)
+    logged: dict[str, float] = field(default_factory=dict)
     latest: float = -INF
     count: int = 0
 
@@ -99,6 +101,8 @@ def collect_symptoms(
         if not (data and data.get("process")):  # not an alert a node got for its process
             s.own_anomaly[a.member] = max(s.own_anomaly.get(a.member, 0.0), x)
             s.own_onset[a.member] = min(s.own_onset.get(a.member, INF), a.t)
+            if data and data.get("symptom") == "log":
+                s.logged[a.member] = min(s.logged.get(a.member, INF), a.t)
         for name in names_in(data) if data else ():
             t0, w0 = s.named.get((a.member, name), (INF, 0.0))
             s.named[(a.member, name)] = (min(t0, a.t), max(w0, w))
@@ -132,7 +136,7 @@ class NodeView:
     symptoms; ``untimed`` the strength of metric evidence without a time. ``implied``: a server
     suspected only because a client of it stands unexplained (it excuses nobody). ``process`` and
     ``indistinguishable``: the process it shares with other candidates, and those of them whose
-    own changes are the same as its own.
+    own changes are the same as its own. ``logged``: when its own log lines began to alert.
     """
 
     member: str
@@ -156,6 +160,7 @@ class NodeView:
     sibling: float = 0.0
     process: str | None = None
     indistinguishable: list[str] = field(default_factory=list)
+    logged: float = INF
 
     def active(self, t0: float, t1: float) -> float:
         """Its anomaly when one of its symptoms held in ``[t0, t1]``; else its untimed evidence
@@ -239,6 +244,7 @@ def node_views(
                 v.own_direct = max(v.own_direct, s.own_anomaly[m])
                 v.own_onset = min(v.own_onset, s.own_onset[m])
                 v.own_kinds.add("alert")
+                v.logged = min(v.logged, s.logged.get(m, INF))
         elif m.startswith(("process:", "host:")) or m == "root":
             for n in nodes_of_process(G, m):
                 v = view(n)
@@ -258,9 +264,10 @@ def node_views(
         for n in pointed_nodes(G, m, [name]):
             _charge(view(n), m, _clip(w * charge), t, spans, "named")
     _charge_shared(G, s, views, shared_by, settings)
-    _settle(G, views, views, s, ev_passive, settings)
+    stalled = siblings.stalls(G, views, settings.tolerance)
+    _settle(G, views, views, s, ev_passive, settings, stalled)
     _imply_servers(G, s, views, ev_passive, settings)
-    for n, verdict in siblings.judge(G, views, settings.tolerance).items():
+    for n, verdict in siblings.judge(G, views, settings.tolerance, stalled).items():
         v = views[n]
         v.process, v.sibling, v.indistinguishable = verdict.process, verdict.excuse, verdict.indistinguishable
         v.upstream = max(v.upstream, v.sibling)
@@ -292,10 +299,11 @@ def _charge_shared(
 
 def _settle(
     G: nx.MultiDiGraph, these: Mapping[str, NodeView], views: dict[str, NodeView], s: Symptoms,
-    ev_passive: dict[str, Evidence], settings: RcaSettings,
+    ev_passive: dict[str, Evidence], settings: RcaSettings, stalled: Mapping[str, set[str]] | None = None,
 ) -> None:
     """Fill in the anomalies of ``these`` views, then their upstream excuse (which reads the
-    anomalies of all ``views``), once every symptom is charged."""
+    anomalies of all ``views``), once every symptom is charged; fellows in a stall of their
+    executor (``stalled``: node → fellows) do not excuse each other."""
     for v in these.values():
         v.anomaly = max(v.direct, v.charged, v.evidence)
         v.own_anomaly = max(v.own_direct, v.charged, v.own_evidence)
@@ -303,7 +311,8 @@ def _settle(
     sources = {m for m in s.anomaly if not m.startswith(("process:", "host:")) and m != "root"}
     sources |= set(views) | set(ev_passive)
     for n, v in these.items():
-        v.upstream = _upstream(G, n, v, s, views, ev_passive, settings, sources)
+        v.upstream = _upstream(G, n, v, s, views, ev_passive, settings, sources,
+                               (stalled or {}).get(n, set()))
 
 
 def _imply_servers(
@@ -343,6 +352,7 @@ def _upstream(
     ev_passive: dict[str, Evidence],
     settings: RcaSettings,
     sources: set[str] | None = None,
+    fellows: Collection[str] = (),
 ) -> float:
     """How anomalous ``n``'s causes were while ``n``'s symptoms began.
 
@@ -355,7 +365,9 @@ def _upstream(
     went on late), so the walk goes on upstream through silent members, up to
     ``max_trajectory`` hops, each silent node passed weakening what is found behind it by
     `SILENT_DECAY`. ``sources``: the members that can excuse at all (symptoms, candidates,
-    evidence); the walk ends once it has passed every one of them.
+    evidence); the walk ends once it has passed every one of them. ``fellows``: nodes that
+    stalled with ``n`` in one executor (`siblings.stalls`) — neither they nor the topics only
+    they publish excuse it.
     """
     if v.onset < INF:
         lo, hi = v.onset - settings.episode_gap, v.onset + settings.tolerance
@@ -374,6 +386,8 @@ def _upstream(
             if p in seen:
                 continue
             seen.add(p)
+            if fellows and _among(G, p, fellows):
+                continue
             if left is not None:
                 left.discard(p)
             found = _excuse(G, p, n, s, views, ev_passive, lo, hi)
@@ -386,6 +400,14 @@ def _upstream(
             break
         frontier = nxt
     return _clip(worst)
+
+
+def _among(G: nx.MultiDiGraph, p: str, fellows: Collection[str]) -> bool:
+    """True when ``p`` is one of ``fellows`` or a topic only they publish."""
+    if p in fellows:
+        return True
+    pubs = [] if is_node(G, p) else publishers(G, p)
+    return bool(pubs) and all(q in fellows for q in pubs)
 
 
 def _excuse(

@@ -215,7 +215,17 @@ def rank_trajectory(ctx: Context) -> list[RootCause]:
 
 
 def finish(ctx: Context, causes: list[RootCause]) -> list[RootCause]:
-    """Sort best first (ties: earlier onset, then id), keep ``top_k``, round scores."""
+    """Sort best first (ties: earlier onset, then id), keep ``top_k``, round scores.
+
+    Candidates the evidence cannot tell apart (``indistinguishable``) share the best score among
+    them: their trajectories differ only by where each sits in the data flow, which says nothing
+    about which of them stalled.
+    """
+    best = {rc.member: rc.score for rc in causes}
+    for rc in causes:
+        v = ctx.views.get(rc.member)
+        if v is not None and v.indistinguishable:
+            rc.score = max([rc.score, *(best[m] for m in v.indistinguishable if m in best)])
     onset = {n: v.onset for n, v in ctx.views.items()}
     ranked = sorted(causes, key=lambda rc: (-rc.score, onset.get(rc.member, np.inf), rc.member))
     ranked = ranked[: ctx.settings.top_k]

@@ -91,7 +91,8 @@ def test_a_process_alert_alone_cannot_tell_its_nodes_apart(G):
 
 def test_an_own_error_log_tells_the_blocking_node_apart(G):
     # All outputs stop together, but cam also logs that its callback overran.
-    alerts = [al(CAM, "rosout", 10, "warn"), *silent(IMAGE, 10), *silent(SCAN, 10), *silent(IMUT, 10)]
+    alerts = [al(CAM, "rosout", 10, "warn", symptom="log"), *silent(IMAGE, 10), *silent(SCAN, 10),
+              *silent(IMUT, 10)]
     by, order = rank(G, alerts)
     assert order[0] == CAM and "indistinguishable_from" not in by[CAM].evidence
     assert by[LIDAR].evidence["upstream"] == pytest.approx(OUT)
@@ -111,3 +112,44 @@ def test_siblings_the_data_flow_tells_apart_are_not_indistinguishable(G):
 def test_nodes_in_separate_processes_are_not_siblings(G):
     by, _ = rank(G, [*silent(IMAGE, 10), al(DET, "rosout", 20)])
     assert "process" not in by[CAM].evidence and "process" not in by[DET].evidence
+
+
+MERGE, MERGED = "node:/merger", "topic:/merged"
+
+
+def with_merger(G):
+    """A scan merger in the sensor container: /scan → merger → /merged → det."""
+    for m in (MERGE, MERGED):
+        add_member(G, m)
+    add_tree_edge(G, BOX, MERGE)
+    add_flow_edge(G, SCAN, MERGE, "sub")
+    add_flow_edge(G, MERGE, MERGED, "pub")
+    add_flow_edge(G, MERGED, DET, "sub")
+    return G
+
+
+def test_a_hung_merger_ties_with_the_drivers_its_executor_starves(G):
+    # The merger's callback blocks; the single executor starves the lidar, imu and cam drivers:
+    # every output of the container stops in one sample, and the aggregator calls the lidar
+    # stale. The data flow (lidar feeds the merger) explains nothing here: imu and cam, which feed
+    # nobody in the container, stopped too. Before: the merger was excused by its input.
+    with_merger(G)
+    stale = [al(LIDAR, "diagnostics", 11, "warn")]
+    by, order = rank(G, silent(IMAGE, 10) + silent(SCAN, 10) + silent(IMUT, 10) + silent(MERGED, 10) + stale)
+    box = {CAM, LIDAR, IMU, MERGE}
+    assert set(order[:4]) == box
+    assert len({by[n].score for n in box}) == 1  # a tie, scored alike
+    for n in box:
+        assert by[n].evidence["process"] == BOX
+        assert by[n].evidence["indistinguishable_from"] == sorted(box - {n})
+    assert by[MERGE].evidence["upstream"] == 0.0
+
+
+def test_one_driver_stopping_still_excuses_the_merger_it_feeds(G):
+    # Only the lidar's output and the merger's stop (the imu and cam publish on): no stall of
+    # the executor, so the data flow tells them apart as before.
+    with_merger(G)
+    by, order = rank(G, silent(SCAN, 10) + silent(MERGED, 10))
+    assert order[0] == LIDAR
+    assert by[MERGE].evidence["upstream"] > 0
+    assert "indistinguishable_from" not in by[LIDAR].evidence
