@@ -193,10 +193,15 @@ def test_bad_arguments_give_one_error_line_and_leave_nothing_running(ros_domain,
 @pytest.mark.ros
 def test_snapshot_prints_the_model_as_json_and_text(children):
     talker = children.python(TALKER, name="talker")
-    out = run_cli(["snapshot", "--json", "--settle", "3"], children.env, timeout=60)
-    assert out.returncode == 0, out.stderr
-    data = json.loads(out.stdout)
-    members = {m["id"]: m for m in data["members"]}
+
+    def snapshot():  # a loaded machine may take longer than one settle to start the talker
+        out = run_cli(["snapshot", "--json", "--settle", "3"], children.env, timeout=60)
+        assert out.returncode == 0, out.stderr
+        data = json.loads(out.stdout)
+        members = {m["id"]: m for m in data["members"]}
+        return (data, members) if {"node:/talker", "node:/listener"} <= set(members) else None
+
+    data, members = wait_for(snapshot, timeout=90, period=0.5)
     assert members["node:/talker"]["pid"] == talker.pid == members["node:/listener"]["pid"]
     assert f"process:{talker.pid}" in members
     edges = {(e["src"], e["dst"], e["kind"]) for e in data["edges"]}
