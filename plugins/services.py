@@ -27,8 +27,9 @@ class Services(Plugin):
     """Alerts on the clients of a service (or the service, when its waiting client is unknown):
 
     * ``waiting`` (warn): an observed call has been open ≥ ``max(min_wait_s, wait_factor × the
-      service's usual response time)``; or the client logged (≥ ``log_level``, ERROR: a WARN
-      about a service not ready yet is the usual bring-up) a line naming the service or its server;
+      service's usual response time)``; or (at the line's level) the client logged (≥
+      ``log_level``, ERROR: a WARN about a service not ready yet is the usual bring-up) a line
+      naming the service or its server;
     * ``slow_response`` (warn): the service's mean response time rose above its own baseline by
       ``max(k·σ, min_rise_ms)`` for ``confirm`` samples;
     * ``server_gone`` (warn): the service had a server and has none while clients remain.
@@ -137,7 +138,9 @@ def _logged(ctx: PluginContext) -> Iterator[Alert]:
                 continue
             seen.add((e.member, service))
             server = hit[0] if hit else (servers[0] if len(servers) == 1 else None)
-            yield ctx.alert(e.member, "warn", f"logged about {name_of(service)}: {e.text}",
+            # As strong as the complaint: the server it names carries it (RCA `named`).
+            level = e.level if e.level in RANK else "warn"
+            yield ctx.alert(e.member, level, f"logged about {name_of(service)}: {e.text}",
                             symptom="waiting", via="log", service=service, server=server,
                             client=e.member)
 

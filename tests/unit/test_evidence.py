@@ -472,11 +472,14 @@ def test_services_client_log_naming_its_service_or_server():
             Event(1.0, "log", "node:/camera", "error", "service /plan not available",  # not its client
                   {"services": ["service:/plan"]})]
     alerts = drive_alerts("services", [(1.0, G, logs)])
-    assert [(a.member, a.data["via"], a.data["server"], a.data["service"], a.message) for a in alerts] == [
-        ("node:/bt", "log", "node:/planner", "service:/plan", "logged about /plan: planner timed out")]
-    # a WARN (a service not ready yet at bring-up) counts only when asked for
+    assert [(a.member, a.severity, a.data["via"], a.data["server"], a.data["service"], a.message)
+            for a in alerts] == [
+        ("node:/bt", "error", "log", "node:/planner", "service:/plan",
+         "logged about /plan: planner timed out")]
+    # a WARN (a service not ready yet at bring-up) counts only when asked for, as a warning
     warned = drive_alerts("services", [(1.0, G, logs[:1])], settings={"log_level": "warn"})
-    assert [(a.member, a.data["server"]) for a in warned] == [("node:/bt", "node:/planner")]
+    assert [(a.member, a.severity, a.data["server"]) for a in warned] == [
+        ("node:/bt", "warn", "node:/planner")]
 
 
 # --------------------------------------------------------------------------- message age
