@@ -1,10 +1,12 @@
-"""Service clients left waiting: by an introspected call, by their own log, by a server gone.
+"""Service and action clients left waiting: by an introspected call, by their own log, by a server gone.
 
 What the collector observes without calling anything: the calls of services whose event topic
 is on (service introspection: the service's θ ``waiting``/``wait_s``/``response_ms`` and its
 attribute ``calls``, the open calls with their client and server), the /rosout lines of a client
-that name one of its services or their server (``log`` events list ``services`` and ``nodes``),
-and a service's ``servers`` becoming empty while it still has clients.
+that name one of its services or actions or their server (``log`` events list ``services``,
+``actions`` and ``nodes``), and a service's or action's ``servers`` becoming empty while it still
+has clients. Actions are calls too (a goal sent to an action server): only introspection is
+services-only.
 
 Every alert is on the client (its symptom) and names the service and the server in its data
 (``service``, ``server``, ``client``): the server is where the fault is looked for.
@@ -38,7 +40,7 @@ class Services(Plugin):
     """
 
     name = "services"
-    kinds = ("service",)
+    kinds = ("service", "action")
     uses = (cached_baseline, rise)
     settings: ClassVar[dict[str, Any]] = {
         **BASELINE_SETTINGS,
@@ -54,7 +56,7 @@ class Services(Plugin):
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         alerting = ctx.state.setdefault("alerting", set())
         had = ctx.state.setdefault("servers", {})
-        for service in ctx.members("service"):
+        for service in _called(ctx):
             clients = ctx.clients(service)
             if service not in ctx.watch and not any(c in ctx.watch for c in clients):
                 continue
@@ -70,6 +72,11 @@ class Services(Plugin):
                                     f"{', '.join(name_of(g) for g in gone)})", symptom="server_gone",
                                     service=service, server=gone[0], servers=gone, client=c)
         yield from _logged(ctx)
+
+
+def _called(ctx: PluginContext) -> list[str]:
+    """The services and actions of the graph."""
+    return [*ctx.members("service"), *ctx.members("action")]
 
 
 def _waiting(ctx: PluginContext, service: str, servers: list[str]) -> Iterator[Alert]:
@@ -123,11 +130,11 @@ def _logged(ctx: PluginContext) -> Iterator[Alert]:
     for e in ctx.events:
         if e.kind != "log" or RANK.get(e.level, -1) < floor:
             continue
-        named_services = set(e.data.get("services", ()))
+        named_services = set(e.data.get("services", ())) | set(e.data.get("actions", ()))
         named_nodes = set(e.data.get("nodes", ()))
         if not named_services and not named_nodes:
             continue
-        for service in ctx.members("service"):
+        for service in _called(ctx):
             if e.member not in ctx.clients(service):
                 continue
             servers = ctx.servers(service)

@@ -210,11 +210,13 @@ class Collector:
 
     def _message_events(self, t: float, reading: GraphReading, index: NodeNames) -> list[Event]:
         services = frozenset(s for nr in reading.nodes.values() for s in (*nr.services, *nr.clients))
+        actions = frozenset(a for nr in reading.nodes.values()
+                            for a in (*nr.action_servers, *nr.action_clients))
         out: list[Event] = []
         for topic, msg, recv, gid in self.topics.take_messages():
             try:
                 if topic == "/rosout":
-                    ev = log_event(msg, index, services)
+                    ev = log_event(msg, index, services, actions)
                     if ev is not None:
                         out.append(ev)
                 elif topic == "/parameter_events":

@@ -303,12 +303,14 @@ def logger_node(logger: str, nodes: set[str] | frozenset[str]) -> str:
     return "/" + "/".join(parts) if parts else "/"
 
 
-def log_event(msg: Any, nodes: set[str] | NodeNames, services: frozenset[str] = frozenset()) -> Event | None:
+def log_event(msg: Any, nodes: set[str] | NodeNames, services: frozenset[str] = frozenset(),
+              actions: frozenset[str] = frozenset()) -> Event | None:
     """Return a ``log`` Event for a /rosout message of level WARN or higher, else None.
 
-    When the text names nodes or ``services`` of the graph (`named_in_text`, relative names
-    against the logging node's namespace), the event data lists them as member ids in ``nodes``
-    and ``services``: a client's "service /plan not available" points at the service's server.
+    When the text names nodes, ``services`` or ``actions`` of the graph (`named_in_text`, relative
+    names against the logging node's namespace), the event data lists them as member ids in
+    ``nodes``, ``services`` and ``actions``: a client's "service /plan not available" or "action
+    server compute_path_to_pose timed out" points at the server.
     """
     level = int(msg.level)
     if level < 30:
@@ -319,9 +321,11 @@ def log_event(msg: Any, nodes: set[str] | NodeNames, services: frozenset[str] = 
     node = logger_node(msg.name, index.fqns)
     data = {"logger": msg.name, "level": level, "file": msg.file, "function": msg.function,
             "line": int(msg.line)}
-    named, called = named_in_text(msg.msg, index, services, node.rsplit("/", 1)[0] or "/", node)
+    named, called = named_in_text(msg.msg, index, services | actions, node.rsplit("/", 1)[0] or "/", node)
     if named:
         data["nodes"] = [f"node:{n}" for n in named]
-    if called:
-        data["services"] = [f"service:{c}" for c in called]
+    if srv := [f"service:{c}" for c in called if c in services]:
+        data["services"] = srv
+    if act := [f"action:{c}" for c in called if c in actions and c not in services]:
+        data["actions"] = act
     return Event(t, "log", f"node:{node}", sev, msg.msg, data)

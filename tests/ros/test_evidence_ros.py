@@ -213,6 +213,49 @@ def test_services_waiting_client_names_the_slow_server(children, tmp_path, run_o
     assert 0 < _theta(run, "service:/plan")["wait_s"] < 7.0
 
 
+ACTION_SERVER = """
+import rclpy
+from rclpy.action import ActionServer
+from test_msgs.action import Fibonacci
+rclpy.init()
+n = rclpy.create_node('planner', namespace='/nav')
+def execute(goal):
+    goal.succeed()
+    return Fibonacci.Result()
+ActionServer(n, Fibonacci, 'compute_path', execute)
+rclpy.spin(n)
+"""
+
+ACTION_CLIENT = """
+import os, sys
+import rclpy
+from rclpy.action import ActionClient
+from test_msgs.action import Fibonacci
+flag = sys.argv[1]
+rclpy.init()
+n = rclpy.create_node('bt_navigator', namespace='/nav')
+client = ActionClient(n, Fibonacci, 'compute_path')
+def tick():
+    if os.path.exists(flag):  # as Nav2's behaviour tree says it, the action named relative
+        n.get_logger().error('Timed out while waiting for action server compute_path to acknowledge goal')
+    elif client.server_is_ready():
+        client.send_goal_async(Fibonacci.Goal(order=3))
+n.create_timer(0.5, tick)
+rclpy.spin(n)
+"""
+
+
+def test_an_action_client_logging_about_its_action_names_the_server(children, tmp_path, run_of):
+    flag = tmp_path / "stuck"
+    children.python(ACTION_SERVER, name="planner")
+    children.python(ACTION_CLIENT, str(flag), name="bt")
+    run = run_of(["services"])
+    _ready(run, "node:/nav/planner", "node:/nav/bt_navigator", "action:/nav/compute_path")
+    a = _sick_after_healthy(run, flag, "services", "node:/nav/bt_navigator", healthy_s=4.0, symptom="waiting")
+    assert (a.severity, a.data["via"], a.data["service"], a.data["server"]) == (
+        "error", "log", "action:/nav/compute_path", "node:/nav/planner"), a
+
+
 PUBLISHER = """
 import os, sys, time
 import rclpy

@@ -376,6 +376,11 @@ def test_log_text_names_services_and_nodes_of_the_graph():
                    index, frozenset(services))
     assert (ev.member, ev.data["services"]) == ("node:/nav/bt_navigator", ["service:/nav/plan_path"])
     assert "nodes" not in ev.data
+    # an action, named relative to the writer's namespace, as Nav2's behaviour tree logs it
+    ev = log_event(Log(level=40, name="nav.bt_navigator",
+                       msg="Timed out waiting for action server compute_path_to_pose"),
+                   index, frozenset(services), frozenset({"/nav/compute_path_to_pose"}))
+    assert ev.data["actions"] == ["action:/nav/compute_path_to_pose"] and "services" not in ev.data
 
 
 # --------------------------------------------------------------------------- service calls
@@ -453,6 +458,27 @@ def test_services_slow_responses_against_their_own_baseline():
     alerts = drive_alerts("services", frames)
     assert [(a.t, a.member) for a in alerts] == [(16.0, "node:/bt"), (17.0, "node:/bt")]
     assert alerts[0].data["symptom"] == "slow_response" and alerts[0].data["server"] == "node:/planner"
+
+
+def test_services_an_action_client_log_naming_its_action_names_the_server():
+    G = model()
+    add_member(G, "node:/planner")
+    add_member(G, "node:/bt")
+    add_member(G, "action:/compute_path", servers=["/planner"], clients=["/bt"],
+               theta=make_theta("action", {"servers": 1, "clients": 1}))
+    log = Event(1.0, "log", "node:/bt", "error", "action compute_path timed out",
+                {"actions": ["action:/compute_path"]})
+    alerts = drive_alerts("services", [(1.0, G, [log])])
+    assert [(a.member, a.severity, a.data["server"], a.data["service"]) for a in alerts] == [
+        ("node:/bt", "error", "node:/planner", "action:/compute_path")]
+    # the action server gone while its client remains
+    gone = model()
+    add_member(gone, "node:/bt")
+    add_member(gone, "action:/compute_path", servers=[], clients=["/bt"],
+               theta=make_theta("action", {"servers": 0, "clients": 1}))
+    alerts = drive_alerts("services", [(1.0, G, []), (2.0, gone, [])])
+    assert [(a.member, a.data["symptom"], a.data["server"]) for a in alerts] == [
+        ("node:/bt", "server_gone", "node:/planner")]
 
 
 def test_services_server_gone_while_clients_remain():
