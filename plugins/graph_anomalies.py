@@ -17,11 +17,14 @@ class GraphAnomalies(Plugin):
     """Alerts on:
 
     * two nodes with one name (node attribute ``instances`` > 1, as the collector counts them): error;
-    * a subscriber whose topic has had no publisher for ``grace_s``, when that is a fault: the
-      topic never had a publisher since it was seen (nobody provides what it waits for), or its
+    * a subscriber whose topic has had no publisher for ``grace_s``, when that is a fault: its
       publisher died uncleanly (its process ended while DDS listed it, or it was seen not alive).
       A topic whose publishers left cleanly (deregistered: a job done, a node destroyed on
-      purpose, an on-demand publisher that comes and goes) is healthy. Warn on the subscriber.
+      purpose, an on-demand publisher that comes and goes) is healthy. So is, by default, a topic
+      that never had a publisher: robots subscribe to what only an operator or a tool publishes
+      (``/initialpose``, ``/joy``, a console that joins later); ``never_published`` alerts on
+      those too (to find a remapping typo: nobody provides what it waits for). Warn on the
+      subscriber.
       The grace starts again whenever many nodes appear in one sample (at least ``burst_min``
       and ``burst_ratio`` of the nodes): a system still being discovered (bring-up, or the
       monitor attaching to 500 nodes) shows subscribers seconds before their publishers.
@@ -33,6 +36,7 @@ class GraphAnomalies(Plugin):
     kinds = ("node", "topic")
     settings: ClassVar[dict[str, Any]] = {
         "grace_s": 5.0, "ignore_topics": [], "duplicates": True, "no_publisher": True,
+        "never_published": False,
         "recheck_s": 10.0, "burst_min": 5, "burst_ratio": 0.05,
     }
 
@@ -54,7 +58,7 @@ class GraphAnomalies(Plugin):
             if orphan and s["no_publisher"]:
                 orphans.add(topic)
                 since = max(orphan_since.setdefault(topic, ctx.t), settled_from)
-                why = orphan_fault(had.get(topic), died)
+                why = orphan_fault(had.get(topic), died, s["never_published"])
                 if why is not None and ctx.t - since >= s["grace_s"]:
                     for v in subs:
                         yield ctx.alert(v, "warn", f"subscribes to {topic} which has had no publisher for "
@@ -87,14 +91,15 @@ def _publishers_seen(ctx: PluginContext) -> tuple[dict[str, list[str]], set[str]
     return had, died
 
 
-def orphan_fault(had: list[str] | None, died: set[str]) -> str | None:
+def orphan_fault(had: list[str] | None, died: set[str], never: bool = False) -> str | None:
     """Why a topic without a publisher is a fault (a phrase for the alert), or None if it is not.
 
     ``had``: its publishers when it last had any (None: never since it was seen); ``died``: the
-    nodes seen to die uncleanly. A topic whose publishers all left cleanly is not a fault.
+    nodes seen to die uncleanly; ``never``: a topic that never had a publisher is a fault. A topic
+    whose publishers all left cleanly is not a fault.
     """
     if had is None:
-        return ""
+        return "" if never else None
     dead = [p.removeprefix("node:") for p in had if p in died]
     return f" since its publisher {', '.join(dead)} died" if dead else None
 

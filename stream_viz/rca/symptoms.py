@@ -211,30 +211,58 @@ def node_views(
     subscribers only), a number in [0, 1] (no time) or `Evidence` with its since/until.
     """
     views: dict[str, NodeView] = {}
+    ev_passive = _metric_views(G, views, evidence or {})
+    shared_by = _alert_views(G, views, s, settings.charge)
+    _charge_shared(G, s, views, shared_by, settings)
+    stalled = siblings.stalls(G, views, settings.tolerance)
+    _settle(G, views, views, s, ev_passive, settings, stalled)
+    _imply_servers(G, s, views, ev_passive, settings)
+    for n, verdict in siblings.judge(G, views, settings.tolerance, stalled).items():
+        v = views[n]
+        v.process, v.sibling, v.indistinguishable = verdict.process, verdict.excuse, verdict.indistinguishable
+        v.upstream = max(v.upstream, v.sibling)
+    for v in views.values():
+        v.ht = v.anomaly * (1.0 - v.upstream)
+    return views
 
-    def view(n: str) -> NodeView:
-        if n not in views:
-            views[n] = NodeView(n)
-        return views[n]
 
+def _view(views: dict[str, NodeView], n: str) -> NodeView:
+    if n not in views:
+        views[n] = NodeView(n)
+    return views[n]
+
+
+def _metric_views(
+    G: nx.MultiDiGraph, views: dict[str, NodeView], evidence: Mapping[str, float | Evidence],
+) -> dict[str, Evidence]:
+    """Put metric evidence on the nodes it is about (a process's on its nodes, as shared); return
+    the evidence of passive members (topics), which only excuses their subscribers."""
     ev_passive: dict[str, Evidence] = {}
-    for m, x in (evidence or {}).items():
+    for m, x in evidence.items():
         e = as_evidence(x)
         e = Evidence(_clip(e.strength), e.since, e.until)
         if e.strength <= 0:
             continue
         if is_node(G, m):
-            _metric(view(m), e, own=True)
+            _metric(_view(views, m), e, own=True)
         elif m.startswith("process:"):
             for n in nodes_of_process(G, m):
-                _metric(view(n), e, own=False)
+                _metric(_view(views, n), e, own=False)
         else:
             ev_passive[m] = e
-    charge = settings.charge
-    shared_by: list[tuple[str, list[str]]] = []  # passive members with several publishers
+    return ev_passive
+
+
+def _alert_views(
+    G: nx.MultiDiGraph, views: dict[str, NodeView], s: Symptoms, charge: float,
+) -> list[tuple[str, list[str]]]:
+    """Put the symptoms on nodes: a node's own, its process's (shared), a passive member's on its
+    only publisher, a named member's on the nodes the name points at; return the passive members
+    with several publishers (charged later, by `_charge_shared`)."""
+    shared_by: list[tuple[str, list[str]]] = []
     for m, a in s.anomaly.items():
         if is_node(G, m):
-            v = view(m)
+            v = _view(views, m)
             v.direct = max(v.direct, a)
             v.onset = min(v.onset, s.onset[m])
             v.own.insert(0, m)
@@ -247,7 +275,7 @@ def node_views(
                 v.logged = min(v.logged, s.logged.get(m, INF))
         elif m.startswith(("process:", "host:")) or m == "root":
             for n in nodes_of_process(G, m):
-                v = view(n)
+                v = _view(views, n)
                 v.direct = max(v.direct, a)
                 v.onset = min(v.onset, s.onset[m])
                 v.own.append(m)
@@ -258,22 +286,12 @@ def node_views(
             if len(nodes) > 1:
                 shared_by.append((m, nodes))
             for n in nodes if len(nodes) == 1 else ():
-                _charge(view(n), m, a * charge, s.onset[m], s.episodes[m], "output")
+                _charge(_view(views, n), m, a * charge, s.onset[m], s.episodes[m], "output")
     for (m, name), (t, w) in s.named.items():
         spans = [(max(a, t), b) for a, b in s.episodes[m] if b >= t]
         for n in pointed_nodes(G, m, [name]):
-            _charge(view(n), m, _clip(w * charge), t, spans, "named")
-    _charge_shared(G, s, views, shared_by, settings)
-    stalled = siblings.stalls(G, views, settings.tolerance)
-    _settle(G, views, views, s, ev_passive, settings, stalled)
-    _imply_servers(G, s, views, ev_passive, settings)
-    for n, verdict in siblings.judge(G, views, settings.tolerance, stalled).items():
-        v = views[n]
-        v.process, v.sibling, v.indistinguishable = verdict.process, verdict.excuse, verdict.indistinguishable
-        v.upstream = max(v.upstream, v.sibling)
-    for v in views.values():
-        v.ht = v.anomaly * (1.0 - v.upstream)
-    return views
+            _charge(_view(views, n), m, _clip(w * charge), t, spans, "named")
+    return shared_by
 
 
 def _charge_shared(

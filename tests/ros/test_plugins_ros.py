@@ -267,7 +267,9 @@ def test_diagnostics_errors(children, tmp_path, run_of):
 def test_graph_anomalies_qos_and_orphan_subscriber(children, tmp_path, run_of):
     _start(children, tmp_path, "qos")  # best-effort publisher, reliable subscriber on /chatter
     children.python(LISTENER, "lonely", "/nobody_publishes", name="lonely")
-    run = run_of(["graph_anomalies", "qos_compat"])  # QoS: its own plugin since issue 16
+    # QoS: its own plugin since issue 16; a never-published topic alerts only when asked for
+    run = run_of(["graph_anomalies", "qos_compat"],
+                 {**FAST, "graph_anomalies": {**FAST["graph_anomalies"], "never_published": True}})
     _ready(run, "node:/talker", "node:/listener", "node:/lonely")
     found = run.until(lambda a: a.member == "node:/lonely", 20.0)
     assert found and found[0].data["symptom"] == "no_publisher"
@@ -291,9 +293,11 @@ def test_graph_anomalies_duplicate_names(children, tmp_path, run_of):
 
 def test_healthy_system_no_alerts_from_any_builtin(children, tmp_path, run_of):
     _start(children, tmp_path, "none")
+    # A subscription to what only an operator publishes (RViz's /initialpose) is healthy.
+    children.python(LISTENER, "localizer", "/initialpose", name="localizer")
     run = run_of(["diagnostics", "graph_anomalies", "member_gone", "message_age", "process_resources",
                   "qos_compat", "rosout", "services", "topic_latency", "topic_rate"])
-    _ready(run, "node:/talker", "node:/listener")
+    _ready(run, "node:/talker", "node:/listener", "node:/localizer", "topic:/initialpose")
     run.observe(15.0)
     assert run.alerts == []
     assert run.problems == []
