@@ -212,7 +212,7 @@ def node_views(
     """
     views: dict[str, NodeView] = {}
     ev_passive = _metric_views(G, views, evidence or {})
-    shared_by = _alert_views(G, views, s, settings.charge)
+    shared_by = _alert_views(G, views, s, settings.charge, settings.tolerance)
     _charge_shared(G, s, views, shared_by, settings)
     stalled = siblings.stalls(G, views, settings.tolerance)
     _settle(G, views, views, s, ev_passive, settings, stalled)
@@ -254,11 +254,12 @@ def _metric_views(
 
 
 def _alert_views(
-    G: nx.MultiDiGraph, views: dict[str, NodeView], s: Symptoms, charge: float,
+    G: nx.MultiDiGraph, views: dict[str, NodeView], s: Symptoms, charge: float, tolerance: float,
 ) -> list[tuple[str, list[str]]]:
     """Put the symptoms on nodes: a node's own, its process's (shared), a passive member's on its
-    only publisher, a named member's on the nodes the name points at; return the passive members
-    with several publishers (charged later, by `_charge_shared`)."""
+    only publisher, a named member's on the nodes the name points at (from when the complaining
+    node's symptoms began, `_waited_since`); return the passive members with several publishers
+    (charged later, by `_charge_shared`)."""
     shared_by: list[tuple[str, list[str]]] = []
     for m, a in s.anomaly.items():
         if is_node(G, m):
@@ -289,9 +290,21 @@ def _alert_views(
                 _charge(_view(views, n), m, a * charge, s.onset[m], s.episodes[m], "output")
     for (m, name), (t, w) in s.named.items():
         spans = [(max(a, t), b) for a, b in s.episodes[m] if b >= t]
+        since = _waited_since(views.get(m), t, tolerance)
+        if spans:
+            spans[0] = (min(spans[0][0], since), spans[0][1])
         for n in pointed_nodes(G, m, [name]):
-            _charge(_view(views, n), m, _clip(w * charge), t, spans, "named")
+            _charge(_view(views, n), m, _clip(w * charge), since, spans, "named")
     return shared_by
+
+
+def _waited_since(client: NodeView | None, t: float, tolerance: float) -> float:
+    """When the complaint a ``client`` made at ``t`` began: a client waits before it complains
+    (a call times out), so its symptoms still going on at ``t`` (its outputs stalled meanwhile)
+    date what it names from their start."""
+    if client is None:
+        return t
+    return min([t, *(a for a, b in client.spans if a <= t <= b + tolerance)])
 
 
 def _charge_shared(

@@ -122,6 +122,22 @@ def test_a_silent_server_behind_a_complaining_client_ranks_first():
     assert by[PLANNER].trajectory[-2:] == [BT, PLANNER]
 
 
+def test_a_client_that_stalls_before_it_complains_still_points_at_its_server():
+    # The client's output stops at 10 while its call is open; only at 13 does its call time out
+    # and it logs an ERROR naming the server. The wait began with the stall: the server's named
+    # symptom is dated from 10, so it excuses the client. Before: the client's stall at 10 came
+    # "before" the server's symptom at 13 and the client ranked first.
+    data = {"server": "/planner", "client": "/bt", "service": SRV}
+    alerts = [al(CMD, "topic_rate", 10), al(CMD, "topic_rate", 15),
+              al(BT, "rosout", 13, symptom="log"), al(BT, "services", 13, **data)]
+    by, order = causes_of(service_graph(), alerts)
+    assert order[:2] == [PLANNER, BT]
+    assert by[BT].evidence["upstream"] == pytest.approx(ERR * S.charge)
+    # An older episode of the client, ended long before the complaint, dates nothing.
+    _, order = causes_of(service_graph(), [al(CMD, "topic_rate", -60), *alerts[1:]])
+    assert order[0] == PLANNER
+
+
 def test_a_services_alert_points_at_the_server():
     data = {"server": "/planner", "client": "/bt", "service": "/planner/compute_path"}
     for member in (SRV, BT):  # on the service, or on the client that waits
