@@ -1,0 +1,77 @@
+"""Re-rank a finished suite's runs with today's RCA: the same alerts, the current code.
+
+``python -m bench.eval.reanalyze bench/out/short --csv bench/results/<suite>-<commit>/reanalysis-<code>.csv``
+
+For every faulty run of ``runs.jsonl`` in the suite's output folder, reads the run's alert
+database (model snapshot, alerts, watchlist) as ``stream-viz analyze`` does, ranks with the
+default settings, and scores the ranking against the run's truth (strict and process level,
+ties as expected values, as `bench.eval.metrics`). Writes one CSV row per run and prints the
+means per system. The live ranking of the run is in the CSV beside it, for comparison.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+from pathlib import Path
+
+from bench.eval.metrics import hit_at, tie_blocks
+from bench.eval.provenance import code_version
+from bench.eval.suites import run_id
+from stream_viz.commands.analyze import _read_run
+from stream_viz.rca import RcaSettings
+from stream_viz.rca.engine import analyze
+
+
+def blocks_of(ranked: list) -> list[tuple[str, ...]]:
+    """A ranking as tie blocks (tuples), whether members come alone or as tied lists."""
+    return [(x,) if isinstance(x, str) else tuple(x) for x in ranked]
+
+
+def rerank(db: Path) -> list:
+    """Today's ranking of the run in ``db``, ties as tuples (`bench.eval.metrics.tie_blocks`)."""
+    G, alerts, watch, *_ = _read_run(db)
+    result = analyze(G, alerts, RcaSettings(), set(watch) if watch else None)
+    return tie_blocks((rc.member, round(rc.score, 6)) for rc in result.root_causes)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", type=Path, help="the suite's output folder (runs.jsonl, a folder per run)")
+    ap.add_argument("--csv", type=Path, required=True, help="where to write one row per run")
+    args = ap.parse_args(argv)
+    rows = []
+    for line in (args.out / "runs.jsonl").read_text().splitlines():
+        run = json.loads(line)
+        if not run.get("injected"):
+            continue
+        spec = run["spec"]
+        db = args.out / run_id(spec) / "alerts.sqlite"
+        if not db.exists():
+            continue
+        now, live = blocks_of(rerank(db)), blocks_of(run["rankings"]["live"])
+        strict, proc = set(run["truth_strict"]), set(run["truth_process"])
+        rows.append({"run": db.parent.name, "system": spec["system"], "fault": spec["fault"],
+                     "target": spec["target"],
+                     "live_top": " ".join("|".join(b) for b in live[:1]),
+                     "now_top": " ".join("|".join(b) for b in now[:1]),
+                     "live_ac1_strict": hit_at(live, strict, 1), "now_ac1_strict": hit_at(now, strict, 1),
+                     "live_ac1_process": hit_at(live, proc, 1), "now_ac1_process": hit_at(now, proc, 1),
+                     "now_ac3_strict": hit_at(now, strict, 3)})
+    args.csv.parent.mkdir(parents=True, exist_ok=True)
+    with args.csv.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    print(f"code {code_version()['commit']}; {len(rows)} runs -> {args.csv}")
+    for system in sorted({r["system"] for r in rows}):
+        rs = [r for r in rows if r["system"] == system]
+        keys = ("live_ac1_strict", "now_ac1_strict", "live_ac1_process", "now_ac1_process", "now_ac3_strict")
+        mean = {k: sum(r[k] for r in rs) / len(rs) for k in keys}
+        print(system, len(rs), " ".join(f"{k}={v:.2f}" for k, v in mean.items()))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
