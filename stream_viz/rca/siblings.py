@@ -38,6 +38,7 @@ class OwnChange(Protocol):
     upstream: float
     implied: bool
     logged: float
+    exited: float
 
 
 @dataclass
@@ -72,26 +73,33 @@ def _before(a: OwnChange, b: OwnChange, tol: float) -> bool:
 
 
 def stalls(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> dict[str, set[str]]:
-    """Return node → the fellow nodes of its process that went silent with it in one stall.
+    """Return node → the fellow nodes of its process that stopped with it, for one common cause.
 
     Nodes of one process whose outputs went silent together (own onsets within ``tol``) are one
     stall of their executor when at least two of them are independent: neither is fed, through
     the data flow, by another of them (a lidar and an IMU driver that share nothing but the
     thread). Then the data flow between them explains nothing — a hung merger starves the
-    drivers that feed it — and only what came before the stall tells them apart.
+    drivers that feed it — and only their own log lines at the stall tell them apart. The nodes
+    of a process seen to die (``exited``) are fellows too: each output of theirs stops when the
+    process ends, however late its silence is noticed.
     """
     by_process: dict[str, list[str]] = {}
     for n, v in views.items():
-        if not v.implied and "output" in v.own_kinds and (p := process_of_node(G, n)) is not None:
+        if not v.implied and (p := process_of_node(G, n)) is not None:
             by_process.setdefault(p, []).append(n)
     out: dict[str, set[str]] = {}
     for nodes in by_process.values():
-        start = min(views[n].own_onset for n in nodes)
-        group = {n for n in nodes if _close(views[n].own_onset, start, tol)}
-        independent = [n for n in group if not _fed_by(G, n, group - {n})]
-        if len(independent) >= 2:
-            for n in group:
-                out[n] = group - {n}
+        silent = [n for n in nodes if "output" in views[n].own_kinds]
+        if silent:
+            start = min(views[n].own_onset for n in silent)
+            group = {n for n in silent if _close(views[n].own_onset, start, tol)}
+            if len([n for n in group if not _fed_by(G, n, group - {n})]) >= 2:
+                for n in group:
+                    out[n] = group - {n}
+        dead = {n for n in nodes if views[n].exited < INF}
+        if len(dead) >= 2:
+            for n in dead:
+                out[n] = out.get(n, set()) | (dead - {n})
     return out
 
 
@@ -124,9 +132,10 @@ def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float,
           stalled: Mapping[str, set[str]] | None = None) -> dict[str, Verdict]:
     """Return a `Verdict` for every candidate that shares its process with another candidate.
 
-    Fellows in one stall (``stalled``, from `stalls`) are told apart only by an own change that
-    came before the stall, or by one that shows it was running (its own log lines): whatever
-    else came with the stall (silent outputs, a stale diagnostic) is its consequence on all.
+    Fellows of one stall or one dead process (``stalled``, from `stalls`) are told apart only by
+    their own log lines (a node that logs was running, one that wrote its last words before the
+    crash): whatever else came with the stall (silent outputs, a stale diagnostic) is its
+    consequence on all.
 
     Parameters
     ----------
@@ -158,9 +167,9 @@ def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float,
                     continue
                 w = views[m]
                 if m in stalled.get(n, ()):
-                    if w.own_onset < v.own_onset - tol or (_spoke(w, tol) and not _spoke(v, tol)):
+                    if _spoke(w, tol) and not _spoke(v, tol):
                         verdict.excuse = max(verdict.excuse, w.own_anomaly * (1.0 - w.upstream))
-                    elif _close(w.own_onset, v.own_onset, tol) and _spoke(w, tol) == _spoke(v, tol):
+                    elif _spoke(w, tol) == _spoke(v, tol):
                         verdict.indistinguishable.append(m)
                 elif _before(w, v, tol):
                     # a sibling explained by its own inputs explains its siblings less

@@ -41,7 +41,8 @@ class Symptoms:
     as ``anomaly``/``onset`` without the alerts a node got for its process (``data["process"]``);
     ``named`` the names alerts give of what to blame: ``(alert member, name)`` → (first time,
     strongest severity weight); ``logged`` when a member's own log lines (symptom ``log``) began
-    to alert — a node that logs is running, which a starved one is not; ``latest`` the latest
+    to alert — a node that logs is running, which a starved one is not; ``exited`` when a node's
+    process was seen to die (an alert for its process with symptom ``exit``); ``latest`` the latest
     alert time; ``count`` how many alerts they come from.
     """
 
@@ -56,6 +57,7 @@ class Symptoms:
     own_onset: dict[str, float] = field(default_factory=dict)
     named: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict)
     logged: dict[str, float] = field(default_factory=dict)
+    exited: dict[str, float] = field(default_factory=dict)
     latest: float = -INF
     count: int = 0
 
@@ -103,6 +105,8 @@ def collect_symptoms(
             s.own_onset[a.member] = min(s.own_onset.get(a.member, INF), a.t)
             if data and data.get("symptom") == "log":
                 s.logged[a.member] = min(s.logged.get(a.member, INF), a.t)
+        elif data.get("symptom") == "exit":
+            s.exited[a.member] = min(s.exited.get(a.member, INF), a.t)
         for name in names_in(data) if data else ():
             t0, w0 = s.named.get((a.member, name), (INF, 0.0))
             s.named[(a.member, name)] = (min(t0, a.t), max(w0, w))
@@ -136,7 +140,8 @@ class NodeView:
     symptoms; ``untimed`` the strength of metric evidence without a time. ``implied``: a server
     suspected only because a client of it stands unexplained (it excuses nobody). ``process`` and
     ``indistinguishable``: the process it shares with other candidates, and those of them whose
-    own changes are the same as its own. ``logged``: when its own log lines began to alert.
+    own changes are the same as its own. ``logged``: when its own log lines began to alert;
+    ``exited``: when its process was seen to die.
     """
 
     member: str
@@ -161,6 +166,7 @@ class NodeView:
     process: str | None = None
     indistinguishable: list[str] = field(default_factory=list)
     logged: float = INF
+    exited: float = INF
 
     def active(self, t0: float, t1: float) -> float:
         """Its anomaly when one of its symptoms held in ``[t0, t1]``; else its untimed evidence
@@ -269,6 +275,7 @@ def _alert_views(
             v.own.insert(0, m)
             v.plugins |= s.plugins[m]
             v.spans += s.episodes[m]
+            v.exited = min(v.exited, s.exited.get(m, INF))
             if m in s.own_anomaly:
                 v.own_direct = max(v.own_direct, s.own_anomaly[m])
                 v.own_onset = min(v.own_onset, s.own_onset[m])

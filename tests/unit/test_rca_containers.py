@@ -153,3 +153,27 @@ def test_one_driver_stopping_still_excuses_the_merger_it_feeds(G):
     assert order[0] == LIDAR
     assert by[MERGE].evidence["upstream"] > 0
     assert "indistinguishable_from" not in by[LIDAR].evidence
+
+
+def died(t, nodes=(CAM, LIDAR, IMU)):
+    """member_gone's alerts for a process seen to die: one per hosted node, for the process."""
+    return [al(n, "member_gone", t, symptom="exit", process=BOX) for n in nodes]
+
+
+def test_the_nodes_of_a_crashed_container_tie_however_late_their_silence_shows(G):
+    # The container dies at 10; its outputs' silence is noticed at 11, 12 and 15 (slower topics
+    # take longer). Before: the node whose topic was quickest to look silent ranked first.
+    by, order = rank(G, died(10) + silent(IMAGE, 11) + silent(SCAN, 12) + silent(IMUT, 15))
+    box = {CAM, LIDAR, IMU}
+    assert set(order[:3]) == box and len({by[n].score for n in box}) == 1
+    for n in box:
+        assert by[n].evidence["indistinguishable_from"] == sorted(box - {n})
+
+
+def test_the_last_words_before_a_crash_tell_the_crashed_node_apart(G):
+    # The lidar logged an error at 9, then the container died: the lidar ranks first.
+    alerts = [al(LIDAR, "rosout", 9, symptom="log"), *died(10), *silent(IMAGE, 11), *silent(SCAN, 11),
+              *silent(IMUT, 12)]
+    by, order = rank(G, alerts)
+    assert order[0] == LIDAR and "indistinguishable_from" not in by[LIDAR].evidence
+    assert by[CAM].evidence["upstream"] > 0 and by[IMU].evidence["upstream"] > 0  # excused by the lidar
