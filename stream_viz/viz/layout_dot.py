@@ -20,10 +20,10 @@ from stream_viz.errors import OutputError
 from stream_viz.model.graph import flow_edges
 from stream_viz.viz.layout_groups import short_label
 
-CHAR_W = 7.0  # width of one label character in the viewer (scene units at zoom 1)
+CHAR_W = 6.5  # width of one label character in the viewer (scene units at zoom 1)
 BOX_PAD = 14.0  # the viewer's label frame: margins and stroke
 BOX_H = 26.0
-RANK_SEP = 0.45  # inches between layers
+RANK_SEP = 0.3  # inches between layers
 NODE_SEP = 0.12  # inches between members of one layer
 # Above this many members, dot's crossing reduction and coordinate pass are bounded (else a
 # 300-member system takes tens of seconds): fewer passes, a slightly busier picture.
@@ -72,7 +72,7 @@ def dot_source(
     lines += [node(m) for m in members if m not in group_of]
     keep = set(index)
     edges = sorted({(index[u], index[v]) for u, v, _ in flow_edges(G) if u in keep and v in keep and u != v})
-    ranked = {(index[u], index[v]) for u, v in dag.edges if u in keep and v in keep} if dag is not None else None
+    ranked = None if dag is None else {(index[u], index[v]) for u, v in dag.edges if u in keep and v in keep}
     lines += [f"n{u} -> n{v};" if ranked is None or (u, v) in ranked else f"n{u} -> n{v} [constraint=false];"
               for u, v in edges]
     lines += [f"n{index[a]} -> n{index[m]} [style=invis, weight=4];"
