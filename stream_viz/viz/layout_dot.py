@@ -56,7 +56,7 @@ def dot_source(
     fast = len(members) > FAST_ABOVE
     lines = ["digraph system {",
              f"graph [rankdir=LR, ranksep={RANK_SEP}, nodesep={NODE_SEP}, "
-             f"newrank=true{', mclimit=0.1, nslimit=1' if fast else ''}];",
+             f"newrank=true, splines=false{', mclimit=0.1, nslimit=1' if fast else ''}];",
              "node [shape=box, fixedsize=true, label=\"\"];"]
 
     def node(m: str) -> str:

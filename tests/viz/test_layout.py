@@ -257,3 +257,34 @@ def test_crossings_and_length_of_straight_edges():
     assert edge_crossings(pos, [("a", "b"), ("b", "a"), ("a", "d")]) == 0  # one pair; a shared end
     assert edge_crossings(pos, [("a", "c"), ("b", "d")]) == 0  # parallel
     assert edge_length(pos, [("a", "e"), ("e", "a"), ("a", "d")]) == 7.0  # 5 once, plus 2
+
+
+@needs_dot
+def test_the_amr_recording_has_its_namespace_box_short_labels_and_overlays_on_the_members(tmp_path):
+    from stream_viz.demo.robots import robot_topology
+    from stream_viz.viz import paths
+    from stream_viz.viz.recorder import Recorder
+    from stream_viz.viz.sample import topology_graph
+    from tests.viz.rrd import rows
+
+    G = topology_graph(robot_topology("amr"))
+    it = {"j": 1, "t": 12.0, "subgraph": ["topic:/amr1/scan"], "watchlist": [], "edges": [],
+          "alert": "topic:/amr1/scan"}
+    rc = [{"member": "node:/amr1/scan_merger", "score": 1.0,
+           "trajectory": ["topic:/amr1/scan", "node:/amr1/scan_merger"]}]
+    with Recorder(save=tmp_path / "amr.rrd") as r:
+        r.system(G, t=10.0)
+        r.rca(G, it, rc)
+    data = rows(tmp_path / "amr.rrd")
+    system = data[paths.SYSTEM][0]
+    pos = dict(zip(system["GraphNodes:node_ids"], map(tuple, system["GraphNodes:positions"]), strict=True))
+    labels = dict(zip(system["GraphNodes:node_ids"], system["GraphNodes:labels"], strict=True))
+    assert labels["node:/amr1/scan_merger"] == "scan_merger"
+    assert labels["topic:/diagnostics"] == "/diagnostics"
+    box = data["/namespace/amr1"][0]
+    (x0, y0), (x1, y1) = box["GraphNodes:positions"]
+    inside = {m for m, (x, y) in pos.items() if x0 < x < x1 and y0 < y < y1}
+    assert inside == {m for m in pos if m.split(":", 1)[1].startswith("/amr1/")}
+    traj = next(row for row in data[paths.RCA_TRAJECTORY] if row.get("rca_iteration") == 1)
+    for m, p in zip(traj["GraphNodes:node_ids"], traj["GraphNodes:positions"], strict=True):
+        assert tuple(p) == pos[m]
