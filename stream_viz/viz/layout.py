@@ -239,7 +239,9 @@ def layered(G: nx.MultiDiGraph, grouping: str = "namespace") -> Layout:
     group_of = member_groups(G, members, grouping)
     beside = {s: servers[0] for s, servers in service_servers(G).items() if servers and s in G}
     exe = layout_dot.dot_executable()
-    if exe is not None:
+    if len(members) > layout_dot.MAX_MEMBERS:
+        _warn(f"more than {layout_dot.MAX_MEMBERS} members: the system graph uses the simple layout")
+    elif exe is not None:
         try:
             out = layout_dot.run_dot(layout_dot.dot_source(G, members, group_of, beside, flow_dag(G)), exe)
             groups = sorted(set(group_of.values()))

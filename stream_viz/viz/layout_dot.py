@@ -29,6 +29,9 @@ NODE_SEP = 0.12  # inches between members of one layer
 # 300-member system takes tens of seconds): fewer passes, a slightly busier picture.
 FAST_ABOVE = 150
 TIMEOUT_S = 120.0
+# Above this many members dot takes tens of seconds (a 2,000-member generated system: ~20 s), and
+# the monitor waits for it: such a graph gets the simple layout (`stream_viz.viz.layout.place`).
+MAX_MEMBERS = 1500
 
 
 def dot_executable() -> str | None:
