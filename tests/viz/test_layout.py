@@ -288,3 +288,20 @@ def test_the_amr_recording_has_its_namespace_box_short_labels_and_overlays_on_th
     traj = next(row for row in data[paths.RCA_TRAJECTORY] if row.get("rca_iteration") == 1)
     for m, p in zip(traj["GraphNodes:node_ids"], traj["GraphNodes:positions"], strict=True):
         assert tuple(p) == pos[m]
+
+
+@needs_dot
+def test_no_two_labels_overlap_in_the_dot_layout_of_the_amr():
+    from stream_viz.demo.robots import robot_topology
+    from stream_viz.viz.layout_dot import BOX_H, BOX_PAD, CHAR_W
+    from stream_viz.viz.sample import topology_graph
+
+    G = topology_graph(robot_topology("amr"))
+    L = layered(G)
+    boxes = []
+    for m, (x, y) in L.pos.items():
+        w = CHAR_W * len(short_label(G, m, L.group_of.get(m))) + BOX_PAD
+        boxes.append((m, x - w / 2, y - BOX_H / 2, x + w / 2, y + BOX_H / 2))
+    for i, (a, ax0, ay0, ax1, ay1) in enumerate(boxes):
+        for b, bx0, by0, bx1, by1 in boxes[i + 1:]:
+            assert ax1 <= bx0 or bx1 <= ax0 or ay1 <= by0 or by1 <= ay0, (a, b)
