@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Collection, Mapping
+from typing import Any
 
 import networkx as nx
 import rerun as rr
@@ -75,13 +77,20 @@ def group_boxes(layout: Layout) -> dict[str, list[Pos]]:
             for g, (x0, y0, x1, y1) in sorted(layout.boxes.items())}
 
 
+# The group entities each recording stream has drawn: a group that is gone is cleared.
+_drawn_groups: weakref.WeakKeyDictionary[Any, set[str]] = weakref.WeakKeyDictionary()
+
+
 def log_groups(rec: rr.RecordingStream, layout: Layout) -> None:
-    """Log the groups' boxes under `paths.GROUP_ROOTS` (earlier boxes cleared first)."""
-    for root in paths.GROUP_ROOTS:
-        rec.log(root, rr.Clear(recursive=True))
-    for path, corners in group_boxes(layout).items():
+    """Log the groups' boxes (`group_boxes`); clear the ones drawn before that are gone."""
+    boxes = group_boxes(layout)
+    drawn = _drawn_groups.setdefault(rec, set())
+    for path in sorted(drawn - set(boxes)):
+        rec.log(path, rr.Clear(recursive=False))
+    for path, corners in boxes.items():
         rec.log(path, rr.GraphNodes(["top_left", "bottom_right"], positions=corners, radii=[0.0, 0.0],
                                     colors=[(0, 0, 0, 0)] * 2, show_labels=False))
+    _drawn_groups[rec] = set(boxes)
 
 
 def log_system(

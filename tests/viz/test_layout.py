@@ -305,3 +305,24 @@ def test_no_two_labels_overlap_in_the_dot_layout_of_the_amr():
     for i, (a, ax0, ay0, ax1, ay1) in enumerate(boxes):
         for b, bx0, by0, bx1, by1 in boxes[i + 1:]:
             assert ax1 <= bx0 or bx1 <= ax0 or ay1 <= by0 or by1 <= ay0, (a, b)
+
+
+def test_a_group_that_is_gone_is_cleared_and_the_others_logged_again(tmp_path):
+    import rerun as rr
+
+    from stream_viz.viz.system import log_groups
+    from tests.viz.rrd import rows
+
+    rec = rr.RecordingStream("stream_viz_test")
+    rec.save(str(tmp_path / "g.rrd"))
+    rec.set_time("time", timestamp=1.0)
+    log_groups(rec, Layout(boxes={"/a": (0.0, 0.0, 1.0, 1.0), "/b": (2.0, 0.0, 3.0, 1.0)}))
+    rec.set_time("time", timestamp=2.0)
+    log_groups(rec, Layout(boxes={"/b": (2.0, 0.0, 4.0, 1.0)}))
+    rec.flush()
+    rec.disconnect()
+    data = rows(tmp_path / "g.rrd")
+    assert [sorted(k for k in row if k.startswith(("Clear", "GraphNodes:positions"))) for row in
+            data["/namespace/a"]] == [["GraphNodes:positions"], ["Clear:is_recursive"]]
+    assert [row["GraphNodes:positions"] for row in data["/namespace/b"]] == [
+        [[2.0, 0.0], [3.0, 1.0]], [[2.0, 0.0], [4.0, 1.0]]]
