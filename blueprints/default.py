@@ -52,7 +52,9 @@ def build_blueprint(
         paused = timeline == paths.RCA_ITERATION
     graph = rrb.GraphView(
         origin="/",
-        contents=[paths.RCA_SUBGRAPH, paths.RCA_TRAJECTORY, paths.SYSTEM],  # overlays under the labels
+        # group boxes and overlays under the labels
+        contents=[*(f"{r}/**" for r in paths.GROUP_ROOTS), paths.RCA_SUBGRAPH, paths.RCA_TRAJECTORY,
+                  paths.SYSTEM],
         name="System graph + RCA overlays",
     )
     metrics = metric_views(watched) or [

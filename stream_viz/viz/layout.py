@@ -1,22 +1,30 @@
-"""Layouts computed by us (explicit positions): the layered system graph and the process tree.
+"""Explicit positions of the system graph and the process tree.
 
-The system graph is drawn left to right from sources to sinks like a good ``rqt_graph``: each
-member of ``G_0`` gets a layer (longest path from the sources after breaking cycles, sources
-pulled next to what they feed) and a row in its layer (near the mean row of its placed
-neighbours). A placed member never moves, so the picture stays put while the graph grows.
-Services have no layer-0 edges (a call is a ``send`` edge client -> server); each service is
-drawn in the gap right of its server.
+The system graph is laid out by Graphviz ``dot`` (`layered`, :mod:`stream_viz.viz.layout_dot`):
+left to right from sources to sinks, crossings minimised, namespaces as groups, the same picture
+for the same system. During a run `settle` keeps the picture still: it lays the graph out again
+only once its members and edges have stopped changing for a few samples, and meanwhile puts new
+members in a provisional column on the right. Services have no layer-0 edges (a call is a
+``send`` edge client -> server); each service is drawn right of its server.
+
+`place` is the layout of our own (layers by longest path, rows near placed neighbours, a placed
+member never moves): used where ``dot`` is not installed, and as the baseline of
+``bench/bench_layout.py``.
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import networkx as nx
 
+from stream_viz.errors import OutputError
 from stream_viz.model.graph import FLOW, flow_edges
 from stream_viz.model.ids import make_id
+from stream_viz.viz import layout_dot
+from stream_viz.viz.layout_groups import member_groups
 
 COL = 200.0  # horizontal distance between layers
 ROW = 70.0  # vertical distance between rows
@@ -24,22 +32,33 @@ SERVICE_STEP = 36.0  # vertical distance between services stacked at one server
 FLOW_KINDS = ("node", "topic", "action")  # members placed in layers
 SIDE_KINDS = ("service",)  # members placed beside their server
 
+SETTLE_SAMPLES = 3  # samples a changed structure must stay unchanged before it is laid out again
+
 Pos = tuple[float, float]
+Box = tuple[float, float, float, float]
+Structure = tuple[tuple[str, ...], tuple[tuple[str, str], ...]]
 
 
 @dataclass
 class Layout:
-    """Positions of the system graph's members; grows with `place`, never moves a placed member."""
+    """Positions of the system graph's members, the groups' boxes, and what they were made for."""
 
     layer: dict[str, int] = field(default_factory=dict)
     row: dict[str, int] = field(default_factory=dict)
     pos: dict[str, Pos] = field(default_factory=dict)
     # Services placed without a known server (they move once, when the server is known).
     loose: set[str] = field(default_factory=set)
+    group_of: dict[str, str] = field(default_factory=dict)  # member -> its group (drawn as a box)
+    boxes: dict[str, Box] = field(default_factory=dict)  # group -> (x0, y0, x1, y1)
+    grouping: str = "namespace"
+    key: Structure | None = None  # the structure laid out
+    pending: Structure | None = None  # a changed structure waiting to settle, and for how long
+    pending_n: int = 0
 
     def copy(self) -> Layout:
         """Return an independent copy."""
-        return Layout(dict(self.layer), dict(self.row), dict(self.pos), set(self.loose))
+        return replace(self, layer=dict(self.layer), row=dict(self.row), pos=dict(self.pos),
+                       loose=set(self.loose), group_of=dict(self.group_of), boxes=dict(self.boxes))
 
     def __contains__(self, member: str) -> bool:
         return member in self.pos
@@ -200,6 +219,92 @@ def _place_services(G: nx.MultiDiGraph, out: Layout) -> None:
         out.pos[s] = (right, k * SERVICE_STEP)
         occupied.add(out.pos[s])
         out.loose.add(s)
+
+
+def structure(G: nx.MultiDiGraph) -> Structure:
+    """Return what the layout depends on: the drawn members and their flow edges, sorted."""
+    members = display_members(G)
+    keep = set(members)
+    edges = sorted({(u, v) for u, v, _ in flow_edges(G) if u in keep and v in keep and u != v})
+    return tuple(members), tuple(edges)
+
+
+def layered(G: nx.MultiDiGraph, grouping: str = "namespace") -> Layout:
+    """Return the layout of ``G`` by Graphviz ``dot``; where dot is missing or fails, `place`.
+
+    Members and edges are handed to dot sorted by id: the same system gets the same positions
+    whatever order it was discovered in. ``grouping``: ``namespace``, ``process`` or ``none``.
+    """
+    members = display_members(G)
+    group_of = member_groups(G, members, grouping)
+    beside = {s: servers[0] for s, servers in service_servers(G).items() if servers and s in G}
+    exe = layout_dot.dot_executable()
+    if len(members) > layout_dot.MAX_MEMBERS:
+        _warn(f"more than {layout_dot.MAX_MEMBERS} members: the system graph uses the simple layout")
+    elif exe is not None:
+        try:
+            out = layout_dot.run_dot(layout_dot.dot_source(G, members, group_of, beside, flow_dag(G)), exe)
+            groups = sorted(set(group_of.values()))
+            pos, boxes = layout_dot.read_positions(out, members, groups)
+            if set(pos) == set(members):
+                return Layout(pos=pos, group_of=group_of, boxes=boxes, grouping=grouping, key=structure(G))
+        except OutputError as e:
+            _warn(str(e))
+    else:
+        _warn("Graphviz 'dot' not found (Debian package graphviz): the system graph uses the simple layout")
+    return replace(place(G), grouping=grouping, key=structure(G))
+
+
+_warned: set[str] = set()
+
+
+def _warn(msg: str) -> None:
+    if msg not in _warned:  # once per process, not once per layout
+        _warned.add(msg)
+        print(f"stream-viz: {msg}", file=sys.stderr)
+
+
+def provisional(G: nx.MultiDiGraph, layout: Layout) -> Layout:
+    """Return ``layout`` plus the members of ``G`` it lacks, stacked in sorted order in a column
+    right of everything (until the next `layered`); placed members do not move."""
+    new = [m for m in display_members(G) if m not in layout.pos]
+    if not new:
+        return layout
+    out = layout.copy()
+    xs = [p[0] for p in layout.pos.values()] + [b[2] for b in layout.boxes.values()]
+    ys = [p[1] for p in layout.pos.values()]
+    x = (max(xs) + COL) if xs else 0.0
+    y0 = min(ys) if ys else 0.0
+    taken = {p for p in layout.pos.values()}
+    k = 0
+    for m in new:
+        while (x, y0 + k * ROW / 2) in taken:
+            k += 1
+        out.pos[m] = (x, y0 + k * ROW / 2)
+        k += 1
+    return out
+
+
+def settle(G: nx.MultiDiGraph, layout: Layout | None, after: int = SETTLE_SAMPLES,
+           grouping: str = "namespace") -> Layout:
+    """Return the layout to draw ``G`` with at this sample (call once per sample).
+
+    The first call lays ``G`` out. Later, an unchanged structure keeps the layout (the very same
+    object); a changed one is laid out again once it has stayed the same for ``after``
+    consecutive calls; until then its new members get provisional places (`provisional`).
+    """
+    key = structure(G)
+    if layout is None or layout.key is None or grouping != layout.grouping:
+        return layered(G, grouping)
+    if key == layout.key:
+        return layout
+    n = layout.pending_n + 1 if key == layout.pending else 1
+    if n >= after:
+        return layered(G, grouping)
+    out = provisional(G, layout)
+    out = out.copy() if out is layout else out
+    out.pending, out.pending_n = key, n
+    return out
 
 
 def tree_layout(T: nx.DiGraph, root: str, dx: float = 170.0, dy: float = 110.0) -> dict[str, Pos]:

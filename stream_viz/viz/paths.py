@@ -18,6 +18,9 @@ RCA = "/rca"
 RCA_SUBGRAPH = "/rca/subgraph"  # G_j and W_j, drawn over /system at the same positions
 RCA_TRAJECTORY = "/rca/trajectory"  # top fault trajectory, same positions
 RCA_REPORT = "/rca/report"  # TextDocument (markdown)
+# Groups of /system drawn as boxes: one entity per group, two invisible corner nodes; the viewer
+# captions each entity's rectangle with its path ("namespace/amr1", "process/navigation").
+GROUP_ROOTS = ("/namespace", "/process")
 
 THETA = "theta"  # leaf under a member's metric subtree: all its θ series (one entity: a small .rrd)
 ALERT_MARKERS = "alerts"  # leaf under a member's metric subtree holding SeriesPoints markers
@@ -28,6 +31,13 @@ def member_path(member: str) -> str:
     kind = kind_of(member)
     parts = [rr.escape_entity_path_part(p) for p in name_of(member).split("/") if p]
     return "/".join([kind, *parts]) if kind != "root" else "root"
+
+
+def group_path(grouping: str, group: str) -> str:
+    """Return the entity of a group's box: ``/namespace/amr1``, ``/process/<process name>``."""
+    root = GROUP_ROOTS[1] if grouping == "process" else GROUP_ROOTS[0]
+    parts = [rr.escape_entity_path_part(p) for p in group.split("/") if p]
+    return "/".join([root, *parts])
 
 
 def metrics_path(member: str, leaf: str | None = None) -> str:

@@ -28,12 +28,12 @@ from stream_viz.output import check_writable
 from stream_viz.records import SEVERITY_RANK, Alert
 from stream_viz.viz import paths, style
 from stream_viz.viz.alerts import log_alerts
-from stream_viz.viz.layout import Layout
+from stream_viz.viz.layout import Layout, settle
 from stream_viz.viz.metrics import log_metrics
 from stream_viz.viz.process_tree import log_process_tree
 from stream_viz.viz.rca import log_rca, log_report
 from stream_viz.viz.screenshot import rerun_executable
-from stream_viz.viz.system import log_system
+from stream_viz.viz.system import log_system, with_gone
 
 VIEWER_MODES = ("spawn", "serve", "none")
 GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
@@ -146,6 +146,8 @@ class Recorder:
         Start a new file part every this many seconds of the ``time`` timeline (0: one file).
     announce : callable
         Where to tell the user the viewer URL (default: stderr).
+    grouping : str
+        Groups of the system graph drawn as boxes: ``namespace`` (default), ``process`` or ``none``.
     """
 
     def __init__(
@@ -160,6 +162,7 @@ class Recorder:
         telemetry: bool | None = None,
         part_s: float = 0.0,
         announce: Callable[[str], None] = _stderr,
+        grouping: str = "namespace",
     ) -> None:
         self.save = _check_sinks(viewer, save)  # before anything is opened (and monitoring starts)
         disable_rerun_telemetry(telemetry)
@@ -171,6 +174,7 @@ class Recorder:
         self._last_rca: tuple[Any, ...] | None = None  # shown again at the top of a new part
         self._last_report: tuple[str, float | None] | None = None
         self.layout: Layout | None = None
+        self.grouping = grouping
         self.status: dict[str, str] = {}
         self._system_sig: Any = None
         self._tree_sig: Any = None
@@ -296,9 +300,11 @@ class Recorder:
         if tree_sig != self._tree_sig or force:
             log_process_tree(self.rec, G)
             self._tree_sig = tree_sig
-        if sig == self._system_sig and not force:
+        # Laid out again only once a changed structure has settled (`settle`, once per sample).
+        layout = settle(with_gone(G, gone_all), self.layout, grouping=self.grouping)
+        if sig == self._system_sig and layout is self.layout and not force:
             return False
-        self.layout = log_system(self.rec, G, self.layout, gone=gone_all, status=self.status)
+        self.layout = log_system(self.rec, G, layout, gone=gone_all, status=self.status)
         self._system_sig = sig
         return True
 

@@ -5,8 +5,9 @@ from __future__ import annotations
 import networkx as nx
 import numpy as np
 
+from stream_viz.demo.topology import NodeSpec, Topology
 from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
-from stream_viz.model.ids import ROOT
+from stream_viz.model.ids import ROOT, make_id, name_of
 from stream_viz.model.theta import make_theta
 
 # (node, process pid, published topics, subscribed topics)
@@ -94,3 +95,34 @@ def chain_graph(n_nodes: int, fan: int = 2, procs: int = 50, rng: np.random.Gene
             add_flow_edge(G, f"topic:/t{i}", f"node:/n{int(j)}", "sub")
     set_theta(G, rng)
     return G
+
+
+def topology_graph(topo: Topology) -> nx.MultiDiGraph:
+    """Return the model graph a monitor would build for ``topo`` (a demo robot's specification):
+    its nodes, topics and served services with their ``pub``/``sub``/``send`` edges, one process
+    per group under the root (no θ). For the layout benchmark and tests, without running ROS."""
+    G = new_graph()
+    add_member(G, ROOT)
+    servers = {s.name: n.name for n in topo.nodes() for s in n.services}
+    for t in sorted(topo.topics()):
+        add_member(G, make_id("topic", t))
+    for s, node in sorted(servers.items()):
+        add_member(G, make_id("service", s), servers=[node])
+    for i, group in enumerate(topo.groups):
+        proc = make_id("process", 1000 + i)
+        add_member(G, proc, name=group.name)
+        add_tree_edge(G, ROOT, proc)
+        for spec in group.nodes:
+            add_member(G, make_id("node", spec.name), pid=1000 + i)
+            add_tree_edge(G, proc, make_id("node", spec.name))
+    for u, v, kind in sorted(topo.edges()):
+        if kind == "send":
+            via = sorted(c.name for c in _spec(topo, u).clients if servers.get(c.name) == name_of(v))
+            add_flow_edge(G, u, v, kind, services=via)
+        else:
+            add_flow_edge(G, u, v, kind)
+    return G
+
+
+def _spec(topo: Topology, node: str) -> NodeSpec:
+    return next(n for n in topo.nodes() if n.name == name_of(node))

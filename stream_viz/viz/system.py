@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Collection, Mapping
+from typing import Any
 
 import networkx as nx
 import rerun as rr
@@ -11,13 +13,19 @@ from stream_viz.errors import ModelError
 from stream_viz.model.graph import flow_edges
 from stream_viz.model.ids import kind_of, name_of
 from stream_viz.viz import paths, style
-from stream_viz.viz.layout import Layout, display_members, place
+from stream_viz.viz.layout import Layout, Pos, display_members, provisional, settle
+from stream_viz.viz.layout_groups import short_label
 
 
-def _label(G: nx.MultiDiGraph, m: str) -> str:
-    if m in G:
-        return str(G.nodes[m].get("label") or name_of(m))
-    return name_of(m)
+def with_gone(G: nx.MultiDiGraph, gone: Collection[str]) -> nx.MultiDiGraph:
+    """Return ``G`` plus the ``gone`` members it lacks (vanished before their edges were seen),
+    marked ``gone``; ``G`` itself when it has them all."""
+    extra = sorted(m for m in gone if m not in G and kind_of(m) in style.KIND_COLOR)
+    if not extra:
+        return G
+    G = G.copy()
+    G.add_nodes_from((m, {"kind": kind_of(m), "label": name_of(m), "gone": True}) for m in extra)
+    return G
 
 
 def system_arrays(
@@ -36,12 +44,12 @@ def system_arrays(
     members = sorted(m for m in members if kind_of(m) not in ("process", "host", "root"))
     missing = [m for m in members if m not in layout]
     if missing:
-        raise ModelError(f"/system: the layout lacks {missing[:5]} (extend it with layout.place first)")
+        raise ModelError(f"/system: the layout lacks {missing[:5]} (extend it with layout.provisional first)")
     ids, labels, colors, radii, positions = [], [], [], [], []
     for m in members:
         kind = kind_of(m)
         is_gone = (m in gone or bool(G.nodes[m].get("gone"))) if m in G else True
-        label = _label(G, m) + (style.GONE_SUFFIX if is_gone else "")
+        label = short_label(G, m, layout.group_of.get(m)) + (style.GONE_SUFFIX if is_gone else "")
         if is_gone:
             color = style.GONE_COLOR
         elif m in status:
@@ -57,6 +65,32 @@ def system_arrays(
     edges = sorted({(u, v) for u, v, _ in flow_edges(G) if u in keep and v in keep})
     return {"ids": ids, "labels": labels, "colors": colors, "radii": radii,
             "positions": positions, "edges": edges}
+
+
+def group_boxes(layout: Layout) -> dict[str, list[Pos]]:
+    """Return entity path -> the two corners of each group's box (top-left, bottom-right).
+
+    The viewer draws every entity of a graph view inside a rectangle captioned with its path: a
+    group is an entity of two invisible corner nodes, so its rectangle is the group's box.
+    """
+    return {paths.group_path(layout.grouping, g): [(x0, y0), (x1, y1)]
+            for g, (x0, y0, x1, y1) in sorted(layout.boxes.items())}
+
+
+# The group entities each recording stream has drawn: a group that is gone is cleared.
+_drawn_groups: weakref.WeakKeyDictionary[Any, set[str]] = weakref.WeakKeyDictionary()
+
+
+def log_groups(rec: rr.RecordingStream, layout: Layout) -> None:
+    """Log the groups' boxes (`group_boxes`); clear the ones drawn before that are gone."""
+    boxes = group_boxes(layout)
+    drawn = _drawn_groups.setdefault(rec, set())
+    for path in sorted(drawn - set(boxes)):
+        rec.log(path, rr.Clear(recursive=False))
+    for path, corners in boxes.items():
+        rec.log(path, rr.GraphNodes(["top_left", "bottom_right"], positions=corners, radii=[0.0, 0.0],
+                                    colors=[(0, 0, 0, 0)] * 2, show_labels=False))
+    _drawn_groups[rec] = set(boxes)
 
 
 def log_system(
@@ -75,17 +109,15 @@ def log_system(
     G : MultiDiGraph
         The model graph (or the ``seen`` union, whose vanished members carry ``gone=True``).
     layout : Layout, optional
-        Positions so far; members not in it are placed (a new layout is returned).
+        The layout (`settle`); without one ``G`` is laid out, members it lacks get provisional
+        places (a new layout is returned).
     gone : collection of str
         Members to draw as gone (grey, label suffix), in addition to ``gone`` attributes.
     status : mapping, optional
         Member -> alert severity, to colour alerted members.
     """
-    extra = [m for m in gone if m not in G and kind_of(m) in style.KIND_COLOR]
-    if extra:  # vanished before we ever saw their edges: still shown, as gone
-        G = G.copy()
-        G.add_nodes_from((m, {"kind": kind_of(m), "label": name_of(m), "gone": True}) for m in extra)
-    layout = place(G, layout)
+    G = with_gone(G, gone)  # vanished before we ever saw their edges: still shown, as gone
+    layout = settle(G, None) if layout is None else provisional(G, layout)
     a = system_arrays(G, layout, gone, status)
     rec.log(
         paths.SYSTEM,
@@ -93,4 +125,5 @@ def log_system(
                       positions=a["positions"], show_labels=True),
         rr.GraphEdges(a["edges"], graph_type=rr.GraphType.Directed),
     )
+    log_groups(rec, layout)
     return layout

@@ -29,6 +29,10 @@ def test_every_entity_path_and_timeline_is_named():
     for leaf in (paths.THETA, paths.ALERT_MARKERS):
         assert f"`{paths.METRICS}/<kind>/<name>/{leaf}`" in CONTRACTS, leaf
     assert "`/metrics/topic/camera/image/theta`" in CONTRACTS
+    for root in paths.GROUP_ROOTS:
+        assert f"`{root}/" in CONTRACTS, root
+    assert paths.group_path("namespace", "/amr1") == "/namespace/amr1"
+    assert "`/namespace/amr1`" in CONTRACTS
     assert paths.metrics_path("topic:/camera/image", paths.THETA) == "/metrics/topic/camera/image/theta"
 
 
