@@ -11,6 +11,7 @@ from stream_viz.records import Alert, Sample
 from stream_viz.viz.metrics import MetricBatch
 from stream_viz.viz.rca import report_markdown
 from stream_viz.viz.recorder import Recorder
+from stream_viz.viz.serve import ServeAt
 
 
 class LiveView:
@@ -30,11 +31,16 @@ class LiveView:
         is closed, so a large system batches longer (`metrics_batch_s`).
     part_s : float
         Seconds per file part of the recording (0: one file); parts bound that index.
+    serve_at : ServeAt, optional
+        Address and ports of a ``serve``d viewer (default: loopback, 9090 and 9876).
     """
 
     def __init__(self, viewer: str = "none", save: Path | None = None, metrics_every: float = 5.0,
-                 max_chunks_per_s: float = 20.0, part_s: float = 0.0) -> None:
-        self.rec = Recorder(viewer=viewer, save=save, part_s=part_s)
+                 max_chunks_per_s: float = 20.0, part_s: float = 0.0,
+                 serve_at: ServeAt | None = None) -> None:
+        at = serve_at or ServeAt()
+        self.rec = Recorder(viewer=viewer, save=save, part_s=part_s, bind=at.bind, web_port=at.web_port,
+                            grpc_port=at.grpc_port)
         self.metrics_every, self.max_chunks_per_s = metrics_every, max_chunks_per_s
         self._batch = MetricBatch()
         self._iterations = 0

@@ -1,7 +1,8 @@
 """The Rerun side of a run: one own ``RecordingStream`` going to a viewer and/or an ``.rrd`` file.
 
-Viewer modes: ``spawn`` (native viewer, needs a display), ``serve`` (gRPC server + web viewer on
-localhost), ``none``, or the gRPC URL of a running viewer (``rerun+http://host:port/proxy``). With
+Viewer modes: ``spawn`` (native viewer, needs a display), ``serve`` (gRPC server + web viewer, on
+loopback unless ``bind`` says otherwise; `stream_viz.viz.serve`), ``none``, or the gRPC URL of a
+running viewer (``rerun+http://host:port/proxy``). With
 ``save`` the same stream is also written to a file (sinks are teed), default blueprint included.
 A long run is saved in parts (``run.rrd``, ``run_1.rrd``, …; one recording id, so the viewer
 merges them): Rerun keeps an index entry for every chunk written to a file until it is closed,
@@ -16,7 +17,6 @@ import uuid
 from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
-from urllib.parse import quote
 
 import networkx as nx
 import rerun as rr
@@ -33,12 +33,11 @@ from stream_viz.viz.metrics import log_metrics
 from stream_viz.viz.process_tree import log_process_tree
 from stream_viz.viz.rca import log_rca, log_report
 from stream_viz.viz.screenshot import rerun_executable
+from stream_viz.viz.serve import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, WebViewerServer
 from stream_viz.viz.system import log_system
 
 VIEWER_MODES = ("spawn", "serve", "none")
 GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
-DEFAULT_GRPC_PORT = 9876
-DEFAULT_WEB_PORT = 9090
 TELEMETRY_ENV = "STREAM_VIZ_RERUN_TELEMETRY"  # set to 1 to allow Rerun's usage analytics
 
 
@@ -138,6 +137,9 @@ class Recorder:
         Memory limit of the spawned viewer / the served gRPC buffer.
     web_port, grpc_port : int, optional
         Ports of ``serve`` (web viewer, gRPC) and ``spawn`` (gRPC).
+    bind : str
+        Address ``serve`` listens on, page and data alike: ``127.0.0.1`` (this machine only),
+        ``0.0.0.0`` (every interface) or one interface's address.
     blueprint : rrb.Blueprint, optional
         Default layout; `stream_viz_blueprints.default.build_blueprint()` if not given.
     telemetry : bool, optional
@@ -160,6 +162,7 @@ class Recorder:
         telemetry: bool | None = None,
         part_s: float = 0.0,
         announce: Callable[[str], None] = _stderr,
+        bind: str = DEFAULT_BIND,
     ) -> None:
         self.save = _check_sinks(viewer, save)  # before anything is opened (and monitoring starts)
         disable_rerun_telemetry(telemetry)
@@ -171,18 +174,22 @@ class Recorder:
         self._last_rca: tuple[Any, ...] | None = None  # shown again at the top of a new part
         self._last_report: tuple[str, float | None] | None = None
         self.layout: Layout | None = None
+        self.server: WebViewerServer | None = None
         self.status: dict[str, str] = {}
         self._system_sig: Any = None
         self._tree_sig: Any = None
         self._closed = False
         self.enabled = viewer != "none" or self.save is not None
-        self._open(memory_limit, web_port, grpc_port)
+        self._open(memory_limit, web_port, grpc_port, bind)
         if viewer == "serve":
             announce(f"Rerun web viewer: {self.url}")
+            if self.server is not None and not self.server.loopback:
+                announce(f"  served on {bind}: from another machine, put this machine's address "
+                         "in place of 127.0.0.1, twice (the page and its ?url=)")
         elif viewer == "spawn":
             announce(f"Rerun viewer spawned, streaming to {self.url}")
 
-    def _open(self, memory_limit: str, web_port: int | None, grpc_port: int | None) -> None:
+    def _open(self, memory_limit: str, web_port: int | None, grpc_port: int | None, bind: str) -> None:
         """Open the streams: one to the viewer, one to the file, both of one recording id.
 
         The file's sink is swapped for the next part without touching the viewer's connection (a
@@ -196,14 +203,16 @@ class Recorder:
                        or [rr.RecordingStream(self.app_id, default_enabled=False)])
         try:
             if self._live is not None:
-                self.url = self._connect(self._live, memory_limit, web_port, grpc_port)
+                self.url = self._connect(self._live, memory_limit, web_port, grpc_port, bind)
             if self._file is not None:
                 self._file.set_sinks(rr.FileSink(str(self.save)), default_blueprint=self.blueprint)
         except (RuntimeError, OSError, ValueError) as e:
+            if self.server is not None:
+                self.server.stop()
             raise OutputError(f"--viewer {self.viewer}: could not start the Rerun sink: {e}") from e
 
     def _connect(self, live: rr.RecordingStream, memory_limit: str, web_port: int | None,
-                 grpc_port: int | None) -> str:
+                 grpc_port: int | None, bind: str) -> str:
         """Point the viewer's stream at its viewer; return the URL to tell the user."""
         bp = self.blueprint
         if self.viewer == "spawn":
@@ -213,12 +222,10 @@ class Recorder:
             live.set_sinks(rr.GrpcSink(url), default_blueprint=bp)
             return url
         if self.viewer == "serve":
-            server = rr.GrpcServerSink("127.0.0.1", grpc_port or DEFAULT_GRPC_PORT,
-                                       server_memory_limit=memory_limit)
-            live.set_sinks(server, default_blueprint=bp)
-            port = web_port or DEFAULT_WEB_PORT
-            rr.serve_web_viewer(web_port=port, open_browser=False, connect_to=server.uri)
-            return f"http://127.0.0.1:{port}/?url={quote(server.uri, safe='')}"
+            self.server = WebViewerServer(bind, web_port or DEFAULT_WEB_PORT,
+                                          grpc_port or DEFAULT_GRPC_PORT, memory_limit)
+            live.set_sinks(rr.GrpcSink(self.server.grpc_url), default_blueprint=bp)
+            return self.server.url
         live.set_sinks(rr.GrpcSink(self.viewer), default_blueprint=bp)
         return self.viewer
 
@@ -349,6 +356,8 @@ class Recorder:
                 stream.disconnect()
             except Exception as e:
                 _stderr(f"stream-viz: closing the Rerun recording: {e}")
+        if self.server is not None:
+            self.server.stop()  # the served page goes with the run
 
     def _file_first(self) -> list[rr.RecordingStream]:
         # The file is the record: it is finished before a viewer that may have gone away is waited for.

@@ -9,14 +9,13 @@ from __future__ import annotations
 
 import os
 import shutil
-import signal
-import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 from stream_viz.errors import OutputError
+from stream_viz.viz.children import end_group, free_port
 
 
 def rerun_executable() -> str | None:
@@ -26,12 +25,6 @@ def rerun_executable() -> str | None:
         cand = Path(sys.executable).with_name("rerun")
         exe = str(cand) if cand.is_file() and os.access(cand, os.X_OK) else None
     return exe
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def screenshot(
@@ -67,7 +60,7 @@ def screenshot(
         raise OutputError(f"screenshot: no recording at {rrd}")
     from rerun.experimental import ViewerClient
 
-    port = _free_port()
+    port = free_port()
     env = dict(os.environ, CI=os.environ.get("CI", "1"))  # no viewer analytics
     proc = subprocess.Popen(
         [exe, "--headless", "--hide-welcome-screen", f"--window-size={size[0]}x{size[1]}", f"--port={port}"],
@@ -96,14 +89,7 @@ def screenshot(
         png.parent.mkdir(parents=True, exist_ok=True)
         client.save_screenshot(str(png))
     finally:
-        try:
-            os.killpg(proc.pid, signal.SIGTERM)
-            proc.wait(10)
-        except (ProcessLookupError, subprocess.TimeoutExpired):
-            try:
-                os.killpg(proc.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
+        end_group(proc)
     if not png.is_file():
         raise OutputError(f"screenshot: the viewer wrote no image to {png}")
     return png

@@ -8,13 +8,17 @@ import signal
 import socket
 import subprocess
 import time
+import urllib.request
 
 import numpy as np
+import psutil
 import pytest
 from rerun.chunk import RrdReader
 from stream_viz_blueprints.default import build_blueprint
 
+from stream_viz.errors import OutputError
 from stream_viz.viz import paths
+from stream_viz.viz.children import free_port
 from stream_viz.viz.recorder import TELEMETRY_ENV, Recorder, disable_rerun_telemetry
 from stream_viz.viz.sample import demo_graph
 from stream_viz.viz.screenshot import rerun_executable, screenshot
@@ -22,12 +26,6 @@ from stream_viz.viz.style import KIND_COLOR
 from tests.viz.rrd import rows
 
 T0 = 1_700_000_000.0
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _renderer_missing() -> str | None:
@@ -76,7 +74,7 @@ def test_a_viewer_that_goes_away_does_not_stop_the_file(tmp_path):
     exe = rerun_executable()
     if exe is None or ctypes.util.find_library("vulkan") is None:
         pytest.skip("needs the rerun viewer and a Vulkan loader to run a viewer to connect to")
-    port = _free_port()
+    port = free_port()
     viewer = subprocess.Popen([exe, "--headless", "--hide-welcome-screen", f"--port={port}"],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                               start_new_session=True, env=dict(os.environ, CI="1"))
@@ -99,20 +97,48 @@ def test_a_viewer_that_goes_away_does_not_stop_the_file(tmp_path):
     assert paths.SYSTEM in RrdReader(str(rrd)).store().schema().entity_paths()  # footer written
 
 
-def test_serve_gives_a_local_web_viewer_url(tmp_path):
-    grpc_port, web_port = _free_port(), _free_port()
+def _listening(pid: int, ports: set[int]) -> set[tuple[str, int]]:
+    procs = [psutil.Process(pid), *psutil.Process(pid).children(recursive=True)]
+    return {(c.laddr.ip, c.laddr.port) for p in procs for c in p.net_connections(kind="tcp")
+            if c.status == psutil.CONN_LISTEN and c.laddr.port in ports}
+
+
+@pytest.mark.parametrize("bind", ["127.0.0.1", "0.0.0.0"])
+def test_serve_listens_on_loopback_unless_told_and_gives_the_url(tmp_path, bind):
+    if rerun_executable() is None:
+        pytest.skip("the 'rerun' executable is not installed")
+    grpc_port, web_port = free_port(), free_port()
     said = []
     r = Recorder(viewer="serve", grpc_port=grpc_port, web_port=web_port, save=tmp_path / "s.rrd",
-                 announce=said.append)
+                 announce=said.append, bind=bind)
     try:
-        assert r.url.startswith(f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp")
-        assert said == [f"Rerun web viewer: {r.url}"]
-        with socket.create_connection(("127.0.0.1", grpc_port), timeout=5):
-            pass  # the gRPC server listens
+        assert r.url == (f"http://127.0.0.1:{web_port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc_port}"
+                         "%2Fproxy")
+        assert said[0] == f"Rerun web viewer: {r.url}"
+        assert len(said) == (1 if bind == "127.0.0.1" else 2)  # exposed: how to reach it from elsewhere
+        # The page and its data on the same address: loopback by default, every interface if asked.
+        assert _listening(r.server.proc.pid, {web_port, grpc_port}) == {(bind, web_port), (bind, grpc_port)}
+        with urllib.request.urlopen(f"http://127.0.0.1:{web_port}/", timeout=10) as page:
+            assert page.status == 200 and b"<canvas" in page.read().lower()
         r.system(demo_graph(), t=T0)
+        server = r.server.proc
     finally:
         r.close()
+    assert server.poll() is not None  # the server went with the run
+    with pytest.raises(OSError):
+        socket.create_connection(("127.0.0.1", web_port), timeout=2).close()
     assert paths.SYSTEM in rows(tmp_path / "s.rrd")
+
+
+def test_serve_refuses_a_port_already_taken(tmp_path):
+    if rerun_executable() is None:
+        pytest.skip("the 'rerun' executable is not installed")
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        with pytest.raises(OutputError, match=f"port {port}"):
+            Recorder(viewer="serve", grpc_port=port, web_port=free_port())
 
 
 def test_telemetry_off_by_default_and_opt_in(monkeypatch):
