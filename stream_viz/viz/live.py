@@ -80,7 +80,7 @@ class LiveView:
         causes, incidents = report["root_causes"], report["incidents"]
         new = report["iterations"][self._iterations:]
         for it in new:
-            self.rec.rca(seen, it, causes, incidents=incidents)
+            self.rec.rca(seen, dated(it, t), causes, incidents=incidents)
         self._iterations = len(report["iterations"])
         if not new and report["iterations"]:
             self.rec.report(report_markdown(causes, report["iterations"][-1], incidents=incidents), t)
@@ -99,6 +99,12 @@ class LiveView:
             self.rec.close()
 
 
+def dated(iteration: dict[str, Any], t: float) -> dict[str, Any]:
+    """Return the iteration with a time: iteration 0 has none of its own (``t`` 0), and drawn at
+    1970 it would stretch the viewer's time axis over fifty years."""
+    return iteration if iteration.get("t") else {**iteration, "t": t}
+
+
 def metrics_batch_s(members: int, shortest: float, max_chunks_per_s: float) -> float:
     """Return how many seconds of metrics to send at once: ``members`` chunks per batch stay
     within ``max_chunks_per_s``, and a batch covers at least ``shortest`` seconds."""
@@ -114,6 +120,6 @@ def save_diagnosis(path: Path, G: nx.MultiDiGraph, alerts: list[Alert], result: 
         rec.alerts(alerts)
         report = result.to_report()
         for it in report["iterations"]:
-            rec.rca(G, it, report["root_causes"], incidents=report["incidents"])
+            rec.rca(G, dated(it, t0), report["root_causes"], incidents=report["incidents"])
     finally:
         rec.close()

@@ -14,6 +14,7 @@ SYSTEM = "/system"  # G_0: GraphNodes + directed GraphEdges in one entity
 PROCESS_TREE = "/process_tree"  # T_1 with the virtual root
 METRICS = "/metrics"  # /metrics/<kind>/<member name>/theta: Scalars, one series per θ attribute
 ALERTS = "/alerts"  # TextLog
+HEALTH = "/health"  # /health/<kind>/<member name>: StateChange lane (ok, a severity, gone)
 RCA = "/rca"
 RCA_SUBGRAPH = "/rca/subgraph"  # G_j and W_j, drawn over /system at the same positions
 RCA_TRAJECTORY = "/rca/trajectory"  # top fault trajectory, same positions
@@ -28,6 +29,11 @@ def member_path(member: str) -> str:
     kind = kind_of(member)
     parts = [rr.escape_entity_path_part(p) for p in name_of(member).split("/") if p]
     return "/".join([kind, *parts]) if kind != "root" else "root"
+
+
+def health_path(member: str) -> str:
+    """Return ``/health/<kind>/<name>``: the member's health lane."""
+    return f"{HEALTH}/{member_path(member)}"
 
 
 def metrics_path(member: str, leaf: str | None = None) -> str:

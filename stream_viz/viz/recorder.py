@@ -28,6 +28,8 @@ from stream_viz.output import check_writable
 from stream_viz.records import SEVERITY_RANK, Alert
 from stream_viz.viz import paths, style
 from stream_viz.viz.alerts import log_alerts
+from stream_viz.viz.focus import diagnosis_members
+from stream_viz.viz.health import HealthLanes, log_health
 from stream_viz.viz.layout import Layout
 from stream_viz.viz.metrics import log_metrics
 from stream_viz.viz.process_tree import log_process_tree
@@ -77,10 +79,10 @@ def _check_sinks(viewer: str, save: str | Path | None) -> Path | None:
     return path
 
 
-def _default_blueprint() -> rrb.Blueprint:
+def _default_layout() -> Callable[..., rrb.Blueprint]:
     from stream_viz_blueprints.default import build_blueprint
 
-    return build_blueprint()
+    return build_blueprint
 
 
 def part_path(path: Path, n: int) -> Path:
@@ -140,8 +142,10 @@ class Recorder:
     bind : str
         Address ``serve`` listens on, page and data alike: ``127.0.0.1`` (this machine only),
         ``0.0.0.0`` (every interface) or one interface's address.
-    blueprint : rrb.Blueprint, optional
-        Default layout; `stream_viz_blueprints.default.build_blueprint()` if not given.
+    blueprint : rrb.Blueprint or callable, optional
+        Default layout: a fixed ``rrb.Blueprint``, or a function ``(diagnosis=…) -> rrb.Blueprint``
+        called again (and its layout sent again) when the diagnosis's members change;
+        `stream_viz_blueprints.default.build_blueprint` if not given.
     telemetry : bool, optional
         Allow Rerun's usage analytics (default off; see `disable_rerun_telemetry`).
     part_s : float
@@ -158,7 +162,7 @@ class Recorder:
         memory_limit: str = "512MiB",
         web_port: int | None = None,
         grpc_port: int | None = None,
-        blueprint: rrb.Blueprint | None = None,
+        blueprint: rrb.Blueprint | Callable[..., rrb.Blueprint] | None = None,
         telemetry: bool | None = None,
         part_s: float = 0.0,
         announce: Callable[[str], None] = _stderr,
@@ -167,7 +171,12 @@ class Recorder:
         self.save = _check_sinks(viewer, save)  # before anything is opened (and monitoring starts)
         disable_rerun_telemetry(telemetry)
         self.viewer, self.app_id, self.url = viewer, app_id, None
-        self.blueprint = blueprint if blueprint is not None else _default_blueprint()
+        if blueprint is None:
+            blueprint = _default_layout()
+        self._layout = None if isinstance(blueprint, rrb.Blueprint) else blueprint
+        self.blueprint = blueprint if self._layout is None else self._layout()
+        self.diagnosis: dict[str, list[str]] = {}  # what the layout shows first (`focus`)
+        self.health = HealthLanes()
         self.parts: list[Path] = [self.save] if self.save is not None else []
         self.part_s = part_s if self.save is not None else 0.0
         self._part_t0: float | None = None
@@ -280,6 +289,9 @@ class Recorder:
     def _replay(self, t: float, G: nx.MultiDiGraph | None) -> None:
         """Log again what a new part must show to open on its own: the system, the last diagnosis."""
         style.forget_styled(self.rec)  # static styles are not carried over to a new sink
+        lanes = {m: [(t, s)] for m, s in self.health.state.items()}
+        if lanes:
+            log_health(self.rec, lanes)
         if G is not None:
             self.system(G, t, force=True)
         if self._last_rca is not None:
@@ -297,6 +309,8 @@ class Recorder:
         if t is not None:
             self.set_time(t)
         gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
+        if t is not None:
+            log_health(self.rec, self.health.set_gone(t, gone_all))
         sig = (frozenset(G.nodes), frozenset(flow_edges(G)), gone_all, frozenset(self.status.items()),
                frozenset((m, lab) for m, lab in G.nodes(data="label")))
         tree_sig = (frozenset((u, v, k) for u, v, k in G.edges(keys=True) if k != FLOW), gone_all)
@@ -318,6 +332,7 @@ class Recorder:
         for a in sorted(alerts, key=lambda a: a.t):
             if SEVERITY_RANK.get(a.severity, -1) >= SEVERITY_RANK["warn"]:
                 self.status[a.member] = a.severity
+        log_health(self.rec, self.health.alerts(alerts))
         return log_alerts(self.rec, alerts)
 
     def rca(self, G: nx.MultiDiGraph, iteration: Mapping[str, Any],
@@ -328,6 +343,25 @@ class Recorder:
         gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
         self.layout = log_rca(self.rec, G, self.layout, iteration, root_causes,
                               gone=sorted(gone_all), status=self.status, incidents=incidents)
+        self.focus(G, root_causes)
+
+    def focus(self, G: nx.MultiDiGraph, root_causes: Sequence[Mapping[str, Any]]) -> bool:
+        """Send the layout again if the diagnosis's members changed (top trajectory, alerted).
+
+        Only with a layout function (`Recorder` ``blueprint``); the new layout becomes the
+        viewer's active and default one, and the file's. Returns True if it was sent.
+        """
+        if self._layout is None:
+            return False
+        diagnosis = diagnosis_members(G, root_causes, self.status)
+        if diagnosis == self.diagnosis:
+            return False
+        self.diagnosis = diagnosis
+        self.blueprint = self._layout(diagnosis=diagnosis)
+        for stream in (self._live, self._file):
+            if stream is not None:
+                stream.send_blueprint(self.blueprint, make_active=True, make_default=True)
+        return True
 
     def report(self, markdown: str, t: float | None = None) -> None:
         """Log a markdown report at ``/rca/report``."""
