@@ -34,10 +34,12 @@ def diagnosis_view(diagnosis: Mapping[str, Sequence[str]]) -> rrb.Container:
     """
     lanes = rrb.StateTimelineView(origin=paths.HEALTH, name="Health",
                                   contents=[paths.health_path(m) for m in diagnosis])
+    # Small plots: a legend listing every θ attribute would cover them (the tab title names the member).
     plots = [rrb.TimeSeriesView(origin=paths.METRICS, name=f"θ {name_of(m)}",
-                                contents=[f"{paths.metrics_path(x)}/**" for x in shown])
+                                contents=[f"{paths.metrics_path(x)}/**" for x in shown],
+                                plot_legend=rrb.PlotLegend(visible=False))
              for m, shown in diagnosis.items()]
-    return rrb.Vertical(lanes, rrb.Grid(*plots), row_shares=[1, 3], name="Diagnosis")
+    return rrb.Vertical(lanes, rrb.Grid(*plots), row_shares=[2, 3], name="Diagnosis")
 
 
 def metrics_tabs(watched: Iterable[str] = (), diagnosis: Mapping[str, Sequence[str]] | None = None
@@ -95,7 +97,7 @@ def build_blueprint(
             rrb.GraphView(origin=paths.PROCESS_TREE, name="Process tree"),
         ),
         rrb.TextLogView(origin=paths.ALERTS, name="Alerts"),
-        column_shares=[2, 2, 2],
+        column_shares=[3, 2, 2] if diagnosis else [2, 2, 2],  # a diagnosis: plots side by side
     )
     return rrb.Blueprint(
         rrb.Vertical(graph, bottom, row_shares=[3, 2]),

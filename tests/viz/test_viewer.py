@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ctypes.util
+import functools
 import os
 import signal
 import socket
@@ -17,12 +18,15 @@ from rerun.chunk import RrdReader
 from stream_viz_blueprints.default import build_blueprint
 
 from stream_viz.errors import OutputError
+from stream_viz.model.theta import make_theta
+from stream_viz.records import Alert
 from stream_viz.viz import paths
 from stream_viz.viz.children import free_port
+from stream_viz.viz.health import STATE_COLOR
 from stream_viz.viz.recorder import TELEMETRY_ENV, Recorder, disable_rerun_telemetry
 from stream_viz.viz.sample import demo_graph
 from stream_viz.viz.screenshot import rerun_executable, screenshot
-from stream_viz.viz.style import KIND_COLOR
+from stream_viz.viz.style import KIND_COLOR, SEVERITY_COLOR
 from tests.viz.rrd import rows
 
 T0 = 1_700_000_000.0
@@ -68,6 +72,64 @@ def test_rendered_recording_shows_the_graph(tmp_path):
         want = np.array(KIND_COLOR[kind])
         close = np.abs(img.astype(int) - want).sum(axis=2) < 40
         assert close.sum() > 50, f"no {kind} colour {tuple(want)} in the rendered graph"
+
+
+def _diagnosed_recording(path):
+    """A minute of the demo robot: /objects' rate falls at 30 s, the planner warns, one diagnosis."""
+    G = demo_graph()
+    with Recorder(save=path, blueprint=functools.partial(build_blueprint, collapse_panels=True)) as r:
+        r.system(G, t=T0)
+        batch = []
+        for i in range(60):
+            late = i > 30
+            for m, d in G.nodes(data=True):
+                if d.get("kind") == "topic":
+                    rate = 2.0 if late and m == "topic:/objects" else 10.0
+                    d["theta"] = make_theta("topic", {"rate_hz": rate})
+                elif d.get("kind") == "process":
+                    cpu = 80.0 if late else 20.0
+                    d["theta"] = make_theta("process", {"cpu_percent": cpu, "rss_mb": 100.0})
+            batch.append((T0 + i, G.copy()))
+        r.metrics(batch)
+        r.alerts([Alert("topic:/objects", "topic_rate", T0 + 31 + 5 * k, "error", "rate fell", {"value": 2.0})
+                  for k in range(5)] + [Alert("node:/planner", "rosout", T0 + 40, "warn", "slow")])
+        r.system(G, t=T0 + 59)
+        it = {"j": 1, "t": T0 + 31, "subgraph": ["topic:/objects", "node:/planner"], "watchlist": [],
+              "edges": [["topic:/objects", "node:/planner"]], "alert": "topic:/objects"}
+        r.rca(G, it, [{"member": "node:/detector", "score": 0.9,
+                       "trajectory": ["node:/planner", "topic:/objects", "node:/detector"]}])
+        assert list(r.diagnosis) == ["node:/detector", "topic:/objects", "node:/planner"]
+
+
+def hue_pixels(img: np.ndarray, rgb: tuple[int, int, int]) -> int:
+    """Pixels of ``rgb``'s hue and at least half its brightness (the viewer shades lane bars)."""
+    px = img.reshape(-1, 3).astype(float)
+    total = px.sum(axis=1)
+    want = np.array(rgb, dtype=float)
+    bright = total > 0.5 * want.sum()
+    norm = px[bright] / total[bright, None]
+    return int((np.abs(norm - want / want.sum()).sum(axis=1) < 0.06).sum())
+
+
+def test_rendered_diagnosis_opens_on_lanes_and_plots_of_its_members(tmp_path):
+    reason = _renderer_missing()
+    if reason:
+        pytest.skip(f"headless renderer unavailable: {reason}")
+    Image = pytest.importorskip("PIL.Image", reason="Pillow decodes the PNG")
+    rrd, png = tmp_path / "diag.rrd", tmp_path / "diag.png"
+    _diagnosed_recording(rrd)
+    screenshot(rrd, png, timeline=paths.TIME, time_value=T0 + 59, settle=3)
+    img = np.asarray(Image.open(png).convert("RGB"))
+    h, w, _ = img.shape
+    metrics = img[int(h * 0.6):, : int(w * 0.42)]  # the lower left panel: the metrics tabs
+    # The Diagnosis tab is the one shown: the lanes of /objects (error, then ok) and /planner
+    # (warn, then ok) in their severity colours, and the plots' alert crosses.
+    assert hue_pixels(metrics, SEVERITY_COLOR["error"]) > 1000
+    assert hue_pixels(metrics, SEVERITY_COLOR["warn"]) > 500
+    assert hue_pixels(metrics, STATE_COLOR["ok"]) > 200
+    # The graph above keeps its colours (nodes blue, topics orange).
+    graph = img[: int(h * 0.55)]
+    assert hue_pixels(graph, KIND_COLOR["node"]) > 50 and hue_pixels(graph, KIND_COLOR["topic"]) > 50
 
 
 def test_a_viewer_that_goes_away_does_not_stop_the_file(tmp_path):
