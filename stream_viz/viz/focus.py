@@ -22,15 +22,18 @@ def diagnosis_members(
 ) -> dict[str, list[str]]:
     """Return ``member -> members whose θ its plot shows``, most telling first.
 
-    First the top trajectory from the root cause to the first symptom, then the alerted members
-    (``status``: member -> severity), most severe first. A node has no θ of its own: its plot
-    shows its process's (``process_of_node``) beside its alert markers. At most ``limit`` members.
+    The top trajectory's ends (root cause, first symptom), its members with an alert, the rest of
+    it in the order the fault spread, then the other alerted members (``status``: member ->
+    severity), most severe first. A node has no θ of its own: its plot shows its process's
+    (``process_of_node``) beside its alert markers. At most ``limit`` members.
     """
+    status = status or {}
     top = root_causes[0] if root_causes else None
     path = list(reversed(top.get("trajectory") or [top["member"]])) if top else []
-    alerted = sorted((status or {}).items(), key=lambda kv: (-SEVERITY_RANK.get(kv[1], -1), kv[0]))
+    alerted = sorted(status.items(), key=lambda kv: (-SEVERITY_RANK.get(kv[1], -1), kv[0]))
+    order = [*path[:1], *path[-1:], *(m for m in path if m in status), *path, *(m for m, _ in alerted)]
     out: dict[str, list[str]] = {}
-    for m in dict.fromkeys([*path, *(m for m, _ in alerted)]):
+    for m in dict.fromkeys(order):
         if len(out) >= limit:
             break
         shown = [m]

@@ -51,10 +51,13 @@ def test_the_diagnosis_lists_the_trajectory_from_the_root_cause_then_the_alerted
     rc = [{"member": "node:/b", "trajectory": ["node:/a", "topic:/t", "node:/b"]}]
     status = {"node:/c": "warn", "topic:/t": "error", "process:9": "fatal"}
     assert diagnosis_members(G, rc, status) == {
-        "node:/b": ["node:/b", "process:7"],  # a node's plot shows its process's θ
-        "topic:/t": ["topic:/t"], "node:/a": ["node:/a"],
-        "process:9": ["process:9"], "node:/c": ["node:/c"]}  # most severe first
-    assert list(diagnosis_members(G, rc, status, limit=2)) == ["node:/b", "topic:/t"]
+        "node:/b": ["node:/b", "process:7"],  # the root cause; a node's plot shows its process's θ
+        "node:/a": ["node:/a"], "topic:/t": ["topic:/t"],  # the first symptom, the alerted between
+        "process:9": ["process:9"], "node:/c": ["node:/c"]}  # other alerted, most severe first
+    assert list(diagnosis_members(G, rc, status, limit=2)) == ["node:/b", "node:/a"]
+    long = [{"member": "node:/r", "trajectory": ["node:/s", "topic:/1", "node:/m", "topic:/2", "node:/r"]}]
+    assert list(diagnosis_members(G, long, {"topic:/2": "warn"})) == [
+        "node:/r", "node:/s", "topic:/2", "node:/m", "topic:/1"]  # the rest as the fault spread
     assert diagnosis_members(G) == {}
 
 
