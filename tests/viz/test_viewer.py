@@ -25,7 +25,7 @@ from stream_viz.viz.children import free_port
 from stream_viz.viz.health import STATE_COLOR
 from stream_viz.viz.recorder import TELEMETRY_ENV, Recorder, disable_rerun_telemetry
 from stream_viz.viz.sample import demo_graph
-from stream_viz.viz.screenshot import rerun_executable, screenshot
+from stream_viz.viz.screenshot import colour_pixels, hue_pixels, rerun_executable, screenshot
 from stream_viz.viz.style import KIND_COLOR, SEVERITY_COLOR
 from tests.viz.rrd import rows
 
@@ -69,9 +69,7 @@ def test_rendered_recording_shows_the_graph(tmp_path):
     assert len(colors) > 200, "the picture is nearly blank"
     # Node labels are drawn in the kind colours (node blue, topic orange): both present on screen.
     for kind in ("node", "topic"):
-        want = np.array(KIND_COLOR[kind])
-        close = np.abs(img.astype(int) - want).sum(axis=2) < 40
-        assert close.sum() > 50, f"no {kind} colour {tuple(want)} in the rendered graph"
+        assert colour_pixels(img, KIND_COLOR[kind]) > 50, f"no {kind} colour {KIND_COLOR[kind]} in the graph"
 
 
 def _diagnosed_recording(path):
@@ -98,17 +96,7 @@ def _diagnosed_recording(path):
               "edges": [["topic:/objects", "node:/planner"]], "alert": "topic:/objects"}
         r.rca(G, it, [{"member": "node:/detector", "score": 0.9,
                        "trajectory": ["node:/planner", "topic:/objects", "node:/detector"]}])
-        assert list(r.diagnosis) == ["node:/detector", "topic:/objects", "node:/planner"]
-
-
-def hue_pixels(img: np.ndarray, rgb: tuple[int, int, int]) -> int:
-    """Pixels of ``rgb``'s hue and at least half its brightness (the viewer shades lane bars)."""
-    px = img.reshape(-1, 3).astype(float)
-    total = px.sum(axis=1)
-    want = np.array(rgb, dtype=float)
-    bright = total > 0.5 * want.sum()
-    norm = px[bright] / total[bright, None]
-    return int((np.abs(norm - want / want.sum()).sum(axis=1) < 0.06).sum())
+        assert list(r.diagnosis) == ["node:/detector", "node:/planner", "topic:/objects"]
 
 
 def test_rendered_diagnosis_opens_on_lanes_and_plots_of_its_members(tmp_path):
