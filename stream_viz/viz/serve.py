@@ -4,16 +4,22 @@ The SDK's own ``serve_web_viewer`` takes no address and listens on every interfa
 gRPC server listens where it is told: a page anyone on the network could load, whose data only
 this machine could read. The ``rerun`` executable takes one address for both (``--serve-web
 --bind ADDR``), so the served viewer runs as that child process, in its own process group, and
-the run streams into it like into any viewer (``GrpcSink``).
+the run streams into it like into any viewer (``GrpcSink``). On Linux the server is told to end
+when the process that started it does (``PR_SET_PDEATHSIG``), so a monitor killed with SIGKILL
+does not leave it holding the ports.
 """
 
 from __future__ import annotations
 
+import ctypes
 import ipaddress
 import os
+import signal
 import socket
 import subprocess
+import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from urllib.parse import quote
 
@@ -63,6 +69,26 @@ def viewer_urls(bind: str, web_port: int, grpc_port: int) -> tuple[str, str]:
     return f"http://{host}:{web_port}/?url={quote(grpc, safe='')}", grpc
 
 
+def server_executable() -> str | None:
+    """Return the ``rerun`` binary itself (the one on PATH is a Python wrapper around it), else
+    the wrapper, else None."""
+    try:
+        import rerun_cli
+    except ImportError:
+        return rerun_executable()
+    exe = os.path.join(os.path.dirname(rerun_cli.__file__), "rerun")
+    return exe if os.access(exe, os.X_OK) else rerun_executable()
+
+
+def _die_with_parent() -> Callable[[], None] | None:
+    """Return a pre-exec hook making the child get SIGTERM when its parent dies (Linux), else None."""
+    if not sys.platform.startswith("linux"):
+        return None
+    prctl = ctypes.CDLL(None, use_errno=True).prctl  # looked up before the fork: the hook only calls it
+    pr_set_pdeathsig = 1
+    return lambda: prctl(pr_set_pdeathsig, signal.SIGTERM)
+
+
 def check_free(bind: str, port: int) -> None:
     """Raise `OutputError` if ``port`` is taken on ``bind`` (a stale viewer would get the run's data)."""
     host = bind.strip("[]")
@@ -94,7 +120,7 @@ class WebViewerServer:
     def __init__(self, bind: str = DEFAULT_BIND, web_port: int = DEFAULT_WEB_PORT,
                  grpc_port: int = DEFAULT_GRPC_PORT, memory_limit: str = "512MiB",
                  timeout: float = 30.0) -> None:
-        exe = rerun_executable()
+        exe = server_executable()
         if exe is None:
             raise OutputError("--viewer serve: the 'rerun' executable is not on PATH")
         self.bind, self.web_port, self.grpc_port = bind, web_port, grpc_port
@@ -106,7 +132,8 @@ class WebViewerServer:
         self.proc = subprocess.Popen(
             [exe, "--serve-web", "--bind", bind, f"--web-viewer-port={web_port}", f"--port={grpc_port}",
              f"--server-memory-limit={memory_limit}"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True, env=env)
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True, env=env,
+            preexec_fn=_die_with_parent())  # only prctl runs between fork and exec
         try:
             self._wait_listening(timeout)
         except BaseException:

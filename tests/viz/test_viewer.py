@@ -8,6 +8,7 @@ import os
 import signal
 import socket
 import subprocess
+import sys
 import time
 import urllib.request
 
@@ -20,12 +21,14 @@ from stream_viz_blueprints.default import build_blueprint
 from stream_viz.errors import OutputError
 from stream_viz.model.theta import make_theta
 from stream_viz.records import Alert
+from stream_viz.testing import wait_for
 from stream_viz.viz import paths
 from stream_viz.viz.children import free_port
 from stream_viz.viz.health import STATE_COLOR
 from stream_viz.viz.recorder import TELEMETRY_ENV, Recorder, disable_rerun_telemetry
 from stream_viz.viz.sample import demo_graph
 from stream_viz.viz.screenshot import colour_pixels, hue_pixels, rerun_executable, screenshot
+from stream_viz.viz.serve import check_free
 from stream_viz.viz.style import KIND_COLOR, SEVERITY_COLOR
 from tests.viz.rrd import rows
 
@@ -178,6 +181,32 @@ def test_serve_listens_on_loopback_unless_told_and_gives_the_url(tmp_path, bind)
     with pytest.raises(OSError):
         socket.create_connection(("127.0.0.1", web_port), timeout=2).close()
     assert paths.SYSTEM in rows(tmp_path / "s.rrd")
+
+
+def test_a_served_viewer_ends_with_a_monitor_killed_by_sigkill():
+    if rerun_executable() is None:
+        pytest.skip("the 'rerun' executable is not installed")
+    web, grpc = free_port(), free_port()
+    code = ("import time; from stream_viz.viz.recorder import Recorder; "
+            f"r = Recorder(viewer='serve', web_port={web}, grpc_port={grpc}, announce=lambda s: None); "
+            "print(r.server.proc.pid, flush=True); time.sleep(120)")
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        server = psutil.Process(int(p.stdout.readline()))
+        assert server.is_running()
+    finally:
+        p.kill()  # SIGKILL to the monitor only, not to its process group
+        p.wait(10)
+
+    def ended() -> bool:
+        try:
+            return server.status() == psutil.STATUS_ZOMBIE
+        except psutil.NoSuchProcess:
+            return True
+
+    assert wait_for(ended, 10), "the served viewer outlived its monitor"
+    check_free("127.0.0.1", web)  # the ports are free for the next run
+    check_free("127.0.0.1", grpc)
 
 
 def test_serve_refuses_a_port_already_taken(tmp_path):
