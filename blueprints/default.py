@@ -34,12 +34,18 @@ def diagnosis_view(diagnosis: Mapping[str, Sequence[str]]) -> rrb.Container:
     """
     lanes = rrb.StateTimelineView(origin=paths.HEALTH, name="Health",
                                   contents=[paths.health_path(m) for m in diagnosis])
-    # Small plots: a legend listing every θ attribute would cover them (the tab title names the member).
-    plots = [rrb.TimeSeriesView(origin=paths.METRICS, name=f"θ {name_of(m)}",
+    # Small plots: a legend listing every θ attribute would cover them (the title names the member,
+    # by its last name part: a namespaced name is cut off in a plot this narrow).
+    plots = [rrb.TimeSeriesView(origin=paths.METRICS, name=f"θ {short_name(m)}",
                                 contents=[f"{paths.metrics_path(x)}/**" for x in shown],
                                 plot_legend=rrb.PlotLegend(visible=False))
              for m, shown in diagnosis.items()]
-    return rrb.Vertical(lanes, rrb.Grid(*plots), row_shares=[2, 3], name="Diagnosis")
+    return rrb.Vertical(lanes, rrb.Grid(*plots, grid_columns=3), row_shares=[2, 3], name="Diagnosis")
+
+
+def short_name(member: str) -> str:
+    """Return the last part of a member's name (``node:/amr1/amcl`` -> ``amcl``)."""
+    return name_of(member).rstrip("/").rsplit("/", 1)[-1] or name_of(member)
 
 
 def metrics_tabs(watched: Iterable[str] = (), diagnosis: Mapping[str, Sequence[str]] | None = None
@@ -101,8 +107,9 @@ def build_blueprint(
     )
     return rrb.Blueprint(
         rrb.Vertical(graph, bottom, row_shares=[3, 2]),
-        rrb.TimePanel(timeline=timeline, play_state="paused" if paused else "following",
-                      state="collapsed" if collapse_panels else None),
+        # Collapsed: the play controls and the time stay, the streams tree is one click away and
+        # its third of the height goes to the metrics.
+        rrb.TimePanel(timeline=timeline, play_state="paused" if paused else "following", state="collapsed"),
         # The graph needs the width; the blueprint and selection panels are one click away.
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),

@@ -83,5 +83,5 @@ def test_lanes_and_the_diagnosis_layout_are_in_the_file(tmp_path):
     layouts = [strings(rrd, bp) for bp in RrdReader(str(rrd)).blueprints()]
     assert len(layouts) == 2 and ["Diagnosis" in names for names in layouts].count(True) == 1
     names = next(names for names in layouts if "Diagnosis" in names)
-    assert {"Diagnosis", "Health", "θ /camera", "θ /image", "Topics", "Processes"} <= names
+    assert {"Diagnosis", "Health", "θ camera", "θ image", "Topics", "Processes"} <= names
     assert {"/metrics/process/10/**", "/metrics/node/camera/**", "/health/topic/image"} <= names
