@@ -204,7 +204,7 @@ def test_a_served_viewer_ends_with_a_monitor_killed_by_sigkill():
         except psutil.NoSuchProcess:
             return True
 
-    assert wait_for(ended, 10), "the served viewer outlived its monitor"
+    assert wait_for(ended, 20), "the served viewer outlived its monitor"
     check_free("127.0.0.1", web)  # the ports are free for the next run
     check_free("127.0.0.1", grpc)
 
