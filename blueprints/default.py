@@ -7,11 +7,12 @@ Change it by editing `build_blueprint` (or passing your own ``rrb.Blueprint`` to
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 import rerun.blueprint as rrb
 
+from stream_viz.model.ids import name_of
 from stream_viz.viz import paths
 
 APP_ID = "stream_viz"
@@ -25,21 +26,61 @@ def metric_views(watched: Iterable[str]) -> list[rrb.TimeSeriesView]:
     return views
 
 
+def diagnosis_view(diagnosis: Mapping[str, Sequence[str]]) -> rrb.Container:
+    """Return the Diagnosis tab: the members' health lanes above one θ plot per member.
+
+    ``diagnosis`` maps a member to the members whose θ and alert markers its plot shows (a node:
+    itself and its process; `stream_viz.viz.focus.diagnosis_members`), in the order shown.
+    """
+    lanes = rrb.StateTimelineView(origin=paths.HEALTH, name="Health",
+                                  contents=[paths.health_path(m) for m in diagnosis])
+    # Small plots: a legend listing every θ attribute would cover them (the title names the member,
+    # by its last name part: a namespaced name is cut off in a plot this narrow).
+    plots = [rrb.TimeSeriesView(origin=paths.METRICS, name=f"θ {short_name(m)}",
+                                contents=[f"{paths.metrics_path(x)}/**" for x in shown],
+                                plot_legend=rrb.PlotLegend(visible=False))
+             for m, shown in diagnosis.items()]
+    return rrb.Vertical(lanes, rrb.Grid(*plots, grid_columns=3), row_shares=[2, 3], name="Diagnosis")
+
+
+def short_name(member: str) -> str:
+    """Return the last part of a member's name (``node:/amr1/amcl`` -> ``amcl``)."""
+    return name_of(member).rstrip("/").rsplit("/", 1)[-1] or name_of(member)
+
+
+def metrics_tabs(watched: Iterable[str] = (), diagnosis: Mapping[str, Sequence[str]] | None = None
+                 ) -> rrb.Tabs:
+    """Return the metrics panel: the diagnosis first (when there is one), every member's health,
+    then the watched members' plots, or one plot per kind (topics, processes)."""
+    tabs: list[rrb.View | rrb.Container] = [diagnosis_view(diagnosis)] if diagnosis else []
+    tabs.append(rrb.StateTimelineView(origin=paths.HEALTH, name="Health"))
+    tabs += metric_views(watched) or [
+        rrb.TimeSeriesView(origin=f"{paths.METRICS}/topic", name="Topics"),
+        rrb.TimeSeriesView(origin=f"{paths.METRICS}/process", name="Processes"),
+    ]
+    # The eye lands on the first tab: the diagnosis, else the per-kind plots (health is sparse).
+    return rrb.Tabs(*tabs, active_tab=0 if diagnosis else 1, name="Metrics")
+
+
 def build_blueprint(
     watched: Iterable[str] = (),
     timeline: str = paths.TIME,
     paused: bool | None = None,
     collapse_panels: bool = False,
+    diagnosis: Mapping[str, Sequence[str]] | None = None,
 ) -> rrb.Blueprint:
     """Return the default layout.
 
     Top, full width: the system graph with the RCA overlays (one GraphView of ``/system``,
-    ``/rca/subgraph`` and ``/rca/trajectory``). Below: metrics, report / process tree, alert log.
+    ``/rca/subgraph`` and ``/rca/trajectory``). Below: metrics (`metrics_tabs`), report / process
+    tree, alert log.
 
     Parameters
     ----------
     watched : iterable of str
         Members (ids) given their own metric plot; without any, one plot per kind (topics, processes).
+    diagnosis : mapping, optional
+        The members of the current diagnosis (`diagnosis_view`): their tab comes first.
     timeline : str
         The timeline the time panel shows: ``time`` (live, default) or ``rca_iteration``
         (step through the RCA iterations; metrics are on ``time`` only).
@@ -57,23 +98,20 @@ def build_blueprint(
                   paths.SYSTEM],
         name="System graph + RCA overlays",
     )
-    metrics = metric_views(watched) or [
-        rrb.TimeSeriesView(origin=f"{paths.METRICS}/topic", name="Topics"),
-        rrb.TimeSeriesView(origin=f"{paths.METRICS}/process", name="Processes"),
-    ]
     bottom = rrb.Horizontal(
-        rrb.Tabs(*metrics, name="Metrics"),
+        metrics_tabs(watched, diagnosis),
         rrb.Tabs(
             rrb.TextDocumentView(origin=paths.RCA_REPORT, name="Root causes"),
             rrb.GraphView(origin=paths.PROCESS_TREE, name="Process tree"),
         ),
         rrb.TextLogView(origin=paths.ALERTS, name="Alerts"),
-        column_shares=[2, 2, 2],
+        column_shares=[3, 2, 2] if diagnosis else [2, 2, 2],  # a diagnosis: plots side by side
     )
     return rrb.Blueprint(
         rrb.Vertical(graph, bottom, row_shares=[3, 2]),
-        rrb.TimePanel(timeline=timeline, play_state="paused" if paused else "following",
-                      state="collapsed" if collapse_panels else None),
+        # Collapsed: the play controls and the time stay, the streams tree is one click away and
+        # its third of the height goes to the metrics.
+        rrb.TimePanel(timeline=timeline, play_state="paused" if paused else "following", state="collapsed"),
         # The graph needs the width; the blueprint and selection panels are one click away.
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),

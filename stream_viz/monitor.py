@@ -31,6 +31,7 @@ from stream_viz.progress import Progress
 from stream_viz.rca.engine import RcaEngine, RcaResult
 from stream_viz.report import build_report, write_report
 from stream_viz.viz.live import LiveView
+from stream_viz.viz.serve import ServeAt
 
 
 class Monitor:
@@ -58,6 +59,7 @@ class Monitor:
         viewer: str = "none",
         progress: Progress | None = None,
         domain_id: int | None = None,
+        serve_at: ServeAt | None = None,
     ) -> None:
         # Outputs are checked before anything starts: a typo must not cost a run.
         self.report_path = check_writable(report, "report") if report else None
@@ -72,7 +74,8 @@ class Monitor:
         self.plugins = PluginSet.from_config(config)
         self._say_problems(self.plugins.load_problems)
         self.store.add_problems(self.plugins.load_problems, t=self.started_at)
-        self.view = LiveView(viewer=viewer, save=save, part_s=60.0 * config.monitor.recording_part_minutes)
+        self.view = LiveView(viewer=viewer, save=save, part_s=60.0 * config.monitor.recording_part_minutes,
+                             serve_at=serve_at)
         self.shadow = Shadow(history=config.monitor.history, forget_gone_s=config.monitor.forget_gone_s)
         self.watchlist = Watchlist()
         self.detector = Detector(self.plugins, self.watchlist, config.watchlist, config.expected_rates)

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from stream_viz.commands.monitor import add_outputs, install_stop_handlers, linger, say_recording
+from stream_viz.commands.monitor import add_outputs, install_stop_handlers, linger, say_recording, serve_at
 from stream_viz.demo.faults import FAULTS
 from stream_viz.demo.robots import ROBOTS
 
@@ -70,7 +70,8 @@ def run(args: argparse.Namespace) -> int:
     if fault is not None:
         robot.topology.check_fault(fault)
     # The monitor checks its outputs before any robot process starts: a bad path costs nothing.
-    mon = Monitor(config, db=args.db, save=save, report=args.report, viewer=viewer, domain_id=args.domain)
+    mon = Monitor(config, db=args.db, save=save, report=args.report, viewer=viewer, domain_id=args.domain,
+                  serve_at=serve_at(args))
     try:
         size = "" if fault is None or fault.size is None else f" (size {fault.size:g})"
         what = f"{fault.fault}{size} of {fault.target} {fault.at:g} s after it is up" if fault else "no fault"

@@ -13,6 +13,8 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from stream_viz.viz.serve import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, ServeAt
+
 if TYPE_CHECKING:
     from stream_viz.monitor import Monitor
 
@@ -30,6 +32,20 @@ def add_outputs(p: argparse.ArgumentParser) -> None:
         "--viewer", default=None, metavar="spawn|serve|none|URL",
         help="spawn a native viewer, serve a web viewer on localhost, none, or a rerun+http:// URL",
     )
+    p.add_argument(
+        "--serve-bind", default=DEFAULT_BIND, metavar="ADDR",
+        help="with --viewer serve: the address the page and its data listen on (127.0.0.1: this "
+             "machine only; 0.0.0.0: every interface, no authentication)",
+    )
+    p.add_argument("--web-port", type=int, default=DEFAULT_WEB_PORT, metavar="PORT",
+                   help="with --viewer serve: the web page's port")
+    p.add_argument("--grpc-port", type=int, default=DEFAULT_GRPC_PORT, metavar="PORT",
+                   help="with --viewer serve: the port the page reads the data from")
+
+
+def serve_at(args: argparse.Namespace) -> ServeAt:
+    """Where ``--viewer serve`` listens, from the command line."""
+    return ServeAt(args.serve_bind, args.web_port, args.grpc_port)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -46,7 +62,8 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     install_stop_handlers(stop)
     viewer = args.viewer or "none"
-    mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=viewer)
+    mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=viewer,
+                  serve_at=serve_at(args))
     mon.progress.say(f"alert database: {mon.db_path}")
     try:
         mon.run(args.duration, stop)

@@ -11,6 +11,7 @@ from stream_viz.records import Alert, Sample
 from stream_viz.viz.metrics import MetricBatch
 from stream_viz.viz.rca import report_markdown
 from stream_viz.viz.recorder import Recorder
+from stream_viz.viz.serve import ServeAt
 
 
 class LiveView:
@@ -30,11 +31,16 @@ class LiveView:
         is closed, so a large system batches longer (`metrics_batch_s`).
     part_s : float
         Seconds per file part of the recording (0: one file); parts bound that index.
+    serve_at : ServeAt, optional
+        Address and ports of a ``serve``d viewer (default: loopback, 9090 and 9876).
     """
 
     def __init__(self, viewer: str = "none", save: Path | None = None, metrics_every: float = 5.0,
-                 max_chunks_per_s: float = 20.0, part_s: float = 0.0) -> None:
-        self.rec = Recorder(viewer=viewer, save=save, part_s=part_s)
+                 max_chunks_per_s: float = 20.0, part_s: float = 0.0,
+                 serve_at: ServeAt | None = None) -> None:
+        at = serve_at or ServeAt()
+        self.rec = Recorder(viewer=viewer, save=save, part_s=part_s, bind=at.bind, web_port=at.web_port,
+                            grpc_port=at.grpc_port)
         self.metrics_every, self.max_chunks_per_s = metrics_every, max_chunks_per_s
         self._batch = MetricBatch()
         self._iterations = 0
@@ -74,7 +80,7 @@ class LiveView:
         causes, incidents = report["root_causes"], report["incidents"]
         new = report["iterations"][self._iterations:]
         for it in new:
-            self.rec.rca(seen, it, causes, incidents=incidents)
+            self.rec.rca(seen, dated(it, t), causes, incidents=incidents)
         self._iterations = len(report["iterations"])
         if not new and report["iterations"]:
             self.rec.report(report_markdown(causes, report["iterations"][-1], incidents=incidents), t)
@@ -93,6 +99,12 @@ class LiveView:
             self.rec.close()
 
 
+def dated(iteration: dict[str, Any], t: float) -> dict[str, Any]:
+    """Return the iteration with a time: iteration 0 has none of its own (``t`` 0), and drawn at
+    1970 it would stretch the viewer's time axis over fifty years."""
+    return iteration if iteration.get("t") else {**iteration, "t": t}
+
+
 def metrics_batch_s(members: int, shortest: float, max_chunks_per_s: float) -> float:
     """Return how many seconds of metrics to send at once: ``members`` chunks per batch stay
     within ``max_chunks_per_s``, and a batch covers at least ``shortest`` seconds."""
@@ -108,6 +120,6 @@ def save_diagnosis(path: Path, G: nx.MultiDiGraph, alerts: list[Alert], result: 
         rec.alerts(alerts)
         report = result.to_report()
         for it in report["iterations"]:
-            rec.rca(G, it, report["root_causes"], incidents=report["incidents"])
+            rec.rca(G, dated(it, t0), report["root_causes"], incidents=report["incidents"])
     finally:
         rec.close()

@@ -14,6 +14,7 @@ SYSTEM = "/system"  # G_0: GraphNodes + directed GraphEdges in one entity
 PROCESS_TREE = "/process_tree"  # T_1 with the virtual root
 METRICS = "/metrics"  # /metrics/<kind>/<member name>/theta: Scalars, one series per θ attribute
 ALERTS = "/alerts"  # TextLog
+HEALTH = "/health"  # /health/<kind>/<member name>: StateChange lane (ok, a severity, gone)
 RCA = "/rca"
 RCA_SUBGRAPH = "/rca/subgraph"  # G_j and W_j, drawn over /system at the same positions
 RCA_TRAJECTORY = "/rca/trajectory"  # top fault trajectory, same positions
@@ -38,6 +39,11 @@ def group_path(grouping: str, group: str) -> str:
     root = GROUP_ROOTS[1] if grouping == "process" else GROUP_ROOTS[0]
     parts = [rr.escape_entity_path_part(p) for p in group.split("/") if p]
     return "/".join([root, *parts])
+
+
+def health_path(member: str) -> str:
+    """Return ``/health/<kind>/<name>``: the member's health lane."""
+    return f"{HEALTH}/{member_path(member)}"
 
 
 def metrics_path(member: str, leaf: str | None = None) -> str:

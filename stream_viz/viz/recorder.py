@@ -1,7 +1,8 @@
 """The Rerun side of a run: one own ``RecordingStream`` going to a viewer and/or an ``.rrd`` file.
 
-Viewer modes: ``spawn`` (native viewer, needs a display), ``serve`` (gRPC server + web viewer on
-localhost), ``none``, or the gRPC URL of a running viewer (``rerun+http://host:port/proxy``). With
+Viewer modes: ``spawn`` (native viewer, needs a display), ``serve`` (gRPC server + web viewer, on
+loopback unless ``bind`` says otherwise; `stream_viz.viz.serve`), ``none``, or the gRPC URL of a
+running viewer (``rerun+http://host:port/proxy``). With
 ``save`` the same stream is also written to a file (sinks are teed), default blueprint included.
 A long run is saved in parts (``run.rrd``, ``run_1.rrd``, …; one recording id, so the viewer
 merges them): Rerun keeps an index entry for every chunk written to a file until it is closed,
@@ -16,7 +17,6 @@ import uuid
 from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
-from urllib.parse import quote
 
 import networkx as nx
 import rerun as rr
@@ -28,17 +28,18 @@ from stream_viz.output import check_writable
 from stream_viz.records import SEVERITY_RANK, Alert
 from stream_viz.viz import paths, style
 from stream_viz.viz.alerts import log_alerts
+from stream_viz.viz.focus import diagnosis_members
+from stream_viz.viz.health import HealthLanes, log_health
 from stream_viz.viz.layout import Layout, settle
 from stream_viz.viz.metrics import log_metrics
 from stream_viz.viz.process_tree import log_process_tree
 from stream_viz.viz.rca import log_rca, log_report
 from stream_viz.viz.screenshot import rerun_executable
+from stream_viz.viz.serve import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, WebViewerServer
 from stream_viz.viz.system import log_system, with_gone
 
 VIEWER_MODES = ("spawn", "serve", "none")
 GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
-DEFAULT_GRPC_PORT = 9876
-DEFAULT_WEB_PORT = 9090
 TELEMETRY_ENV = "STREAM_VIZ_RERUN_TELEMETRY"  # set to 1 to allow Rerun's usage analytics
 
 
@@ -78,10 +79,10 @@ def _check_sinks(viewer: str, save: str | Path | None) -> Path | None:
     return path
 
 
-def _default_blueprint() -> rrb.Blueprint:
+def _default_layout() -> Callable[..., rrb.Blueprint]:
     from stream_viz_blueprints.default import build_blueprint
 
-    return build_blueprint()
+    return build_blueprint
 
 
 def part_path(path: Path, n: int) -> Path:
@@ -138,8 +139,13 @@ class Recorder:
         Memory limit of the spawned viewer / the served gRPC buffer.
     web_port, grpc_port : int, optional
         Ports of ``serve`` (web viewer, gRPC) and ``spawn`` (gRPC).
-    blueprint : rrb.Blueprint, optional
-        Default layout; `stream_viz_blueprints.default.build_blueprint()` if not given.
+    bind : str
+        Address ``serve`` listens on, page and data alike: ``127.0.0.1`` (this machine only),
+        ``0.0.0.0`` (every interface) or one interface's address.
+    blueprint : rrb.Blueprint or callable, optional
+        Default layout: a fixed ``rrb.Blueprint``, or a function ``(diagnosis=…) -> rrb.Blueprint``
+        called again (and its layout sent again) when the diagnosis's members change;
+        `stream_viz_blueprints.default.build_blueprint` if not given.
     telemetry : bool, optional
         Allow Rerun's usage analytics (default off; see `disable_rerun_telemetry`).
     part_s : float
@@ -158,16 +164,22 @@ class Recorder:
         memory_limit: str = "512MiB",
         web_port: int | None = None,
         grpc_port: int | None = None,
-        blueprint: rrb.Blueprint | None = None,
+        blueprint: rrb.Blueprint | Callable[..., rrb.Blueprint] | None = None,
         telemetry: bool | None = None,
         part_s: float = 0.0,
         announce: Callable[[str], None] = _stderr,
         grouping: str = "namespace",
+        bind: str = DEFAULT_BIND,
     ) -> None:
         self.save = _check_sinks(viewer, save)  # before anything is opened (and monitoring starts)
         disable_rerun_telemetry(telemetry)
         self.viewer, self.app_id, self.url = viewer, app_id, None
-        self.blueprint = blueprint if blueprint is not None else _default_blueprint()
+        if blueprint is None:
+            blueprint = _default_layout()
+        self._layout = None if isinstance(blueprint, rrb.Blueprint) else blueprint
+        self.blueprint = blueprint if self._layout is None else self._layout()
+        self.diagnosis: dict[str, list[str]] = {}  # what the layout shows first (`focus`)
+        self.health = HealthLanes()
         self.parts: list[Path] = [self.save] if self.save is not None else []
         self.part_s = part_s if self.save is not None else 0.0
         self._part_t0: float | None = None
@@ -175,18 +187,22 @@ class Recorder:
         self._last_report: tuple[str, float | None] | None = None
         self.layout: Layout | None = None
         self.grouping = grouping
+        self.server: WebViewerServer | None = None
         self.status: dict[str, str] = {}
         self._system_sig: Any = None
         self._tree_sig: Any = None
         self._closed = False
         self.enabled = viewer != "none" or self.save is not None
-        self._open(memory_limit, web_port, grpc_port)
+        self._open(memory_limit, web_port, grpc_port, bind)
         if viewer == "serve":
             announce(f"Rerun web viewer: {self.url}")
+            if self.server is not None and not self.server.loopback:
+                announce(f"  served on {bind}: from another machine, put this machine's address "
+                         "in place of 127.0.0.1, twice (the page and its ?url=)")
         elif viewer == "spawn":
             announce(f"Rerun viewer spawned, streaming to {self.url}")
 
-    def _open(self, memory_limit: str, web_port: int | None, grpc_port: int | None) -> None:
+    def _open(self, memory_limit: str, web_port: int | None, grpc_port: int | None, bind: str) -> None:
         """Open the streams: one to the viewer, one to the file, both of one recording id.
 
         The file's sink is swapped for the next part without touching the viewer's connection (a
@@ -200,14 +216,16 @@ class Recorder:
                        or [rr.RecordingStream(self.app_id, default_enabled=False)])
         try:
             if self._live is not None:
-                self.url = self._connect(self._live, memory_limit, web_port, grpc_port)
+                self.url = self._connect(self._live, memory_limit, web_port, grpc_port, bind)
             if self._file is not None:
                 self._file.set_sinks(rr.FileSink(str(self.save)), default_blueprint=self.blueprint)
         except (RuntimeError, OSError, ValueError) as e:
+            if self.server is not None:
+                self.server.stop()
             raise OutputError(f"--viewer {self.viewer}: could not start the Rerun sink: {e}") from e
 
     def _connect(self, live: rr.RecordingStream, memory_limit: str, web_port: int | None,
-                 grpc_port: int | None) -> str:
+                 grpc_port: int | None, bind: str) -> str:
         """Point the viewer's stream at its viewer; return the URL to tell the user."""
         bp = self.blueprint
         if self.viewer == "spawn":
@@ -217,12 +235,10 @@ class Recorder:
             live.set_sinks(rr.GrpcSink(url), default_blueprint=bp)
             return url
         if self.viewer == "serve":
-            server = rr.GrpcServerSink("127.0.0.1", grpc_port or DEFAULT_GRPC_PORT,
-                                       server_memory_limit=memory_limit)
-            live.set_sinks(server, default_blueprint=bp)
-            port = web_port or DEFAULT_WEB_PORT
-            rr.serve_web_viewer(web_port=port, open_browser=False, connect_to=server.uri)
-            return f"http://127.0.0.1:{port}/?url={quote(server.uri, safe='')}"
+            self.server = WebViewerServer(bind, web_port or DEFAULT_WEB_PORT,
+                                          grpc_port or DEFAULT_GRPC_PORT, memory_limit)
+            live.set_sinks(rr.GrpcSink(self.server.grpc_url), default_blueprint=bp)
+            return self.server.url
         live.set_sinks(rr.GrpcSink(self.viewer), default_blueprint=bp)
         return self.viewer
 
@@ -277,6 +293,9 @@ class Recorder:
     def _replay(self, t: float, G: nx.MultiDiGraph | None) -> None:
         """Log again what a new part must show to open on its own: the system, the last diagnosis."""
         style.forget_styled(self.rec)  # static styles are not carried over to a new sink
+        lanes = {m: [(t, s)] for m, s in self.health.state.items()}
+        if lanes:
+            log_health(self.rec, lanes)
         if G is not None:
             self.system(G, t, force=True)
         if self._last_rca is not None:
@@ -294,6 +313,8 @@ class Recorder:
         if t is not None:
             self.set_time(t)
         gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
+        if t is not None:
+            log_health(self.rec, self.health.set_gone(t, gone_all))
         sig = (frozenset(G.nodes), frozenset(flow_edges(G)), gone_all, frozenset(self.status.items()),
                frozenset((m, lab) for m, lab in G.nodes(data="label")))
         tree_sig = (frozenset((u, v, k) for u, v, k in G.edges(keys=True) if k != FLOW), gone_all)
@@ -317,6 +338,7 @@ class Recorder:
         for a in sorted(alerts, key=lambda a: a.t):
             if SEVERITY_RANK.get(a.severity, -1) >= SEVERITY_RANK["warn"]:
                 self.status[a.member] = a.severity
+        log_health(self.rec, self.health.alerts(alerts))
         return log_alerts(self.rec, alerts)
 
     def rca(self, G: nx.MultiDiGraph, iteration: Mapping[str, Any],
@@ -327,6 +349,25 @@ class Recorder:
         gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
         self.layout = log_rca(self.rec, G, self.layout, iteration, root_causes,
                               gone=sorted(gone_all), status=self.status, incidents=incidents)
+        self.focus(G, root_causes)
+
+    def focus(self, G: nx.MultiDiGraph, root_causes: Sequence[Mapping[str, Any]]) -> bool:
+        """Send the layout again if the diagnosis's members changed (top trajectory, alerted).
+
+        Only with a layout function (`Recorder` ``blueprint``); the new layout becomes the
+        viewer's active and default one, and the file's. Returns True if it was sent.
+        """
+        if self._layout is None:
+            return False
+        diagnosis = diagnosis_members(G, root_causes, self.status)
+        if diagnosis == self.diagnosis:
+            return False
+        self.diagnosis = diagnosis
+        self.blueprint = self._layout(diagnosis=diagnosis)
+        for stream in (self._live, self._file):
+            if stream is not None:
+                stream.send_blueprint(self.blueprint, make_active=True, make_default=True)
+        return True
 
     def report(self, markdown: str, t: float | None = None) -> None:
         """Log a markdown report at ``/rca/report``."""
@@ -355,6 +396,8 @@ class Recorder:
                 stream.disconnect()
             except Exception as e:
                 _stderr(f"stream-viz: closing the Rerun recording: {e}")
+        if self.server is not None:
+            self.server.stop()  # the served page goes with the run
 
     def _file_first(self) -> list[rr.RecordingStream]:
         # The file is the record: it is finished before a viewer that may have gone away is waited for.

@@ -26,6 +26,8 @@ def test_every_entity_path_and_timeline_is_named():
     for value in (paths.SYSTEM, paths.PROCESS_TREE, paths.ALERTS, paths.RCA_SUBGRAPH, paths.RCA_TRAJECTORY,
                   paths.RCA_REPORT, paths.TIME, paths.RCA_ITERATION):
         assert f"`{value}`" in CONTRACTS, value
+    assert f"`{paths.HEALTH}/<kind>/<name>`" in CONTRACTS
+    assert paths.health_path("topic:/camera/image") == "/health/topic/camera/image"
     for leaf in (paths.THETA, paths.ALERT_MARKERS):
         assert f"`{paths.METRICS}/<kind>/<name>/{leaf}`" in CONTRACTS, leaf
     assert "`/metrics/topic/camera/image/theta`" in CONTRACTS
