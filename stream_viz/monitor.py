@@ -60,6 +60,7 @@ class Monitor:
         progress: Progress | None = None,
         domain_id: int | None = None,
         serve_at: ServeAt | None = None,
+        group_by: str = "namespace",
     ) -> None:
         # Outputs are checked before anything starts: a typo must not cost a run.
         self.report_path = check_writable(report, "report") if report else None
@@ -75,7 +76,7 @@ class Monitor:
         self._say_problems(self.plugins.load_problems)
         self.store.add_problems(self.plugins.load_problems, t=self.started_at)
         self.view = LiveView(viewer=viewer, save=save, part_s=60.0 * config.monitor.recording_part_minutes,
-                             serve_at=serve_at)
+                             serve_at=serve_at, grouping=group_by)
         self.shadow = Shadow(history=config.monitor.history, forget_gone_s=config.monitor.forget_gone_s)
         self.watchlist = Watchlist()
         self.detector = Detector(self.plugins, self.watchlist, config.watchlist, config.expected_rates)

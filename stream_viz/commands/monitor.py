@@ -13,6 +13,7 @@ import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from stream_viz.viz.layout_groups import GROUPINGS
 from stream_viz.viz.serve import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, ServeAt
 
 if TYPE_CHECKING:
@@ -41,6 +42,8 @@ def add_outputs(p: argparse.ArgumentParser) -> None:
                    help="with --viewer serve: the web page's port")
     p.add_argument("--grpc-port", type=int, default=DEFAULT_GRPC_PORT, metavar="PORT",
                    help="with --viewer serve: the port the page reads the data from")
+    p.add_argument("--group-by", choices=GROUPINGS, default="namespace",
+                   help="the system graph's boxes: per namespace (default), per process, or none")
 
 
 def serve_at(args: argparse.Namespace) -> ServeAt:
@@ -63,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     install_stop_handlers(stop)
     viewer = args.viewer or "none"
     mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=viewer,
-                  serve_at=serve_at(args))
+                  serve_at=serve_at(args), group_by=args.group_by)
     mon.progress.say(f"alert database: {mon.db_path}")
     try:
         mon.run(args.duration, stop)

@@ -33,14 +33,16 @@ class LiveView:
         Seconds per file part of the recording (0: one file); parts bound that index.
     serve_at : ServeAt, optional
         Address and ports of a ``serve``d viewer (default: loopback, 9090 and 9876).
+    grouping : str
+        The system graph's boxes: ``namespace``, ``process`` or ``none``.
     """
 
     def __init__(self, viewer: str = "none", save: Path | None = None, metrics_every: float = 5.0,
                  max_chunks_per_s: float = 20.0, part_s: float = 0.0,
-                 serve_at: ServeAt | None = None) -> None:
+                 serve_at: ServeAt | None = None, grouping: str = "namespace") -> None:
         at = serve_at or ServeAt()
         self.rec = Recorder(viewer=viewer, save=save, part_s=part_s, bind=at.bind, web_port=at.web_port,
-                            grpc_port=at.grpc_port)
+                            grpc_port=at.grpc_port, grouping=grouping)
         self.metrics_every, self.max_chunks_per_s = metrics_every, max_chunks_per_s
         self._batch = MetricBatch()
         self._iterations = 0

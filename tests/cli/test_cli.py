@@ -16,6 +16,7 @@ import pytest
 from rerun.chunk import RrdReader
 
 from stream_viz.testing import EXE, TALKER, wait_for
+from tests.viz.rrd import rows
 
 REPORT_SCHEMA = jsonschema.Draft202012Validator(
     json.loads((Path(__file__).resolve().parents[2] / "docs" / "report.schema.json").read_text()))
@@ -107,6 +108,24 @@ def test_monitor_ends_on_duration_and_writes_everything(children, tmp_path):
     with sqlite3.connect(db) as con:
         assert con.execute("SELECT count(*) FROM snapshots").fetchone()[0] >= 1
     assert "/system" in RrdReader(str(tmp_path / "m.rrd")).store().schema().entity_paths()
+
+
+@pytest.mark.ros
+def test_monitor_group_by_process_draws_a_box_around_each_process(children, tmp_path):
+    talker = children.python(TALKER, name="talker")  # /talker and /listener in one process
+    out = run_cli(["monitor", "--duration", "8", "--viewer", "none", "--group-by", "process",
+                   "--save", str(tmp_path / "m.rrd")], children.env)
+    assert out.returncode == 0, out.stderr
+    data = rows(tmp_path / "m.rrd")
+    system = data["/system"][-1]
+    pos = dict(zip(system["GraphNodes:node_ids"], map(tuple, system["GraphNodes:positions"]), strict=True))
+    boxes = {path: row["GraphNodes:positions"] for path, found in data.items() if path.startswith("/process/")
+             for row in found[-1:] if row.get("GraphNodes:positions")}
+    assert boxes and not any(path.startswith("/namespace/") for path in data)
+    (x0, y0), (x1, y1) = next(iter(boxes.values()))
+    for node in ("node:/talker", "node:/listener"):
+        assert x0 < pos[node][0] < x1 and y0 < pos[node][1] < y1, (node, pos, boxes)
+    assert talker.poll() is None
 
 
 @pytest.mark.ros
