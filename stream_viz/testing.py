@@ -20,6 +20,8 @@ import time
 from collections.abc import MutableMapping
 from pathlib import Path
 
+from stream_viz.viz.children import end_group
+
 _LOCKS: list[int] = []
 
 
@@ -79,18 +81,7 @@ class Children:
 
     def end(self, p: subprocess.Popen, sig: int = signal.SIGINT, timeout: float = 5.0) -> None:
         """End ``p``'s process group with ``sig``, then SIGKILL if it is still there after ``timeout``."""
-        if p.poll() is None:
-            try:
-                os.killpg(p.pid, sig)
-                p.wait(timeout)
-            except (ProcessLookupError, subprocess.TimeoutExpired):
-                pass
-        if p.poll() is None:
-            try:
-                os.killpg(p.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-            p.wait(5)
+        end_group(p, sig, timeout)
 
     def end_all(self) -> None:
         """End every child started so far."""

@@ -19,7 +19,7 @@ from pathlib import Path
 from bench.eval.metrics import hit_at, tie_blocks
 from bench.eval.provenance import code_version
 from bench.eval.suites import run_id
-from stream_viz.commands.analyze import _read_run
+from stream_viz.commands.analyze import read_run
 from stream_viz.rca import RcaSettings
 from stream_viz.rca.engine import analyze
 
@@ -31,7 +31,7 @@ def blocks_of(ranked: list) -> list[tuple[str, ...]]:
 
 def rerank(db: Path) -> list:
     """Today's ranking of the run in ``db``, ties as tuples (`bench.eval.metrics.tie_blocks`)."""
-    G, alerts, watch, *_ = _read_run(db)
+    G, alerts, watch, *_ = read_run(db)
     result = analyze(G, alerts, RcaSettings(), set(watch) if watch else None)
     return tie_blocks((rc.member, round(rc.score, 6)) for rc in result.root_causes)
 

@@ -33,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
         check_writable(args.report, "report")
     if args.save:
         check_writable(args.save, "recording")
-    G, alerts, watch, started, ended, injected = _read_run(args.db)
+    G, alerts, watch, started, ended, injected = read_run(args.db)
     result = analyze(G, alerts, settings, set(watch) if watch else None)
     report = build_report(G, alerts, result.to_report(), started, ended, injected)
     for rank, rc in enumerate(report["root_causes"][:10], 1):
@@ -63,7 +63,7 @@ def _rca_settings(args: argparse.Namespace) -> Any:
     return settings
 
 
-def _read_run(db: Path) -> tuple[Any, list[Any], Any, float, float, Any]:
+def read_run(db: Path) -> tuple[Any, list[Any], Any, float, float, Any]:
     """The model, alerts, saved watchlist, start, end and injected fault of the run in ``db``."""
     from stream_viz.detect.store import AlertStore
     from stream_viz.errors import StoreError
