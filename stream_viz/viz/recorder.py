@@ -321,6 +321,9 @@ class Recorder:
         if tree_sig != self._tree_sig or force:
             log_process_tree(self.rec, G)
             self._tree_sig = tree_sig
+        settled = self.layout is not None and self.layout.pending is None
+        if sig == self._system_sig and settled and not force:
+            return False  # nothing drawn changed and no new structure is waiting to settle
         # Laid out again only once a changed structure has settled (`settle`, once per sample).
         layout = settle(with_gone(G, gone_all), self.layout, grouping=self.grouping)
         if sig == self._system_sig and layout is self.layout and not force:
