@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import networkx as nx
 import numpy as np
 
-from stream_viz.model.queries import called_servers, nodes_of_process
+from stream_viz.model.queries import called_servers, nodes_of_process, process_of_node
 from stream_viz.rca import siblings
 from stream_viz.rca.causal import causes, is_node, outputs, publishers
 from stream_viz.rca.charge import charged_nodes, names_in, pointed_nodes, publisher_shares
@@ -168,12 +168,14 @@ class NodeView:
     logged: float = INF
     exited: float = INF
 
-    def active(self, t0: float, t1: float) -> float:
+    def active(self, t0: float, t1: float, own: bool = False) -> float:
         """Its anomaly when one of its symptoms held in ``[t0, t1]``; else its untimed evidence
-        when it has no timed symptom at all; else 0."""
+        when it has no timed symptom at all; else 0. ``own``: only what it does not share with
+        its process (asked by a node of the same process)."""
+        x = self.own_anomaly if own else self.anomaly
         if overlaps(self.spans, t0, t1):
-            return self.anomaly
-        return 0.0 if self.spans else self.untimed
+            return x
+        return 0.0 if self.spans else min(self.untimed, x) if own else self.untimed
 
 
 def _clip(x: float) -> float:
@@ -405,8 +407,11 @@ def _upstream(
     `SILENT_DECAY`. ``sources``: the members that can excuse at all (symptoms, candidates,
     evidence); the walk ends once it has passed every one of them. ``fellows``: nodes that
     stalled with ``n`` in one executor (`siblings.stalls`) — neither they nor the topics only
-    they publish excuse it.
+    they publish excuse it. A node of ``n``'s own process excuses it only with its own changes:
+    what they share (the process's CPU, memory, exit) is one symptom of the process, and does
+    not travel along the data flow between them.
     """
+    home = process_of_node(G, n)
     if v.onset < INF:
         lo, hi = v.onset - settings.episode_gap, v.onset + settings.tolerance
     else:  # evidence without a time: any time
@@ -428,7 +433,7 @@ def _upstream(
                 continue
             if left is not None:
                 left.discard(p)
-            found = _excuse(G, p, n, s, views, ev_passive, lo, hi)
+            found = _excuse(G, p, n, s, views, ev_passive, lo, hi, home)
             worst = max(worst, w * found)
             if found > 0 or w * SILENT_DECAY <= worst:
                 continue  # an alerting member ends its path: the earlier ones are its own causes
@@ -457,11 +462,14 @@ def _excuse(
     ev_passive: dict[str, Evidence],
     lo: float,
     hi: float,
+    home: str | None = None,
 ) -> float:
-    """How much the cause ``p`` of ``n`` was anomalous at some time in ``[lo, hi]``."""
+    """How much the cause ``p`` of ``n`` was anomalous at some time in ``[lo, hi]``; a node of
+    ``n``'s process ``home`` counts with its own changes only."""
     if is_node(G, p):  # a server it calls, or a node further upstream
         pv = views.get(p)
-        return 0.0 if pv is None or pv.implied else pv.active(lo, hi)
+        fellow = home is not None and process_of_node(G, p) == home
+        return 0.0 if pv is None or pv.implied else pv.active(lo, hi, own=fellow)
     worst = s.anomaly[p] if p in s.anomaly and overlaps(s.episodes[p], lo, hi) else 0.0
     e = ev_passive.get(p)
     if e is not None and e.meets(lo, hi):
@@ -470,6 +478,9 @@ def _excuse(
         qv = views.get(q)
         if q == n or qv is None or qv.implied:
             continue
-        own = max(qv.direct, qv.evidence)
+        if home is not None and process_of_node(G, q) == home:
+            own = max(qv.own_direct, qv.own_evidence)
+        else:
+            own = max(qv.direct, qv.evidence)
         worst = max(worst, own if overlaps(qv.spans, lo, hi) else (0.0 if qv.spans else qv.untimed))
     return worst

@@ -98,13 +98,31 @@ def test_an_own_error_log_tells_the_blocking_node_apart(G):
     assert by[LIDAR].evidence["upstream"] == pytest.approx(OUT)
 
 
-def test_siblings_the_data_flow_tells_apart_are_not_indistinguishable(G):
-    # A process alert on both, but one feeds the other: the data flow tells them apart.
+def with_cam_info(G):
+    """cam also feeds lidar, inside the container: cam → /cam_info → lidar."""
     add_member(G, "topic:/cam_info")
     add_flow_edge(G, CAM, "topic:/cam_info", "pub")
     add_flow_edge(G, "topic:/cam_info", LIDAR, "sub")
+    return G
+
+
+def test_a_process_symptom_does_not_travel_along_the_data_flow_between_its_nodes(G):
+    # A process alert on both, and cam feeds lidar: the CPU (or memory) they share is one symptom
+    # of the process, not cam's output reaching lidar, so the data flow tells nothing apart.
+    # Before: cam excused lidar and ranked first (on the AMR, a leak in a four-node container
+    # ranked the two nodes fed by nobody in it first).
+    with_cam_info(G)
+    by, order = rank(G, [al(n, "process_resources", 9, "warn", process=BOX) for n in (CAM, LIDAR)])
+    assert set(order) == {CAM, LIDAR} and by[CAM].score == by[LIDAR].score
+    assert by[LIDAR].evidence["upstream"] == 0.0
+    assert by[LIDAR].evidence["indistinguishable_from"] == [CAM]
+
+
+def test_a_fellows_own_changed_output_still_excuses_the_node_it_feeds(G):
+    # The same, but cam's own output changed too: that does travel, and tells them apart.
+    with_cam_info(G)
     alerts = [al(n, "process_resources", 9, "warn", process=BOX) for n in (CAM, LIDAR)]
-    by, order = rank(G, alerts)
+    by, order = rank(G, alerts + silent("topic:/cam_info", 9))
     assert order[0] == CAM and by[LIDAR].evidence["upstream"] > 0
     assert all("indistinguishable_from" not in by[n].evidence for n in (CAM, LIDAR))
 
