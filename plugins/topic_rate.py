@@ -116,8 +116,10 @@ def _follow(ctx: PluginContext, r: Rhythm, topic: str, rate: float, base: Baseli
     s = ctx.settings
     limit = _base_limit(s, _ref_hz(r, base))
     newest = newest_message(ctx.t, rate, ctx.value(topic, "age_s"))
+    gap = ctx.value(topic, "gap_s")
     return follow(r, ctx.t, newest, rate, window_s=s["rate_window_s"], notable=limit,
-                  settle_s=max(s["warmup_s"], limit), margin=s["gap_margin"], min_gaps=s["min_gaps"])
+                  settle_s=max(s["warmup_s"], limit), margin=s["gap_margin"], min_gaps=s["min_gaps"],
+                  gap=0.0 if math.isnan(gap) else gap)
 
 
 def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, base: Baseline,

@@ -263,6 +263,9 @@ class TopicMonitor:
                 w.window.expire(now - self.window_ns)
                 m = w.window.metrics(now, w.created_ns, self.window_ns, publishers.get(t, 0),
                                      sized=w.kind != "log")
+                gap = w.window.take_gap()
+                if m and gap > 0:
+                    m["gap_s"] = gap  # a quiet that began and ended between two samples
                 out[t] = TopicStats(True, "", m, w.window.publisher_rates(now, w.created_ns, self.window_ns))
         if not self.metrics:
             for t in publishers:

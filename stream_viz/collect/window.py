@@ -24,8 +24,8 @@ WARMUP_S = 1.0  # a fresh subscription has seen too little to call a rate (0 wou
 class TopicWindow:
     """Records of one topic, oldest first, and the running sums its metrics need."""
 
-    __slots__ = ("buf", "by_gid", "gaps", "n_age", "no_seq", "s_age", "s_d", "s_d2", "s_recv", "s_size",
-                 "s_src")
+    __slots__ = ("buf", "by_gid", "gap_ns", "gaps", "n_age", "no_seq", "s_age", "s_d", "s_d2", "s_recv",
+                 "s_size", "s_src")
 
     def __init__(self) -> None:
         self.buf: deque[Record] = deque()
@@ -35,6 +35,7 @@ class TopicWindow:
         self.no_seq = 0  # records without a sequence number
         self.s_age = self.n_age = 0  # sum and count of the message ages (records that have one)
         self.by_gid: Counter[bytes] = Counter()  # records per publisher gid (those that have one)
+        self.gap_ns = 0  # the longest interval between records added since `take_gap`
 
     def add(self, recv: int, src: int, size: int, seq: int | None, gid: bytes | None = None,
             age: int | None = None) -> None:
@@ -44,6 +45,11 @@ class TopicWindow:
             d = recv - last[0]
             self.s_d += d
             self.s_d2 += d * d
+            # A stall of the monitor stretches receive intervals only; a clock offset between two
+            # publishers' hosts, source intervals only: a quiet of the topic stretches both.
+            g = min(d, src - last[1])
+            if g > self.gap_ns:
+                self.gap_ns = g
             if seq is not None and last[3] is not None and seq > last[3] + 1:
                 self.gaps += seq - last[3] - 1
         self.buf.append((recv, src, size, seq, gid, age))
@@ -112,6 +118,12 @@ class TopicWindow:
         if n_publishers == 1 and self.no_seq == 0:
             m["drops_per_s"] = self.gaps / span
         return m
+
+    def take_gap(self) -> float:
+        """Return the longest interval (s) between consecutive records added since the last call,
+        the shorter of its receive and source intervals, and start over (0 without one)."""
+        g, self.gap_ns = self.gap_ns, 0
+        return g / 1e9
 
     def publisher_rates(self, now_ns: int, created_ns: int, window_ns: int) -> dict[bytes, float]:
         """Return publisher gid → messages/s over the window (records without a gid left out);

@@ -8,6 +8,9 @@ from what the collector shows every sample (the receive time of the newest messa
 
 * a **quiet** is the time since the newest message; it is *notable* when it reaches the base
   silence limit (a few periods, at least a second or two: `stream_viz`'s ``topic_rate``);
+* a quiet that began and ended between two samples (the monitor was busy, or the gap was
+  short) is seen in the collector's longest interval since the last sample (``gap_s``) and
+  counts as if a sample had seen it;
 * a notable quiet that ends without having been a symptom is a **healthy gap**, and is learned
   (its length from the newest message before it to the newest after it: an upper bound, off by at
   most a sample period, so a repeat of the same gap never exceeds what was learned);
@@ -84,7 +87,7 @@ def newest_message(t: float, rate: float, age: float) -> float | None:
 
 
 def follow(r: Rhythm, t: float, newest: float | None, rate: float, *, window_s: float, notable: float,
-           settle_s: float, margin: float, min_gaps: int) -> float | None:
+           settle_s: float, margin: float, min_gaps: int, gap: float = 0.0) -> float | None:
     """Account one sample of a topic in ``r``; return its quiet now (s), None before any message.
 
     Parameters
@@ -105,6 +108,8 @@ def follow(r: Rhythm, t: float, newest: float | None, rate: float, *, window_s: 
         A run this long without a notable quiet makes the topic continuous.
     margin, min_gaps : float, int
         See the module docstring.
+    gap : float
+        The longest interval between messages received since the previous sample (s; 0 unknown).
     """
     if rate > 0:
         r.rate = rate
@@ -112,6 +117,7 @@ def follow(r: Rhythm, t: float, newest: float | None, rate: float, *, window_s: 
     r.count = count
     if newest is not None and (r.newest is None or newest > r.newest):
         if r.newest is None or count > before or newest > r.newest + SAME_MESSAGE_S:
+            r.peak = max(r.peak, gap)  # a quiet no sample saw
             _message(r, newest, notable)
         else:  # the same message seen a little later (or one just after it): no quiet ended
             r.newest = newest

@@ -17,6 +17,7 @@ import time
 import pytest
 
 from stream_viz.config import load_config
+from stream_viz.model.theta import SCHEMAS
 from stream_viz.monitor import Monitor
 from stream_viz.progress import Progress
 from stream_viz.testing import wait_for
@@ -239,5 +240,28 @@ def test_a_node_started_four_times_is_one_restart_loop_symptom_of_that_node(chil
         # the same (as more instances of the name), though their alerts are rows only every 5 s.
         restarts = _plugin(mon, "member_gone").state["restarts"]
         assert len(restarts.get("node:/looper_kill", ())) >= 2, restarts
+    finally:
+        mon.close()
+
+
+def test_a_busy_monitor_still_sees_the_quiets_between_its_samples(children, tmp_path):
+    # The monitor looks only every 7 s (a loaded machine): a 5 s quiet of the bursty topic falls
+    # between two looks, and the samples may always land in a burst. The collector's longest
+    # interval since its last look (gap_s) shows each quiet, so the rhythm learns them and the
+    # topic is not taken for a continuous one whose next quiet would be a silence.
+    children.python(BURSTS, name="bursts")
+    mon = _monitor(children, tmp_path)
+    try:
+        wait_for(lambda: (mon.step(), "topic:/detections" in mon.seen)[1], timeout=20, period=1.0)
+        seen = []
+        for _ in range(6):
+            time.sleep(7.0)
+            mon.step()
+            seen.append(mon.seen.nodes["topic:/detections"]["theta"])
+        gaps = [float(th[list(SCHEMAS["topic"]).index("gap_s")]) for th in seen]
+        assert all(4.5 <= g <= 5.6 for g in gaps[1:]), gaps  # the first look may span a start
+        r = _plugin(mon, "topic_rate").state["rhythms"]["topic:/detections"]
+        assert len(r.gaps) >= 4 and all(g >= 4.5 for g in r.gaps), r.gaps
+        assert mon.store.alerts() == []
     finally:
         mon.close()

@@ -556,3 +556,18 @@ def test_snapshot_text_says_who_sends_on_a_multi_publisher_topic():
     assert "from node:/camera 10 Hz, node:/replay 2.5 Hz" in _member_line(G, "topic:/img")
     G.nodes["topic:/img"]["publisher_rates"] = {"node:/camera": 10.0}
     assert " from " not in _member_line(G, "topic:/img")
+
+
+def test_the_longest_gap_since_the_last_look_counts_what_both_clocks_agree_on():
+    w = TopicWindow()
+    for k in range(5):  # 10 Hz
+        w.add(k * S // 10, k * S // 10, 1, k)
+    assert w.take_gap() == pytest.approx(0.1)
+    assert w.take_gap() == 0.0  # started over
+    w.add(3 * S, 3 * S, 1, 5)  # a real quiet: 2.6 s on both clocks
+    w.add(3 * S + S // 10, 3 * S + S // 10, 1, 6)
+    assert w.take_gap() == pytest.approx(2.6)
+    # The monitor stalled: three messages sent 0.1 s apart were received together 2 s late.
+    for k in range(3):
+        w.add(5 * S + 2 * S // 10 + k, 3 * S + (k + 2) * S // 10, 1, 7 + k)
+    assert w.take_gap() == pytest.approx(0.1)

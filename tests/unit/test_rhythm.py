@@ -94,3 +94,23 @@ def test_the_same_message_seen_a_little_later_ends_no_quiet():
     # More messages in the window than before: a new one, however close.
     r, _ = run([(0.0, 0.0, 1.0), (1.0, 0.1, 2.0)])
     assert r.newest == 0.1 and r.peak == 0.9
+
+
+def test_a_quiet_between_two_samples_is_learned_from_the_collectors_longest_gap():
+    # Bursts of 1 s with 2.5 s gaps, sampled while the monitor was too busy to look in between:
+    # every sample sees a fresh message. Without the longest interval (gap_s) the topic reads as
+    # continuous and settles; with it, each quiet is learned.
+    samples = [(3.5 * k + 1.0, 3.5 * k + 0.95, 5.0) for k in range(4)]
+    blind = Rhythm()
+    for t, newest, rate in samples:
+        follow(blind, t, newest, rate, **KW)
+    r = Rhythm()
+    for i, (t, newest, rate) in enumerate(samples):
+        follow(r, t, newest, rate, **KW, gap=2.5 if i else 0.0)
+    assert blind.gaps == [] and blind.settled  # as continuous: its next gap would be a "silence"
+    assert [round(g, 6) for g in r.gaps] == [3.5, 3.5, 3.5]  # newest to newest: an upper bound
+    assert r.settled and round(quiet_limit(r, 1.5, 2.0), 2) == 7.0  # from three gaps
+    r2 = Rhythm()
+    for t, newest, rate in samples:
+        follow(r2, t, newest, rate, **KW, gap=0.3)  # short intervals: no quiet
+    assert r2.gaps == []
