@@ -75,6 +75,7 @@ def _loaded(name: str) -> str | None:
 Sink = Callable[[int, int, int, int, bytes, bytes], None]
 # A window's add: (received ns, source ns, size, sequence number, gid[, message age ns]).
 Add = Callable[..., None]
+Age = Callable[[int, int], int]  # (received ns, header stamp ns) -> message age ns
 
 
 class RclTake:
@@ -122,12 +123,13 @@ class RclTake:
         self._take = take
         self._info = _MessageInfo()
 
-    def drain(self, handle: Any, add: Add | None = None, stamped: bool = False,
+    def drain(self, handle: Any, add: Add | None = None, age: Age | None = None,
               sink: Sink | None = None, payload: bool = False) -> int:
         """Take every waiting message of an rclpy subscription ``handle``; return how many.
 
         The caller holds the handle (``with handle:``). Each message's record goes to ``add``
-        (a `TopicWindow.add`; with ``stamped`` the message age from its header stamp too), or,
+        (a `TopicWindow.add`; given ``age``, a type with a header, the message age too: ``age(received,
+        header stamp)``), or,
         given a ``sink``, there with the first `HEAD` bytes (the whole payload with ``payload``).
         """
         take, string_at, unpack_info, unpack_buffer = self._take, ctypes.string_at, _INFO, _BUFFER
@@ -142,9 +144,9 @@ class RclTake:
             n += 1
             if sink is not None:
                 sink(recv, src, size, seq, gid, string_at(addr, size if payload else min(size, HEAD)))
-            elif stamped:
+            elif age is not None:
                 stamp = self._stamp(addr, size, capacity)
-                add(recv, src, size, seq, gid, None if stamp is None else recv - stamp)
+                add(recv, src, size, seq, gid, None if stamp is None else age(recv, stamp))
             else:
                 add(recv, src, size, seq, gid)
         return n

@@ -30,6 +30,7 @@ from stream_viz.collect.naming import NodeNames, named_in_text
 from stream_viz.collect.rcltake import RclTake
 from stream_viz.collect.readings import TopicStats
 from stream_viz.collect.services import EVENT_SUFFIX
+from stream_viz.collect.simclock import CLOCK_TYPE, ROS_CLOCK, SimClock
 from stream_viz.collect.window import TopicWindow
 from stream_viz.records import Event
 
@@ -102,6 +103,7 @@ class TopicMonitor:
         self._thread: threading.Thread | None = None
         self.rcl = RclTake(rclpy.get_rmw_implementation_identifier()) if gids else None
         self.taken = 0  # messages taken so far (for the benchmark)
+        self.clock = SimClock()  # simulated time, when the system publishes /clock
 
     def start(self) -> None:
         """Subscribe to the log, parameter and diagnostics topics and start draining."""
@@ -143,7 +145,8 @@ class TopicMonitor:
             self._failed[topic] = f"message type {type_name} is not installed ({e.__class__.__name__})"
             return
         kind = ("log" if topic in LOGS else "diag" if topic in DIAGNOSTICS
-                else "event" if topic.endswith(EVENT_SUFFIX) and is_service_event(cls) else "raw")
+                else "event" if topic.endswith(EVENT_SUFFIX) and is_service_event(cls)
+                else "clock" if topic == ROS_CLOCK and type_name == CLOCK_TYPE else "raw")
         try:
             sub = self.node.create_subscription(cls, topic, lambda _m: None, OBSERVE_QOS,
                                                 raw=kind != "log")
@@ -158,7 +161,12 @@ class TopicMonitor:
 
     def _sink(self, topic: str, kind: str, window: TopicWindow) -> Sink | None:
         """What to do with each message taken from ``topic``; None: its window's add (raw)."""
-        add = window.add
+        add, clock = window.add, self.clock
+        if kind == "clock":
+            def tick(recv: int, src: int, size: int, seq: int, gid: bytes | None, head: bytes) -> None:
+                clock.tick(recv, header_stamp_ns(head))  # a Clock begins with its time, as a Header
+                add(recv, src, size, seq, gid)
+            return tick
         if kind == "event":
             service, events = topic[: -len(EVENT_SUFFIX)], self._service_events
 
@@ -173,7 +181,7 @@ class TopicMonitor:
             def keep(recv: int, src: int, size: int, seq: int, gid: bytes | None, msg: Any) -> None:
                 # the diagnostics arrays come as bytes (deserialised later), with a Header
                 stamp = header_stamp_ns(msg) if kind == "diag" else None
-                add(recv, src, size, seq, gid, None if stamp is None else recv - stamp)
+                add(recv, src, size, seq, gid, None if stamp is None else clock.age(recv, stamp))
                 messages.append((topic, msg, recv, gid))
             return keep
         return None
@@ -207,7 +215,8 @@ class TopicMonitor:
         """Take what waits on one subscription: through rcl with gids, else through rclpy."""
         rcl = self.rcl
         if rcl is not None and rcl.available and w.kind != "log":
-            n = rcl.drain(handle, w.window.add, w.stamped, w.sink, payload=w.kind == "diag")
+            age = self.clock.age if w.stamped else None
+            n = rcl.drain(handle, w.window.add, age, w.sink, payload=w.kind == "diag")
             if rcl.available:
                 return n
         raw, take, msg_type, n = w.kind != "log", handle.take_message, w.sub.msg_type, 0
@@ -222,7 +231,7 @@ class TopicMonitor:
                 sink(recv, src, size, seq, None, msg)
             elif stamped:
                 stamp = header_stamp_ns(msg)
-                add(recv, src, size, seq, None, None if stamp is None else recv - stamp)
+                add(recv, src, size, seq, None, None if stamp is None else self.clock.age(recv, stamp))
             else:
                 add(recv, src, size, seq)
         return n

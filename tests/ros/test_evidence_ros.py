@@ -77,6 +77,69 @@ def test_message_age_of_stamps_lagging_300ms(children, tmp_path, run_of):
     assert 280.0 <= sick["stamp_age_ms"] <= 400.0 and sick["latency_ms"] < 50.0, sick
 
 
+SIMULATED = """
+import os, sys, time
+import rclpy
+from rclpy.duration import Duration
+from rclpy.parameter import Parameter
+from rclpy.executors import SingleThreadedExecutor
+from builtin_interfaces.msg import Time
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Imu
+flag = sys.argv[1]
+rclpy.init()
+# A simulator at half real time whose clock starts at 1000 s; a driver on simulated time; a
+# bridge stamping with the wall clock, as mixed systems do.
+sim = rclpy.create_node('simulator')
+clock = sim.create_publisher(Clock, '/clock', 10)
+t0 = time.monotonic()
+def tick():
+    ns = int(1000e9 + 0.5 * (time.monotonic() - t0) * 1e9)
+    clock.publish(Clock(clock=Time(sec=ns // 10**9, nanosec=ns % 10**9)))
+sim.create_timer(0.01, tick)
+drv = rclpy.create_node('imu_driver', parameter_overrides=[Parameter('use_sim_time', value=True)])
+imu = drv.create_publisher(Imu, '/imu', 10)
+def sample():
+    if drv.get_clock().now().nanoseconds < 1000e9:
+        return  # no /clock received yet
+    m = Imu()
+    lag = Duration(seconds=0.3) if os.path.exists(flag) else Duration()
+    m.header.stamp = (drv.get_clock().now() - lag).to_msg()
+    imu.publish(m)
+drv.create_timer(0.05, sample)
+bridge = rclpy.create_node('bridge')
+wall = bridge.create_publisher(Imu, '/wall_imu', 10)
+def bridged():
+    m = Imu()
+    m.header.stamp = bridge.get_clock().now().to_msg()
+    wall.publish(m)
+bridge.create_timer(0.05, bridged)
+ex = SingleThreadedExecutor()
+for n in (sim, drv, bridge):
+    ex.add_node(n)
+ex.spin()
+"""
+
+
+def test_message_age_on_simulated_time_is_no_clock_skew(children, tmp_path, run_of):
+    # A robot in simulation stamps with /clock's time (1000 s, at half speed): its age is read on
+    # that clock, a wall-stamped topic beside it on ours, and neither is a clock skew. Before:
+    # every sim-stamped topic was "46 years behind", a warning on a healthy system.
+    flag = tmp_path / "lag"
+    children.python(SIMULATED, str(flag), name="sim")
+    run = run_of(["message_age"])
+    _ready(run, "topic:/imu", "topic:/wall_imu")
+    wait_for(lambda: (run.step(), not math.isnan(_theta(run, "topic:/imu")["stamp_age_ms"]))[1],
+             timeout=20, period=PERIOD)
+    run.observe(2.0)
+    for topic in ("topic:/imu", "topic:/wall_imu"):
+        age = _theta(run, topic)["stamp_age_ms"]
+        assert 0.0 <= age < 60.0, (topic, age)
+    a = _sick_after_healthy(run, flag, "message_age", "topic:/imu", healthy_s=6.0, symptom="stale")
+    assert 100.0 <= a.data["value_ms"] <= 400.0, a  # 300 ms of simulated time
+    assert not [x for x in run.alerts if x.data.get("symptom") == "clock_skew"], run.alerts
+
+
 def _spin(nodes: str) -> str:
     """The end of a child script: spin ``nodes`` (a Python tuple's items) on one executor."""
     return f"""
