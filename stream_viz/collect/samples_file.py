@@ -267,7 +267,11 @@ class SamplesReader:
         except OSError as exc:
             raise SamplesError(f"{self.path}: cannot read the samples file: {exc}") from exc
         try:
-            first = self._next_line()
+            try:
+                first = self._next_line()
+            except SamplesError as exc:
+                why = exc.__cause__
+                raise SamplesError(f"{self.path}, line 1: not a stream-viz samples file ({why})") from exc
             if first is None:
                 raise SamplesError(f"{self.path}: empty, not a stream-viz samples file")
             try:
