@@ -48,6 +48,9 @@ class Monitor:
         The files of the recording so far (empty without ``save``).
     seen, history
         Every member seen (vanished ones kept until forgotten) and their θ history.
+
+    A replay (``stream-viz replay``) passes its ``collector`` (the recorded samples), the run's
+    ``started_at`` and a longer ``plugin_timeout_s``; ``samples`` writes every sample collected.
     """
 
     def __init__(
@@ -65,6 +68,7 @@ class Monitor:
         samples: Path | None = None,
         collector: Any = None,
         started_at: float | None = None,
+        plugin_timeout_s: float | None = None,
     ) -> None:
         # Outputs are checked before anything starts: a typo must not cost a run.
         self.report_path = check_writable(report, "report") if report else None
@@ -78,7 +82,8 @@ class Monitor:
         self.store = AlertStore(self.db_path)
         self.started_at = time.time() if started_at is None else started_at
         self.store.set_meta("started_at", self.started_at)
-        self.plugins = PluginSet.from_config(config)
+        timeout = {"timeout_s": plugin_timeout_s} if plugin_timeout_s else {}
+        self.plugins = PluginSet.from_config(config, **timeout)
         self._say_problems(self.plugins.load_problems)
         self.store.add_problems(self.plugins.load_problems, t=self.started_at)
         self.view = LiveView(viewer=viewer, save=save, part_s=60.0 * config.monitor.recording_part_minutes,

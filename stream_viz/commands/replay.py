@@ -20,6 +20,10 @@ if TYPE_CHECKING:
     from stream_viz.config import Config
     from stream_viz.monitor import Monitor
 
+# A replay gives each plugin call this long (live: 0.5 s): a loaded machine must not cut a call
+# off and change the diagnosis; a plugin that hangs is still stopped.
+PLUGIN_TIMEOUT_S = 30.0
+
 NAME = "replay"
 HELP = "replay a recorded run's samples through detection, the RCA and the viewer"
 
@@ -53,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         config = replay_config(args.config, source.header)
         mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=viewer,
                       serve_at=serve_at(args), group_by=args.group_by, collector=source,
-                      started_at=source.header.get("started_at"))
+                      started_at=source.header.get("started_at"), plugin_timeout_s=PLUGIN_TIMEOUT_S)
     except BaseException:
         source.close()
         raise
