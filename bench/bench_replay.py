@@ -58,7 +58,7 @@ def record(nodes: int, samples: int, crash_at: int, path: Path) -> tuple[int, fl
     return members, 1e3 * cpu / samples, group
 
 
-def replay(path: Path, workdir: Path, crash_at: int | None) -> dict:
+def replay(path: Path, workdir: Path, crash_at: int | None, config: Path | None = None) -> dict:
     """Replay ``path`` through a real Monitor, timing each step; return what was measured."""
     from stream_viz.collect.replay import ReplayCollector
     from stream_viz.commands.replay import PLUGIN_TIMEOUT_S, replay_config
@@ -66,7 +66,7 @@ def replay(path: Path, workdir: Path, crash_at: int | None) -> dict:
     from stream_viz.progress import Progress
 
     source = ReplayCollector(path)
-    mon = Monitor(replay_config(None, source.header), db=workdir / "a.sqlite", save=workdir / "r.rrd",
+    mon = Monitor(replay_config(config, source.header), db=workdir / "a.sqlite", save=workdir / "r.rrd",
                   collector=source, started_at=source.header.get("started_at"),
                   plugin_timeout_s=PLUGIN_TIMEOUT_S, progress=Progress(open(os.devnull, "w")))
     cpu: dict[str, list[float]] = {name: [] for name, _, _ in STEPS}
@@ -183,19 +183,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--samples", type=int, default=90, help="samples per recording (one a second)")
     ap.add_argument("--crash-at", type=int, default=40, help="the sample at which the process dies")
     ap.add_argument("--replay", type=Path, help="replay this recording instead (no synthetic ones)")
+    ap.add_argument("--watch", choices=("auto", "all"), default="auto",
+                    help="[watchlist] mode: auto (the default: every member up to 2,000, then processes "
+                         "and nodes, the rest as the RCA grows) or all (every member)")
     args = ap.parse_args(argv)
     print(f"commit {commit()}, {platform.node()}, {os.cpu_count()} cores, "
           f"python {platform.python_version()}; {' '.join(sys.argv)}")
     runs = []
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
+        config = work / "watch.toml"
+        config.write_text(f'[watchlist]\nmode = "{args.watch}"\n')
         if args.replay:
-            run = replay(args.replay, work, None)
+            run = replay(args.replay, work, None, config)
             runs.append((0, run))
         for nodes in [] if args.replay else args.sizes:
             path = work / f"g{nodes}.jsonl.gz"
             members, write_ms, group = record(nodes, args.samples, args.crash_at, path)
-            run = replay(path, work, args.crash_at)
+            run = replay(path, work, args.crash_at, config)
             runs.append((nodes, run))
             print(f"{nodes} nodes, {members} members: samples file {run['size'] / 1e3 / args.samples:.1f} kB "
                   f"a sample, writing it {write_ms:.1f} ms a sample; crash of {group}: "
