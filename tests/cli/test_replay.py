@@ -42,14 +42,9 @@ def test_a_replayed_demo_run_gives_the_live_diagnosis(ros_domain, tmp_path, faul
 
 
 def test_replay_at_speed_one_takes_the_runs_time(tmp_path):
-    from stream_viz.collect.samples_file import SamplesWriter
-    from tests.unit.test_samples_file import _gone_run
+    from tests.unit.test_samples_file import _gone_run, write_file
 
-    path = tmp_path / "s.jsonl.gz"
-    w = SamplesWriter(path, {"started_at": 99.0})
-    for s in _gone_run()[:6]:  # 5 s of samples
-        w.write(s)
-    w.close()
+    path = write_file(tmp_path / "s.jsonl.gz", _gone_run()[:6])  # 5 s of samples
     timed = {}
     for speed in ("1", "0"):
         t0 = time.monotonic()

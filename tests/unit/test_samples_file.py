@@ -203,12 +203,17 @@ def _gone_run() -> list[Sample]:
     return out
 
 
-def test_the_replay_collector_returns_the_samples_then_stops(tmp_path):
-    path = tmp_path / "s.jsonl.gz"
+def write_file(path, samples: list[Sample]):
+    """``samples`` written to a samples file at ``path`` (started at 99 s); return the path."""
     w = SamplesWriter(path, {"started_at": 99.0})
-    for s in _gone_run():
+    for s in samples:
         w.write(s)
     w.close()
+    return path
+
+
+def test_the_replay_collector_returns_the_samples_then_stops(tmp_path):
+    path = write_file(tmp_path / "s.jsonl.gz", _gone_run())
     source = ReplayCollector(path)
     source.start()
     assert source.header["started_at"] == 99.0
@@ -225,11 +230,7 @@ def test_the_replay_collector_returns_the_samples_then_stops(tmp_path):
 def test_a_replay_through_the_monitor_is_the_same_each_time(tmp_path):
     from stream_viz.monitor import Monitor
 
-    path = tmp_path / "s.jsonl.gz"
-    w = SamplesWriter(path, {"started_at": 99.0})
-    for s in _gone_run():
-        w.write(s)
-    w.close()
+    path = write_file(tmp_path / "s.jsonl.gz", _gone_run())
     reports = []
     for i in range(2):
         source = ReplayCollector(path)
