@@ -19,7 +19,7 @@ import io
 import json
 import math
 import zlib
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -29,6 +29,7 @@ import numpy as np
 from stream_viz.errors import SamplesError
 from stream_viz.model.diff import diff
 from stream_viz.model.graph import new_graph
+from stream_viz.model.theta import SCHEMAS
 from stream_viz.output import check_writable
 from stream_viz.records import Event, Sample
 
@@ -139,9 +140,14 @@ class SampleDecoder:
 
     Each sample gets a graph of its own; attribute values that did not change are shared with the
     previous sample's graph (the monitor treats a sample's graph as read-only, as the live one).
+    ``schemas`` are the θ attribute names per member kind the file was written with (its header):
+    where they differ from this version's `SCHEMAS`, θ is mapped by name (an attribute the file
+    lacks is NaN, one this version lacks is dropped).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, schemas: Mapping[str, list[str]] | None = None) -> None:
+        self._remap = {kind: _remap(list(names), SCHEMAS[kind]) for kind, names in (schemas or {}).items()
+                       if kind in SCHEMAS and tuple(names) != SCHEMAS[kind]}
         self._members: dict[str, dict[str, Any]] = {}
         self._edges: dict[tuple[str, str, int], dict[str, Any]] = {}
         self._theta: dict[str, np.ndarray] = {}
@@ -166,7 +172,9 @@ class SampleDecoder:
             if row is None:
                 self._theta.pop(m, None)
             else:
-                self._theta[m] = _theta_in(row)
+                th = _theta_in(row)
+                remap = self._remap.get(self._members[m].get("kind"))
+                self._theta[m] = th if remap is None else remap(th)
         if "unreadable" in rec:
             self._unreadable = {str(m): str(why) for m, why in rec["unreadable"].items()}
         G = self._graph()
@@ -182,6 +190,20 @@ class SampleDecoder:
         G.add_nodes_from((m, {**a, "theta": theta[m]} if m in theta else a) for m, a in self._members.items())
         G.add_edges_from((u, v, k, a) for (u, v, k), a in self._edges.items())
         return G
+
+
+def _remap(recorded: list[str], now: tuple[str, ...]) -> Callable[[np.ndarray], np.ndarray]:
+    """θ in the ``recorded`` attribute order → θ in the ``now`` order, by name."""
+    pairs = [(i, recorded.index(name)) for i, name in enumerate(now) if name in recorded]
+    to = np.array([i for i, _ in pairs], dtype=int)
+    frm = np.array([j for _, j in pairs], dtype=int)
+
+    def remap(theta: np.ndarray) -> np.ndarray:
+        out = np.full(len(now), np.nan)
+        out[to] = theta[frm]
+        return out
+
+    return remap
 
 
 def _known(d: dict[Any, Any], key: Any) -> dict[Any, Any]:
@@ -206,7 +228,7 @@ class SamplesWriter:
         self._encoder = SampleEncoder()
         # Level 1: a fifth of level 9's time for a file about a tenth larger (a live run pays it).
         self._gz = gzip.GzipFile(self.path, "wb", compresslevel=1, mtime=0)
-        self._line({"format": FORMAT, **header})
+        self._line({"format": FORMAT, **header, "theta": {k: list(v) for k, v in SCHEMAS.items()}})
 
     def write(self, sample: Sample) -> None:
         """Append ``sample`` (and make it readable now, should the run be killed next)."""
@@ -289,7 +311,11 @@ class SamplesReader:
             self._f.close()
             raise
         self.header: dict[str, Any] = header
-        self._decoder = SampleDecoder()
+        try:
+            self._decoder = SampleDecoder(header.get("theta"))
+        except (AttributeError, TypeError, ValueError) as exc:
+            self._f.close()
+            raise SamplesError(f"{self.path}, line 1: a malformed header ({exc})") from exc
 
     def _next_line(self) -> str | None:
         """The next complete line, None at the end (also at a cut-off end: ``truncated``)."""

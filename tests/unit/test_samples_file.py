@@ -27,7 +27,7 @@ from stream_viz.config import Config
 from stream_viz.errors import CollectError, SamplesError
 from stream_viz.model.diff import diff
 from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
-from stream_viz.model.theta import make_theta
+from stream_viz.model.theta import SCHEMAS, make_theta
 from stream_viz.records import Event, Sample
 
 
@@ -102,6 +102,21 @@ def test_theta_that_goes_away_is_removed():
     assert "theta" not in dec.decode(rec).graph.nodes["topic:/img"]
 
 
+def test_theta_of_another_schema_is_mapped_by_name():
+    """A file written when a kind's θ had other attributes, or in another order."""
+    topic = SCHEMAS["topic"]
+    old = {"topic": [topic[1], topic[0], "retired_hz"], "process": list(SCHEMAS["process"])}
+    dec = SampleDecoder(old)
+    members = [["topic:/img", {"kind": "topic"}], ["process:10", {"kind": "process"}]]
+    rec = {"t": 1.0, "graph": {"members": members, "edges": []},
+           "theta": {"topic:/img": [2.5, 10.0, 7.0], "process:10": [1.0] * len(SCHEMAS["process"])}}
+    G = dec.decode(rec).graph
+    want = np.full(len(topic), np.nan)
+    want[0], want[1] = 10.0, 2.5
+    np.testing.assert_array_equal(G.nodes["topic:/img"]["theta"], want)
+    np.testing.assert_array_equal(G.nodes["process:10"]["theta"], [1.0] * len(SCHEMAS["process"]))
+
+
 def test_file_round_trip_with_header_and_notes(tmp_path):
     path = tmp_path / "s.jsonl.gz"
     w = SamplesWriter(path, {"stream_viz": "0.1.0", "started_at": 99.0})
@@ -110,7 +125,8 @@ def test_file_round_trip_with_header_and_notes(tmp_path):
     w.note("end", {"ended_at": 104.0, "injected": {"fault": "crash"}})
     w.close()
     with gzip.open(path, "rt") as f:
-        assert json.loads(f.readline()) == {"format": FORMAT, "stream_viz": "0.1.0", "started_at": 99.0}
+        assert json.loads(f.readline()) == {"format": FORMAT, "stream_viz": "0.1.0", "started_at": 99.0,
+                                            "theta": {k: list(v) for k, v in SCHEMAS.items()}}
     header, got, notes = read_samples(path)
     assert header["started_at"] == 99.0
     assert notes == {"end": {"ended_at": 104.0, "injected": {"fault": "crash"}}}
@@ -175,6 +191,7 @@ def test_a_file_cut_anywhere_reads_up_to_its_last_complete_sample(tmp_path):
         (b'{"format": "stream-viz.samples/v1"}\n{"t": 1, "graph": {"members": [], "edges": []}}\n'
          b'{"t": 2, "theta": {"topic:/x": [1.0]}}\n', "line 3: not a sample record (KeyError"),
         (b'{"format": "stream-viz.samples/v1"}\n{"graph": {}}\n', "line 2: not a sample record"),
+        (b'{"format": "stream-viz.samples/v1", "theta": ["rate_hz"]}\n', "line 1: a malformed header"),
     ],
 )
 def test_foreign_and_broken_files_name_the_file_and_line(tmp_path, content, message):
