@@ -80,9 +80,9 @@ def replay(path: Path, workdir: Path, crash_at: int | None, config: Path | None 
         loop.append(time.process_time() - t0)
         alerts.append(mon.n_alerts)
         members.append(mon.seen.number_of_nodes())
-    t0 = time.process_time()
+    nodes = sum(1 for _, k in mon.seen.nodes(data="kind") if k == "node")
     report = mon.close()
-    return {"cpu": cpu, "loop": loop, "alerts": alerts, "members": members, "close": time.process_time() - t0,
+    return {"cpu": cpu, "loop": loop, "alerts": alerts, "members": members, "nodes": nodes,
             "causes": [rc["member"] for rc in report["root_causes"][:8]], "crash_at": crash_at,
             "size": path.stat().st_size}
 
@@ -196,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
         config.write_text(f'[watchlist]\nmode = "{args.watch}"\n')
         if args.replay:
             run = replay(args.replay, work, None, config)
-            runs.append((0, run))
+            runs.append((run["nodes"], run))
         for nodes in [] if args.replay else args.sizes:
             path = work / f"g{nodes}.jsonl.gz"
             members, write_ms, group = record(nodes, args.samples, args.crash_at, path)
