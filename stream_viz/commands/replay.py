@@ -63,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
         raise
     stop = threading.Event()
     install_stop_handlers(stop)
-    mon.progress.say(f"replaying {args.file} (recorded by stream-viz {source.header.get('stream_viz')})")
+    version = source.header.get("stream_viz", "an unknown version")
+    mon.progress.say(f"replaying {args.file} (recorded by stream-viz {version})")
     last_t = None
     try:
         last_t = replay(mon, source, args.speed, stop)
@@ -72,6 +73,8 @@ def run(args: argparse.Namespace) -> int:
         end = source.notes.get("end") or {}
         mon.injected = end.get("injected") or None
         report = mon.close(keep_view=viewer == "serve", ended_at=end.get("ended_at") or last_t)
+    if mon.samples == 0:
+        mon.progress.say(f"{args.file} holds no samples")
     if source.truncated:
         mon.progress.say(f"{args.file} ends mid-way (its run was killed?): replayed its {mon.samples} "
                          "complete samples")
