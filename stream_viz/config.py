@@ -80,8 +80,11 @@ class Config:
 SECTIONS = ("monitor", "watchlist", "rca", "plugins", "topics")
 
 
-def load_config(path: str | Path | None) -> Config:
+def load_config(path: str | Path | None, text: str | None = None) -> Config:
     """Read and check a TOML configuration; ``None`` gives the defaults.
+
+    ``text``, when given, is the file's content (a replay: the configuration its run recorded);
+    ``path`` still names it and anchors its relative plugin paths.
 
     Raises
     ------
@@ -93,7 +96,7 @@ def load_config(path: str | Path | None) -> Config:
     path = Path(path)
     where = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8") if text is None else text
     except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{where}: cannot read the configuration: {exc}") from exc
     try:

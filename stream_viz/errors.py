@@ -19,6 +19,10 @@ class StoreError(StreamVizError):
     """The alert database is unreadable, corrupt or not ours (names the file)."""
 
 
+class SamplesError(StreamVizError):
+    """A samples file is unreadable, corrupt or not ours (names the file and the line)."""
+
+
 class CollectError(StreamVizError):
     """Observing the ROS 2 system or the OS failed in a way we cannot skip."""
 

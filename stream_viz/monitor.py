@@ -19,6 +19,7 @@ from typing import Any
 import networkx as nx
 
 from stream_viz.collect.collector import Collector
+from stream_viz.collect.samples_file import SamplesWriter, run_header
 from stream_viz.config import Config
 from stream_viz.detect.detector import Detector
 from stream_viz.detect.plugin_set import PluginSet
@@ -47,6 +48,9 @@ class Monitor:
         The files of the recording so far (empty without ``save``).
     seen, history
         Every member seen (vanished ones kept until forgotten) and their θ history.
+
+    A replay (``stream-viz replay``) passes its ``collector`` (the recorded samples), the run's
+    ``started_at`` and a longer ``plugin_timeout_s``; ``samples`` writes every sample collected.
     """
 
     def __init__(
@@ -61,18 +65,25 @@ class Monitor:
         domain_id: int | None = None,
         serve_at: ServeAt | None = None,
         group_by: str = "namespace",
+        samples: Path | None = None,
+        collector: Any = None,
+        started_at: float | None = None,
+        plugin_timeout_s: float | None = None,
     ) -> None:
         # Outputs are checked before anything starts: a typo must not cost a run.
         self.report_path = check_writable(report, "report") if report else None
         if save:
             check_writable(save, "recording")
+        if samples:
+            check_writable(samples, "samples file")
         self.config = config
         self.progress = progress or Progress()
         self.db_path = Path(db) if db else default_db_path()
         self.store = AlertStore(self.db_path)
-        self.started_at = time.time()
+        self.started_at = time.time() if started_at is None else started_at
         self.store.set_meta("started_at", self.started_at)
-        self.plugins = PluginSet.from_config(config)
+        timeout = {"timeout_s": plugin_timeout_s} if plugin_timeout_s else {}
+        self.plugins = PluginSet.from_config(config, **timeout)
         self._say_problems(self.plugins.load_problems)
         self.store.add_problems(self.plugins.load_problems, t=self.started_at)
         self.view = LiveView(viewer=viewer, save=save, part_s=60.0 * config.monitor.recording_part_minutes,
@@ -84,8 +95,10 @@ class Monitor:
         self.n_alerts = 0  # the alerts themselves live in the database, not in memory
         self.samples = 0
         self.injected: Mapping[str, Any] | None = None
-        self.collector = Collector(domain_id, topic_metrics=config.monitor.topic_metrics)
+        # A replay passes its own collector (the recorded samples) in place of the live one.
+        self.collector = collector or Collector(domain_id, topic_metrics=config.monitor.topic_metrics)
         self.collector.start()
+        self.samples_file = SamplesWriter(samples, run_header(config, self.started_at)) if samples else None
         # Everything loaded so far (rclpy, numpy, networkx, Rerun, plugins) lives as long as the
         # process: frozen, a full collection no longer walks it each time (cost in
         # docs/evaluation.md, "Cost"). Garbage first, so none is frozen; `close` unfreezes.
@@ -96,6 +109,8 @@ class Monitor:
     def step(self) -> None:
         """One tick: sample → record → detect → store → diagnose → show."""
         sample = self.collector.sample()
+        if self.samples_file:
+            self.samples_file.write(sample)
         self.samples += 1
         forgotten = self.shadow.record(sample.graph, sample.t)
         self.watchlist.forget(forgotten)
@@ -170,14 +185,15 @@ class Monitor:
                 wait = 0
             stop.wait(wait)
 
-    def close(self, keep_view: bool = False) -> dict[str, Any]:
+    def close(self, keep_view: bool = False, ended_at: float | None = None) -> dict[str, Any]:
         """Stop observing, write the report, commit the database, flush the recording.
 
         Every step runs even when an earlier one fails (the first error is raised after all of
         them), so one broken output never costs the others. ``keep_view`` leaves the viewer
         connection open (a served web viewer keeps showing the run); close it with ``view.close()``.
+        ``ended_at`` is now unless given (a replay: the recorded run's end).
         """
-        ended_at = time.time()
+        ended_at = time.time() if ended_at is None else ended_at
         report: dict[str, Any] = {}
 
         def write() -> None:
@@ -193,7 +209,13 @@ class Monitor:
                 self.store.set_meta("injected", dict(self.injected))
             self.store.close()
 
-        steps = [self.collector.close, self.progress.done, write, commit, self.plugins.close, gc.unfreeze]
+        def end_samples() -> None:
+            if self.samples_file:
+                self.samples_file.note("end", {"ended_at": ended_at, "injected": self.injected})
+                self.samples_file.close()
+
+        steps = [self.collector.close, end_samples, self.progress.done, write, commit, self.plugins.close,
+                 gc.unfreeze]
         if not keep_view:
             steps.append(self.view.close)
         first: BaseException | None = None

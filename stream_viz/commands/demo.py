@@ -9,7 +9,14 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from stream_viz.commands.monitor import add_outputs, install_stop_handlers, linger, say_recording, serve_at
+from stream_viz.commands.monitor import (
+    add_outputs,
+    add_samples,
+    install_stop_handlers,
+    linger,
+    say_recording,
+    serve_at,
+)
 from stream_viz.demo.faults import FAULTS
 from stream_viz.demo.robots import ROBOTS
 
@@ -36,6 +43,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="length of the run, from when the robot is up")
     p.add_argument("--domain", type=int, default=42, metavar="ID", help="ROS_DOMAIN_ID of the demo robot")
     add_outputs(p)
+    add_samples(p)
 
 
 def default_viewer() -> str:
@@ -71,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
         robot.topology.check_fault(fault)
     # The monitor checks its outputs before any robot process starts: a bad path costs nothing.
     mon = Monitor(config, db=args.db, save=save, report=args.report, viewer=viewer, domain_id=args.domain,
-                  serve_at=serve_at(args), group_by=args.group_by)
+                  serve_at=serve_at(args), group_by=args.group_by, samples=args.samples)
     try:
         size = "" if fault is None or fault.size is None else f" (size {fault.size:g})"
         what = f"{fault.fault}{size} of {fault.target} {fault.at:g} s after it is up" if fault else "no fault"
@@ -96,12 +104,13 @@ def run(args: argparse.Namespace) -> int:
             report = mon.close(keep_view=viewer == "serve")
         finally:
             robot.stop()
-    _print_diagnosis(report, mon)
+    print_diagnosis(report, mon)
     linger(mon, viewer)
     return 0
 
 
-def _print_diagnosis(report: dict[str, Any], mon: Monitor) -> None:
+def print_diagnosis(report: dict[str, Any], mon: Monitor) -> None:
+    """The injected fault, the top five root causes, where the outputs went."""
     say = mon.progress.say
     inj = report.get("injected")
     if inj:
@@ -112,4 +121,5 @@ def _print_diagnosis(report: dict[str, Any], mon: Monitor) -> None:
     for rank, rc in enumerate(causes[:5], 1):
         say(f"{rank}. {rc['member']}  score {rc['score']:.2f}  trajectory: {' <- '.join(rc['trajectory'])}")
     say(f"{len(report['alerts'])} alerts; alert database: {mon.db_path}")
-    say_recording(mon)
+    if mon.recording_parts:
+        say_recording(mon)

@@ -46,6 +46,12 @@ def add_outputs(p: argparse.ArgumentParser) -> None:
                    help="the system graph's boxes: per namespace (default), per process, or none")
 
 
+def add_samples(p: argparse.ArgumentParser) -> None:
+    """``--samples``: a live run also writes what it collected, for ``stream-viz replay``."""
+    p.add_argument("--samples", type=Path, metavar="FILE.jsonl.gz",
+                   help="also write every sample collected here (replay it with stream-viz replay)")
+
+
 def serve_at(args: argparse.Namespace) -> ServeAt:
     """Where ``--viewer serve`` listens, from the command line."""
     return ServeAt(args.serve_bind, args.web_port, args.grpc_port)
@@ -54,6 +60,7 @@ def serve_at(args: argparse.Namespace) -> ServeAt:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=float, metavar="SECONDS", help="stop after this long (else SIGINT)")
     add_outputs(p)
+    add_samples(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -66,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     install_stop_handlers(stop)
     viewer = args.viewer or "none"
     mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=viewer,
-                  serve_at=serve_at(args), group_by=args.group_by)
+                  serve_at=serve_at(args), group_by=args.group_by, samples=args.samples)
     mon.progress.say(f"alert database: {mon.db_path}")
     try:
         mon.run(args.duration, stop)

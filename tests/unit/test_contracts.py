@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from stream_viz.cli import build_parser
+from stream_viz.collect.samples_file import FORMAT
 from stream_viz.detect.store import MIGRATIONS, SCHEMA_VERSION
 from stream_viz.report import SCHEMA
 from stream_viz.viz import paths
@@ -55,3 +56,4 @@ def test_every_table_and_the_versions_are_named():
         assert f"| `{table}` |" in CONTRACTS, table
     assert f"**Schema version {SCHEMA_VERSION}**" in CONTRACTS
     assert f"`{SCHEMA}`" in CONTRACTS
+    assert f"`{FORMAT}`" in CONTRACTS
