@@ -111,6 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", help="run only these systems (comma list: demo, amr, gen100)")
     ap.add_argument("--kinds", help="run only these fault kinds (comma list: leak,cpu; none: fault-free)")
     ap.add_argument("--report-only", action="store_true", help="rescore what is in --out")
+    ap.add_argument("--samples", action="store_true",
+                    help="record each run's samples.jsonl.gz (for stream-viz replay)")
     ap.add_argument("--plots", type=Path, help="write eval_*.png here (peer venv matplotlib)")
     ap.add_argument("--results", type=Path,
                     help="also write the small result files to RESULTS/<suite>-<commit>/ (bench/results)")
@@ -126,6 +128,8 @@ def main(argv: list[str] | None = None) -> int:
             specs = [s for s in specs if s["system"] in args.only.split(",")]
         if args.kinds:
             specs = [s for s in specs if (s["fault"] or "none") in args.kinds.split(",")]
+        if args.samples:
+            specs = [{**s, "samples": True} for s in specs]
         execute(specs, out)
     print(report(out))
     if args.results:

@@ -95,7 +95,8 @@ def _live(spec: dict, topo: Topology, config: Config, domain: int, out: Path) ->
     fault = spec.get("fault")
     tmp = Path(tempfile.mkdtemp(prefix="stream_eval_"))
     me = psutil.Process()
-    mon = Monitor(config, db=tmp / "alerts.sqlite", viewer="none", domain_id=domain)
+    samples = out / "samples.jsonl.gz" if spec.get("samples") else None  # for `stream-viz replay`
+    mon = Monitor(config, db=tmp / "alerts.sqlite", viewer="none", domain_id=domain, samples=samples)
     robot = Robot(env=dict(os.environ), topology=topo, run_dir=tmp / "robot")
     ticks: list[dict] = []
     anomalous: set[str] = set()  # members process monitoring flagged at some tick
