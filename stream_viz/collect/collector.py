@@ -7,6 +7,7 @@ graph API calls, raw subscriptions; it never publishes on or calls the system's 
 from __future__ import annotations
 
 import os
+import socket
 import time
 from typing import Any
 
@@ -19,6 +20,7 @@ from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 from stream_viz.collect.build import build_model
 from stream_viz.collect.diagnostics import DiagnosticsReader
 from stream_viz.collect.fastdds import decode_gid
+from stream_viz.collect.hosts import HostReports
 from stream_viz.collect.naming import NodeNames
 from stream_viz.collect.pidmap import PidResolver
 from stream_viz.collect.processes import ProcessSampler
@@ -94,6 +96,7 @@ class Collector:
         self.node = None
         self.topics: TopicMonitor | None = None
         self.resolver: PidResolver | None = None
+        self.hosts: HostReports | None = None
         self.sampler = ProcessSampler()
         self.qos = QosCache()
         self.gids = GidCache()
@@ -119,6 +122,7 @@ class Collector:
         self.topics = TopicMonitor(self.node, self.window_s, metrics=self.topic_metrics)
         self.topics.start()
         self.resolver = PidResolver(self.domain_id, self._own_host())
+        self.hosts = HostReports(self.node, (self.resolver.own_host, socket.gethostname()))
 
     def _own_host(self) -> int | None:
         # Our own /rosout subscription carries our participant's prefix, hence this host's id.
@@ -167,6 +171,9 @@ class Collector:
         services, calls = self._service_calls(reading)
         G = build_model(reading, pids, processes, stats, services, calls)
         unreadable = {make_id("node", n): why for n, why in reading.skipped.items()}
+        remote_events, unreadable_remote = self.hosts.apply(G, pids, t)  # other computers' agents
+        events += remote_events
+        unreadable.update(unreadable_remote)
         for pid, why in ps.errors.items():
             if pid not in processes:  # dead ones are in the model, marked alive=False
                 unreadable[make_id("process", pid)] = why

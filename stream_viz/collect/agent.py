@@ -1,0 +1,154 @@
+"""``stream-viz agent``'s sampler: this computer's ROS processes, published as one `HostReport`.
+
+It maps the nodes whose participant's GUID prefix carries this host's id to their processes
+(`PidResolver`, as the monitor does locally), samples those processes and their ancestors
+(`ProcessSampler`) and publishes the report on `AGENT_TOPIC` (best effort, depth 1). Its node has
+no /rosout publisher, no parameter or type-description services and is hidden (``_`` name); it
+publishes nothing else and calls nothing.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+from typing import Any
+
+import rclpy
+from rclpy.context import Context
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from stream_viz.collect.collector import ObserverNode
+from stream_viz.collect.fastdds import decode_gid
+from stream_viz.collect.hostreport import AGENT_TOPIC, HostReport, StatusRow, encode
+from stream_viz.collect.pidmap import PidResolver
+from stream_viz.collect.processes import ProcessSampler
+from stream_viz.collect.readings import ProcessReading
+from stream_viz.errors import CollectError
+from stream_viz.model.ids import node_fqn
+
+QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+
+
+class AgentNode(ObserverNode):
+    """An observer node allowed one publisher: the host reports on `AGENT_TOPIC`."""
+
+    def create_publisher(self, msg_type: Any, topic: str, *args: Any, **kwargs: Any) -> Any:
+        if topic == AGENT_TOPIC:
+            return super(ObserverNode, self).create_publisher(msg_type, topic, *args, **kwargs)
+        return super().create_publisher(msg_type, topic, *args, **kwargs)
+
+
+def to_msg(rows: list[StatusRow], stamp: Any = None) -> Any:
+    """Return a ``diagnostic_msgs/DiagnosticArray`` of the rows."""
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    msg = DiagnosticArray()
+    if stamp is not None:
+        msg.header.stamp = stamp
+    msg.status = [DiagnosticStatus(level=bytes([r.level]), name=r.name, message=r.message,
+                                   hardware_id=r.hardware_id,
+                                   values=[KeyValue(key=k, value=v) for k, v in r.values])
+                  for r in rows]
+    return msg
+
+
+class Agent:
+    """Samples this host's ROS processes and publishes one report per `step`.
+
+    Parameters
+    ----------
+    domain_id : int
+        The ROS_DOMAIN_ID of the robot.
+    period_s : float
+        The sampling period (said in each report, so the monitor knows when one is late).
+    host : str, optional
+        The name this host goes by (default: its host name).
+    """
+
+    def __init__(self, domain_id: int, period_s: float = 1.0, host: str | None = None) -> None:
+        self.domain_id, self.period_s = domain_id, period_s
+        self.host = host or socket.gethostname()
+        self.name = f"_stream_viz_agent_{os.getpid()}"
+        self.sampler = ProcessSampler()
+        self.seq = 0
+        self._ctx: Context | None = None
+        self.node: AgentNode | None = None
+        self.pub: Any = None
+        self.host_id: int | None = None
+        self.resolver: PidResolver | None = None
+        self._dead: dict[int, ProcessReading] = {}
+
+    def start(self) -> None:
+        """Create our own Context, node and the one publisher."""
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        ctx = Context()
+        try:
+            rclpy.init(args=[], context=ctx, domain_id=self.domain_id)
+            self._ctx = ctx
+            self.node = AgentNode(self.name, context=ctx)
+            self.pub = self.node.create_publisher(DiagnosticArray, AGENT_TOPIC, QOS)
+        except Exception as e:  # rclpy raises RCLError/RuntimeError kinds we cannot name portably
+            self.close()
+            raise CollectError(f"cannot start the agent on domain {self.domain_id}: {e}") from e
+        self.host_id = self._own_host()
+        self.resolver = PidResolver(self.domain_id, self.host_id)
+
+    def _own_host(self) -> int:
+        # Our own publisher's gid carries our participant's prefix, hence this host's id.
+        me = node_fqn("/", self.name)
+        for i in self.node.get_publishers_info_by_topic(AGENT_TOPIC):
+            if node_fqn(i.node_namespace, i.node_name) == me:
+                info = decode_gid(bytes(i.endpoint_gid))
+                if info is not None:
+                    return info.host_id
+        raise CollectError("the agent cannot read its own Fast DDS GUID (is the RMW Fast DDS?)")
+
+    def sample(self) -> HostReport:
+        """Read this host's nodes' processes now."""
+        gids = {node_fqn(i.node_namespace, i.node_name): bytes(i.endpoint_gid)
+                for i in self.node.get_publishers_info_by_topic("/rosout")}
+        pids = self.resolver.resolve(gids)
+        mine = {p.prefix: p.pid for p in pids.values() if p.pid is not None and p.prefix}
+        ps = self.sampler.sample(set(mine.values()))
+        # An ended process stays (alive=False) while DDS still lists its nodes, as in the monitor.
+        self._dead.update(ps.exited)
+        listed = set(mine.values())
+        self._dead = {p: r for p, r in self._dead.items() if p in listed and p not in ps.processes}
+        processes = dict(ps.processes)
+        for pid, r in self._dead.items():
+            r.alive = False
+            processes[pid] = r
+        self.resolver.forget({p.prefix for p in pids.values() if p.prefix})
+        self.seq += 1
+        return HostReport(self.host, self.host_id, self.seq, self.period_s, mine, processes)
+
+    def step(self, measure: bool = False) -> int:
+        """Sample and publish one report; with ``measure`` return its size in bytes (CDR), else 0."""
+        msg = to_msg(encode(self.sample()), self.node.get_clock().now().to_msg())
+        self.pub.publish(msg)
+        return _size(msg) if measure else 0
+
+    def close(self) -> None:
+        """Destroy the node and shut our Context. Idempotent."""
+        if self.node is not None:
+            try:
+                self.node.destroy_node()
+            finally:
+                self.node = None
+        if self._ctx is not None:
+            self._ctx.try_shutdown()
+            self._ctx = None
+
+    def __enter__(self) -> Agent:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _size(msg: Any) -> int:
+    from rclpy.serialization import serialize_message
+
+    return len(serialize_message(msg))

@@ -1,0 +1,154 @@
+"""Several computers on one machine (network + PID namespaces, discovery over UDP on a veth bridge).
+
+Host ``a`` runs the monitor's collector (and a node of its own), ``b`` an agent and a node, ``c``
+a node and no agent. The PIDs of the three hosts' nodes collide (each host's PID namespace
+starts at 1); the model must still put every node on its own host and process.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import textwrap
+import time
+
+import pytest
+
+from stream_viz.testing import EXE, claim_domain, wait_for
+from stream_viz.testing_hosts import Lab, inner, lab_env, why_not
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+WHY_NOT = why_not()
+if WHY_NOT:
+    pytestmark.append(pytest.mark.skip(reason=f"cannot make network/PID namespaces here: {WHY_NOT}"))
+
+NODE = """
+import sys
+import rclpy
+from std_msgs.msg import String
+rclpy.init()
+n = rclpy.create_node(sys.argv[1])
+pub = n.create_publisher(String, '/' + sys.argv[1] + '/out', 10)
+subs = [n.create_subscription(String, '/' + t + '/out', lambda m: None, 10) for t in sys.argv[2:]]
+n.create_timer(0.1, lambda: pub.publish(String(data='x')))
+print('ready', flush=True)
+rclpy.spin(n)
+"""
+
+# Runs in host a: samples the collector every 0.5 s, one JSON line per sample.
+OBSERVE = """
+import json, sys, time
+from stream_viz.collect.collector import Collector
+out = open(sys.argv[1], 'w')
+with Collector(topic_metrics=False) as c:
+    while True:
+        s = c.sample()
+        G = s.graph
+        keep = ('host', 'pid', 'pid_status', 'alive', 'agent', 'process_unknown', 'unknown')
+        members = {m: {k: d[k] for k in keep if k in d} for m, d in G.nodes(data=True)
+                   if d['kind'] in ('node', 'process', 'host')}
+        tree = [[u, v] for u, v, k in G.edges(keys=True) if k == 1]
+        events = [[e.kind, e.member, e.level, e.t] for e in s.events if e.kind == 'exit']
+        out.write(json.dumps({'t': s.t, 'members': members, 'tree': tree, 'events': events,
+                              'unreadable': s.unreadable}) + '\\n')
+        out.flush()
+        time.sleep(0.5)
+"""
+
+
+class Samples:
+    """The observer's JSON lines, read back as they come."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def all(self):
+        if not self.path.exists():
+            return []
+        lines = self.path.read_text().splitlines()
+        return [json.loads(x) for x in lines if x.endswith("}")]
+
+    def last(self):
+        s = self.all()
+        return s[-1] if s else None
+
+    def until(self, pred, timeout):
+        def ok():
+            s = self.last()
+            return s if s is not None and pred(s) else None
+        return wait_for(ok, timeout, 0.3)
+
+
+@pytest.fixture
+def lab(tmp_path):
+    with Lab(tmp_path) as lab:
+        yield lab
+
+
+def _script(tmp_path, name, code):
+    path = tmp_path / f"{name}.py"
+    path.write_text(textwrap.dedent(code))
+    return str(path)
+
+
+def test_one_model_across_three_hosts_remote_crash_and_agent_killed(lab, tmp_path):
+    env = lab_env(claim_domain())
+    a, b, c = lab.add("a"), lab.add("b"), lab.add("c")
+    node = _script(tmp_path, "node", NODE)
+    nodes = {
+        "planner": a.run([sys.executable, node, "planner", "cam"], env, tmp_path / "planner.log"),
+        "cam": b.run([sys.executable, node, "cam"], env, tmp_path / "cam.log"),
+        "imu": b.run([sys.executable, node, "imu"], env, tmp_path / "imu.log"),
+        "lidar": c.run([sys.executable, node, "lidar"], env, tmp_path / "lidar.log"),
+    }
+    agent = b.run([EXE, "agent", "--period", "0.5"], env, tmp_path / "agent.log")
+    samples = Samples(tmp_path / "samples.jsonl")
+    observe = _script(tmp_path, "observe", OBSERVE)
+    a.run([sys.executable, observe, str(samples.path)], env, tmp_path / "observe.log")
+
+    def merged(s):
+        m = s["members"]
+        return (all(f"node:/{n}" in m for n in nodes) and m["node:/cam"].get("pid_status") == "confirmed"
+                and m["node:/imu"].get("pid_status") == "confirmed")
+
+    s = samples.until(merged, 40.0)
+    m, tree = s["members"], {tuple(e) for e in s["tree"]}
+    # every node on its own host, a host level under the root
+    assert {n: m[f"node:/{n}"]["host"] for n in nodes} == {"planner": "a", "cam": "b", "imu": "b", "lidar": m[
+        "node:/lidar"]["host"]}
+    assert {("root", "host:a"), ("root", "host:b")} <= tree
+    assert m["host:b"]["agent"] == "reporting"
+    # PIDs collide across the hosts' PID namespaces: the processes still differ
+    cam_pid, imu_pid, planner_pid = (m[f"node:/{n}"]["pid"] for n in ("cam", "imu", "planner"))
+    assert (f"process:b/{cam_pid}", "node:/cam") in tree and (f"process:b/{imu_pid}", "node:/imu") in tree
+    assert (f"process:{planner_pid}", "node:/planner") in tree and m[f"process:{planner_pid}"]["host"] == "a"
+    assert cam_pid < 100 and planner_pid < 100  # each host's own small PIDs
+    # host c has no agent: its node is marked, never guessed
+    lidar = m["node:/lidar"]
+    host_c = lidar["host"]
+    assert lidar["pid"] is None and lidar["pid_status"] == "unknown"
+    assert s["unreadable"]["node:/lidar"] == f"process unknown: no agent on host {host_c}"
+    assert (f"host:{host_c}", "node:/lidar") in tree and m[f"host:{host_c}"]["agent"] == "none"
+
+    # a crash on host b, seen from b's OS through its agent (DDS lists the node ~20 s more)
+    os.kill(inner(nodes["cam"]), signal.SIGKILL)
+    t_kill = time.time()
+    s = samples.until(lambda s: any(e[:3] == ["exit", "node:/cam", "error"] for e in s["events"]), 10.0)
+    exit_t = next(e[3] for e in s["events"] if e[1] == "node:/cam")
+    assert exit_t - t_kill < 3.0
+    assert {"exit", f"process:b/{cam_pid}", "error"} == set(next(
+        e[:3] for e in s["events"] if e[1] == f"process:b/{cam_pid}"))
+    assert s["members"]["node:/cam"]["alive"] is False
+
+    # the agent killed mid-run: b's members become unknown, nothing else is lost
+    os.kill(inner(agent), signal.SIGKILL)
+    s = samples.until(lambda s: s["members"]["host:b"]["agent"] == "silent", 10.0)
+    m = s["members"]
+    assert m["node:/imu"]["pid_status"] == "unknown" and "silent" in s["unreadable"]["node:/imu"]
+    assert "silent" in s["unreadable"][f"process:b/{imu_pid}"]
+    assert m["node:/imu"]["host"] == "b" and f"process:b/{imu_pid}" in m  # kept, marked, not dropped
+    assert m["node:/planner"]["pid_status"] == "confirmed" and "node:/planner" not in s["unreadable"]
+    assert all(not k.startswith("process:") or "/" in k for k in s["unreadable"])  # no local one
