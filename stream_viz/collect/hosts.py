@@ -16,6 +16,7 @@ not enter process metrics, exits or staleness.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -31,6 +32,9 @@ from stream_viz.records import Event
 
 STALE_PERIODS = 3.0  # an agent is silent after this many of its periods without a report
 STALE_MIN_S = 2.0
+# A host seen for less than this without a report may still have an agent starting: its nodes
+# wait (as on one computer, pid_status "remote") rather than enter the model under a provisional name.
+AGENT_GRACE_S = 3.0
 
 
 @dataclass
@@ -58,8 +62,8 @@ def remote_id(host: str, pid: int) -> str:
 
 
 def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, str],
-                received: dict[int, Received], now: float,
-                names: dict[int, str] | None = None) -> dict[str, str]:
+                received: dict[int, Received], now: float, names: dict[int, str] | None = None,
+                first_seen: dict[int, float] | None = None) -> dict[str, str]:
     """Add the host level and the remote processes to the model ``G`` of one sample.
 
     Parameters
@@ -76,13 +80,16 @@ def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, st
         The sample's time (the monitor's clock).
     names : dict, optional
         Host id → a name an agent gave earlier (kept after it went silent).
+    first_seen : dict, optional
+        Host id → when its first node was seen; a host without report younger than
+        `AGENT_GRACE_S` is left out for now (default: all are old enough).
 
     Returns
     -------
     dict
         Member id → why it is unknown (nodes and processes of hosts without a live agent).
     """
-    names = names or {}
+    names, first_seen = names or {}, first_seen or {}
     own_id, own_name = own
     node_host = {fqn: host_of_prefix(p.prefix) for fqn, p in pids.items()
                  if p.prefix and make_id("node", fqn) in G}
@@ -111,6 +118,8 @@ def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, st
         name = host_name(h, received, names)
         nodes = sorted(fqn for fqn, nh in node_host.items() if nh == h)
         got = received.get(h)
+        if got is None and h not in names and now - first_seen.get(h, -math.inf) < AGENT_GRACE_S:
+            continue
         if got is None:
             why = f"process unknown: no agent on host {name}"
         elif got.stale(now):
@@ -223,6 +232,7 @@ class HostReports:
         self.own = own
         self.received: dict[int, Received] = {}
         self.names: dict[int, str] = {}
+        self.first_seen: dict[int, float] = {}
         self._type = DiagnosticArray
         self._sub = node.create_subscription(DiagnosticArray, AGENT_TOPIC, lambda m: None, QOS)
 
@@ -252,12 +262,15 @@ class HostReports:
         """Merge the reports into ``G``; return the remote exit events and the unknown members."""
         new = self.take(t)
         node_prefix = {fqn: p.prefix for fqn, p in pids.items() if p.prefix}
+        for prefix in node_prefix.values():
+            self.first_seen.setdefault(host_of_prefix(prefix), t)
         events = []
         for _, (before, after) in sorted(new.items()):
             events += remote_exits(t, after.host, before, after, node_prefix)
         if self.own[0] is None:
             return events, {}
-        return events, merge_hosts(G, pids, (self.own[0], self.own[1]), self.received, t, self.names)
+        return events, merge_hosts(G, pids, (self.own[0], self.own[1]), self.received, t, self.names,
+                                   self.first_seen)
 
 
 def _rows(msg: Any) -> list[StatusRow]:

@@ -152,3 +152,29 @@ def test_one_model_across_three_hosts_remote_crash_and_agent_killed(lab, tmp_pat
     assert m["node:/imu"]["host"] == "b" and f"process:b/{imu_pid}" in m  # kept, marked, not dropped
     assert m["node:/planner"]["pid_status"] == "confirmed" and "node:/planner" not in s["unreadable"]
     assert all(not k.startswith("process:") or "/" in k for k in s["unreadable"])  # no local one
+
+
+def test_a_crash_on_another_host_is_ranked_first_with_its_host_and_process(lab, tmp_path):
+    env = lab_env(claim_domain())
+    a, b = lab.add("a"), lab.add("b")
+    node = _script(tmp_path, "node", NODE)
+    a.run([sys.executable, node, "planner", "cam"], env, tmp_path / "planner.log")
+    cam = b.run([sys.executable, node, "cam"], env, tmp_path / "cam.log")
+    b.run([sys.executable, node, "imu"], env, tmp_path / "imu.log")
+    b.run([EXE, "agent", "--period", "0.5"], env, tmp_path / "agent.log")
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[monitor]\nperiod = 0.5\n")
+    rep = tmp_path / "r.json"
+    monitor = a.run([EXE, "monitor", "--duration", "22", "--viewer", "none", "--config", str(cfg),
+                     "--report", str(rep), "--db", str(tmp_path / "a.sqlite")], env, tmp_path / "monitor.log")
+    time.sleep(12.0)  # discovery, the agent's first reports, the monitor's warm-up
+    os.kill(inner(cam), signal.SIGKILL)
+    assert monitor.wait(timeout=60) == 0, (tmp_path / "monitor.log").read_text()
+    report = json.loads(rep.read_text())
+    rows = {m["id"]: m for m in report["members"]}
+    cam_row = rows["node:/cam"]
+    assert cam_row["host"] == "host:b" and cam_row["process"] == f"process:b/{cam_row['pid']}"
+    assert rows["node:/planner"]["host"] == "host:a" and rows["node:/imu"]["host"] == "host:b"
+    assert rows["host:b"]["agent"] == "reporting" and rows["host:a"]["agent"] == "local"
+    assert report["root_causes"], report["alerts"]
+    assert report["root_causes"][0]["member"] == "node:/cam", report["root_causes"][:3]

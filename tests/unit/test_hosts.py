@@ -131,3 +131,13 @@ def test_tree_of_merge_is_a_tree():
             assert v not in parents, v
             parents[v] = u
     assert set(G) - set(parents) == {"root"}
+
+
+def test_a_host_just_seen_waits_for_its_agent_before_it_is_named_by_its_id():
+    G, pids = _local_graph()
+    unknown = merge_hosts(G, pids, (OWN, "a"), {REMOTE: Received(50.0, _report())}, now=50.5,
+                          first_seen={REMOTE: 49.0, 0x3333: 49.0})
+    assert "host:3333" not in G and "node:/lidar" not in unknown
+    assert G.nodes["node:/lidar"]["pid_status"] == "remote"  # as on one computer, for now
+    merge_hosts(G, pids, (OWN, "a"), {}, now=53.0, first_seen={REMOTE: 49.0, 0x3333: 49.0})
+    assert "host:3333" in G
