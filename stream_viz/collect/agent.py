@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import socket
+import time
 from typing import Any
 
 import rclpy
@@ -18,15 +19,18 @@ from rclpy.context import Context
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from stream_viz.collect.collector import ObserverNode
+from stream_viz.collect.diagcdr import diagnostic_array
 from stream_viz.collect.fastdds import decode_gid
-from stream_viz.collect.hostreport import AGENT_TOPIC, HostReport, StatusRow, encode
+from stream_viz.collect.hostreport import AGENT_TOPIC, HostReport, encode
 from stream_viz.collect.pidmap import PidResolver
 from stream_viz.collect.processes import ProcessSampler
 from stream_viz.collect.readings import ProcessReading
+from stream_viz.collect.rosgraph import GidCache
 from stream_viz.errors import CollectError
 from stream_viz.model.ids import node_fqn
 
 QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+IDENTITY_EVERY = 10  # a process's command line, user and start time: when new and every 10th report
 
 
 class AgentNode(ObserverNode):
@@ -36,20 +40,6 @@ class AgentNode(ObserverNode):
         if topic == AGENT_TOPIC:
             return super(ObserverNode, self).create_publisher(msg_type, topic, *args, **kwargs)
         return super().create_publisher(msg_type, topic, *args, **kwargs)
-
-
-def to_msg(rows: list[StatusRow], stamp: Any = None) -> Any:
-    """Return a ``diagnostic_msgs/DiagnosticArray`` of the rows."""
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-
-    msg = DiagnosticArray()
-    if stamp is not None:
-        msg.header.stamp = stamp
-    msg.status = [DiagnosticStatus(level=bytes([r.level]), name=r.name, message=r.message,
-                                   hardware_id=r.hardware_id,
-                                   values=[KeyValue(key=k, value=v) for k, v in r.values])
-                  for r in rows]
-    return msg
 
 
 class Agent:
@@ -70,6 +60,9 @@ class Agent:
         self.host = host or socket.gethostname()
         self.name = f"_stream_viz_agent_{os.getpid()}"
         self.sampler = ProcessSampler()
+        # /rosout gids are read again when the node set changes or a process exits, else seldom:
+        # a graph read costs the agent more than a sample of 50 processes (docs/hosts.md).
+        self.gids = GidCache(every_s=30.0)
         self.seq = 0
         self._ctx: Context | None = None
         self.node: AgentNode | None = None
@@ -77,6 +70,8 @@ class Agent:
         self.host_id: int | None = None
         self.resolver: PidResolver | None = None
         self._dead: dict[int, ProcessReading] = {}
+        self.last_size = 0  # bytes of the last report published
+        self._sent: set[int] = set()  # processes of the last report (their identity was sent)
 
     def start(self) -> None:
         """Create our own Context, node and the one publisher."""
@@ -106,11 +101,12 @@ class Agent:
 
     def sample(self) -> HostReport:
         """Read this host's nodes' processes now."""
-        gids = {node_fqn(i.node_namespace, i.node_name): bytes(i.endpoint_gid)
-                for i in self.node.get_publishers_info_by_topic("/rosout")}
-        pids = self.resolver.resolve(gids)
+        names = {node_fqn(ns, n): None for n, ns in self.node.get_node_names_and_namespaces()}
+        pids = self.resolver.resolve(self.gids.get(self.node, names, time.monotonic()))
         mine = {p.prefix: p.pid for p in pids.values() if p.pid is not None and p.prefix}
         ps = self.sampler.sample(set(mine.values()))
+        if ps.exited:  # a node restarted under its old name has a new gid
+            self.gids.invalidate()
         # An ended process stays (alive=False) while DDS still lists its nodes, as in the monitor.
         self._dead.update(ps.exited)
         listed = set(mine.values())
@@ -123,11 +119,14 @@ class Agent:
         self.seq += 1
         return HostReport(self.host, self.host_id, self.seq, self.period_s, mine, processes)
 
-    def step(self, measure: bool = False) -> int:
-        """Sample and publish one report; with ``measure`` return its size in bytes (CDR), else 0."""
-        msg = to_msg(encode(self.sample()), self.node.get_clock().now().to_msg())
-        self.pub.publish(msg)
-        return _size(msg) if measure else 0
+    def step(self) -> None:
+        """Sample and publish one report (its size in bytes, CDR, in ``last_size``)."""
+        report = self.sample()
+        known = set() if report.seq % IDENTITY_EVERY == 1 else self._sent
+        raw = diagnostic_array(time.time_ns(), encode(report, known))
+        self._sent = set(report.processes)
+        self.pub.publish(raw)
+        self.last_size = len(raw)
 
     def close(self) -> None:
         """Destroy the node and shut our Context. Idempotent."""
@@ -147,8 +146,3 @@ class Agent:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-
-def _size(msg: Any) -> int:
-    from rclpy.serialization import serialize_message
-
-    return len(serialize_message(msg))

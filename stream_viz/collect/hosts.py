@@ -246,10 +246,14 @@ class HostReports:
             if got is None:
                 break
             msg = got[0] if isinstance(got, tuple) else got
-            report = decode(_rows(msg))
+            rows = _rows(msg)
+            try:
+                old = self.received.get(int(dict(rows[0].values).get("host_id", -1)) if rows else -1)
+                report = decode(rows, old.report if old is not None else None)
+            except (KeyError, ValueError):  # not an agent's report: nothing to merge
+                continue
             if report is None or report.host_id == self.own[0]:
                 continue
-            old = self.received.get(report.host_id)
             self.received[report.host_id] = Received(now, report)
             self.names[report.host_id] = report.host
             if old is not None:

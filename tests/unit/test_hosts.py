@@ -141,3 +141,30 @@ def test_a_host_just_seen_waits_for_its_agent_before_it_is_named_by_its_id():
     assert G.nodes["node:/lidar"]["pid_status"] == "remote"  # as on one computer, for now
     merge_hosts(G, pids, (OWN, "a"), {}, now=53.0, first_seen={REMOTE: 49.0, 0x3333: 49.0})
     assert "host:3333" in G
+
+
+def test_identity_left_out_for_known_processes_is_taken_from_the_report_before():
+    rows = encode(_report(seq=2), known={1, 10})
+    assert "cmdline" not in dict(rows[2].values) and "create_time" not in dict(rows[2].values)
+    back = decode(rows, before=_report())
+    assert (back.processes[10].cmdline, back.processes[10].create_time) == ("python cam.py", 101.5)
+    assert back.processes[10].metrics == {"cpu_percent": 12.5, "rss_mb": 40.0}
+    assert decode(rows).processes[10].create_time is None  # nothing before: unknown, not made up
+
+
+def test_the_agents_own_cdr_is_what_rclpy_serializes():
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from stream_viz.collect.diagcdr import diagnostic_array
+
+    rows = encode(_report())
+    rows[1] = rows[1]._replace(message="ünïcode", values=[])  # odd lengths, padding, UTF-8
+    msg = DiagnosticArray()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 1700000000, 123456789
+    msg.status = [DiagnosticStatus(level=bytes([r.level]), name=r.name, message=r.message,
+                                   hardware_id=r.hardware_id,
+                                   values=[KeyValue(key=k, value=v) for k, v in r.values]) for r in rows]
+    raw = diagnostic_array(1700000000_123456789, rows)
+    assert len(raw) == len(serialize_message(msg))  # the same layout (rclpy's padding bytes vary)
+    assert deserialize_message(raw, DiagnosticArray) == msg
