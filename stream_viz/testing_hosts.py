@@ -10,15 +10,52 @@ inside the namespaces the lab created; ending the lab ends every process in it.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import signal
 import subprocess
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 NSENTER = ("nsenter", "--preserve-credentials")
+
+# A node publishing /<name>/out at 10 Hz, subscribed to /<other>/out of the names after it.
+NODE = """
+import sys
+import rclpy
+from std_msgs.msg import String
+rclpy.init()
+n = rclpy.create_node(sys.argv[1])
+pub = n.create_publisher(String, '/' + sys.argv[1] + '/out', 10)
+subs = [n.create_subscription(String, '/' + t + '/out', lambda m: None, 10) for t in sys.argv[2:]]
+n.create_timer(0.1, lambda: pub.publish(String(data='x')))
+print('ready', flush=True)
+rclpy.spin(n)
+"""
+
+# The collector, sampled every argv[2] s; one JSON line per sample to argv[1]: the nodes',
+# processes' and hosts' placement, the process tree, the exit events, the unreadable members.
+OBSERVER = """
+import json, sys, time
+from stream_viz.collect.collector import Collector
+out = open(sys.argv[1], 'w')
+period = float(sys.argv[2]) if len(sys.argv) > 2 else 0.5
+keep = ('host', 'pid', 'pid_status', 'alive', 'agent', 'process_unknown', 'unknown')
+with Collector(topic_metrics=False) as c:
+    while True:
+        s = c.sample()
+        G = s.graph
+        members = {m: {k: d[k] for k in keep if k in d} for m, d in G.nodes(data=True)
+                   if d['kind'] in ('node', 'process', 'host')}
+        tree = [[u, v] for u, v, k in G.edges(keys=True) if k == 1]
+        events = [[e.kind, e.member, e.level, e.t] for e in s.events if e.kind == 'exit']
+        out.write(json.dumps({'t': s.t, 'members': members, 'tree': tree, 'events': events,
+                              'unreadable': s.unreadable}) + '\\n')
+        out.flush()
+        time.sleep(period)
+"""
 
 
 def why_not() -> str | None:
@@ -155,6 +192,35 @@ class Lab:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class Samples:
+    """The `OBSERVER`'s JSON lines, read back as they come."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def all(self) -> list[dict]:
+        """Every complete line so far."""
+        if not self.path.exists():
+            return []
+        return [json.loads(x) for x in self.path.read_text().splitlines() if x.endswith("}")]
+
+    def last(self) -> dict | None:
+        """The newest sample, None before the first."""
+        s = self.all()
+        return s[-1] if s else None
+
+    def until(self, pred: Callable[[dict], bool], timeout: float) -> dict:
+        """Wait for a sample for which ``pred`` holds; return it (raises TimeoutError)."""
+        deadline = time.monotonic() + timeout
+        while True:
+            s = self.last()
+            if s is not None and pred(s):
+                return s
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"no such sample within {timeout} s (last: {s})")
+            time.sleep(0.3)
 
 
 def lab_env(domain: int) -> dict[str, str]:

@@ -16,71 +16,14 @@ import time
 
 import pytest
 
-from stream_viz.testing import EXE, claim_domain, wait_for
-from stream_viz.testing_hosts import Lab, inner, lab_env, why_not
+from stream_viz.testing import EXE, claim_domain
+from stream_viz.testing_hosts import NODE, OBSERVER, Lab, Samples, inner, lab_env, why_not
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 WHY_NOT = why_not()
 if WHY_NOT:
     pytestmark.append(pytest.mark.skip(reason=f"cannot make network/PID namespaces here: {WHY_NOT}"))
-
-NODE = """
-import sys
-import rclpy
-from std_msgs.msg import String
-rclpy.init()
-n = rclpy.create_node(sys.argv[1])
-pub = n.create_publisher(String, '/' + sys.argv[1] + '/out', 10)
-subs = [n.create_subscription(String, '/' + t + '/out', lambda m: None, 10) for t in sys.argv[2:]]
-n.create_timer(0.1, lambda: pub.publish(String(data='x')))
-print('ready', flush=True)
-rclpy.spin(n)
-"""
-
-# Runs in host a: samples the collector every 0.5 s, one JSON line per sample.
-OBSERVE = """
-import json, sys, time
-from stream_viz.collect.collector import Collector
-out = open(sys.argv[1], 'w')
-with Collector(topic_metrics=False) as c:
-    while True:
-        s = c.sample()
-        G = s.graph
-        keep = ('host', 'pid', 'pid_status', 'alive', 'agent', 'process_unknown', 'unknown')
-        members = {m: {k: d[k] for k in keep if k in d} for m, d in G.nodes(data=True)
-                   if d['kind'] in ('node', 'process', 'host')}
-        tree = [[u, v] for u, v, k in G.edges(keys=True) if k == 1]
-        events = [[e.kind, e.member, e.level, e.t] for e in s.events if e.kind == 'exit']
-        out.write(json.dumps({'t': s.t, 'members': members, 'tree': tree, 'events': events,
-                              'unreadable': s.unreadable}) + '\\n')
-        out.flush()
-        time.sleep(0.5)
-"""
-
-
-class Samples:
-    """The observer's JSON lines, read back as they come."""
-
-    def __init__(self, path):
-        self.path = path
-
-    def all(self):
-        if not self.path.exists():
-            return []
-        lines = self.path.read_text().splitlines()
-        return [json.loads(x) for x in lines if x.endswith("}")]
-
-    def last(self):
-        s = self.all()
-        return s[-1] if s else None
-
-    def until(self, pred, timeout):
-        def ok():
-            s = self.last()
-            return s if s is not None and pred(s) else None
-        return wait_for(ok, timeout, 0.3)
-
 
 @pytest.fixture
 def lab(tmp_path):
@@ -106,19 +49,21 @@ def test_one_model_across_three_hosts_remote_crash_and_agent_killed(lab, tmp_pat
     }
     agent = b.run([EXE, "agent", "--period", "0.5"], env, tmp_path / "agent.log")
     samples = Samples(tmp_path / "samples.jsonl")
-    observe = _script(tmp_path, "observe", OBSERVE)
+    observe = _script(tmp_path, "observe", OBSERVER)
     a.run([sys.executable, observe, str(samples.path)], env, tmp_path / "observe.log")
 
     def merged(s):
         m = s["members"]
         return (all(f"node:/{n}" in m for n in nodes) and m["node:/cam"].get("pid_status") == "confirmed"
-                and m["node:/imu"].get("pid_status") == "confirmed")
+                and m["node:/imu"].get("pid_status") == "confirmed" and "host" in m["node:/lidar"])
 
     s = samples.until(merged, 40.0)
     m, tree = s["members"], {tuple(e) for e in s["tree"]}
     # every node on its own host, a host level under the root
-    assert {n: m[f"node:/{n}"]["host"] for n in nodes} == {"planner": "a", "cam": "b", "imu": "b", "lidar": m[
-        "node:/lidar"]["host"]}
+    host_c = m["node:/lidar"]["host"]  # no agent: named by its Fast DDS host id
+    hosts = {n: m[f"node:/{n}"]["host"] for n in nodes}
+    assert hosts == {"planner": "a", "cam": "b", "imu": "b", "lidar": host_c}
+    assert host_c not in ("a", "b") and len(host_c) == 4
     assert {("root", "host:a"), ("root", "host:b")} <= tree
     assert m["host:b"]["agent"] == "reporting"
     # PIDs collide across the hosts' PID namespaces: the processes still differ
@@ -128,7 +73,6 @@ def test_one_model_across_three_hosts_remote_crash_and_agent_killed(lab, tmp_pat
     assert cam_pid < 100 and planner_pid < 100  # each host's own small PIDs
     # host c has no agent: its node is marked, never guessed
     lidar = m["node:/lidar"]
-    host_c = lidar["host"]
     assert lidar["pid"] is None and lidar["pid_status"] == "unknown"
     assert s["unreadable"]["node:/lidar"] == f"process unknown: no agent on host {host_c}"
     assert (f"host:{host_c}", "node:/lidar") in tree and m[f"host:{host_c}"]["agent"] == "none"
