@@ -4,8 +4,8 @@ own computer, side by side in one run.
 Two computers on this machine (`stream_viz.testing_hosts.Lab`: network and PID namespaces, ROS 2
 discovery over UDP on a veth bridge): host ``a`` runs the collector (sampling every
 ``--period``) and a node, host ``b`` an agent (the same period) and a node. Each round both nodes
-are SIGKILLed at the same moment; the figure is the time from the kill to the collector's
-``exit`` event of each node (both on this machine's clock).
+are SIGKILLed at the same moment, at a random phase of the two samplers; the figure is the time
+from the kill to the collector's ``exit`` event of each node (both on this machine's clock).
 
     .venv/bin/python bench/bench_hosts_crash.py --rounds 5 --period 0.5
 """
@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import argparse
 import os
+import random
+import shutil
 import signal
 import statistics
 import sys
@@ -50,7 +52,8 @@ def main() -> None:
             pf = hb.run([sys.executable, str(work / "node.py"), far], env, work / f"{far}.log")
             samples.until(lambda s, n=near, f=far: all(
                 s["members"].get(f"node:/{x}", {}).get("pid_status") == "confirmed" for x in (n, f)), 60.0)
-            time.sleep(2.0)  # the processes tracked a while, as in a running robot
+            # Tracked a while, as in a running robot; then a kill at a random phase of the samplers.
+            time.sleep(2.0 + random.uniform(0.0, a.period))
             targets = (inner(pn), inner(pf))
             t_kill = time.time()
             for pid in targets:
@@ -59,7 +62,7 @@ def main() -> None:
 
             def both(s, n=near, f=far, seen=seen):
                 for x in samples.all():
-                    for kind, member, _, t in x["events"]:
+                    for kind, member, _, t, *_ in x["events"]:
                         if kind == "exit" and member in (f"node:/{n}", f"node:/{f}"):
                             seen.setdefault(member, t)
                 return len(seen) == 2
@@ -68,6 +71,7 @@ def main() -> None:
             local.append(seen[f"node:/{near}"] - t_kill)
             remote.append(seen[f"node:/{far}"] - t_kill)
             print(f"round {r}: local {local[-1]:.2f} s, remote {remote[-1]:.2f} s", flush=True)
+    shutil.rmtree(work, ignore_errors=True)
     print(f"\n| crash seen (s from the kill), {a.rounds} rounds, period {a.period} s | median | max |")
     print("|---|---|---|")
     for what, xs in (("on the monitor's computer (from its /proc)", local),

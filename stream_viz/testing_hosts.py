@@ -50,7 +50,7 @@ with Collector(topic_metrics=False) as c:
         members = {m: {k: d[k] for k in keep if k in d} for m, d in G.nodes(data=True)
                    if d['kind'] in ('node', 'process', 'host')}
         tree = [[u, v] for u, v, k in G.edges(keys=True) if k == 1]
-        events = [[e.kind, e.member, e.level, e.t] for e in s.events if e.kind == 'exit']
+        events = [[e.kind, e.member, e.level, e.t, e.text] for e in s.events if e.kind == 'exit']
         out.write(json.dumps({'t': s.t, 'members': members, 'tree': tree, 'events': events,
                               'unreadable': s.unreadable}) + '\\n')
         out.flush()

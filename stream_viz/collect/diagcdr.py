@@ -19,35 +19,38 @@ _U32 = struct.Struct("<I")
 _PADS = (b"", b"\x00", b"\x00\x00", b"\x00\x00\x00")
 
 
-def _string(out: list[bytes], at: int, s: str) -> int:
-    """Append string ``s`` at payload offset ``at`` (padded to 4 first); return the offset after it."""
-    b = s.encode()
-    pad = -at % 4
-    out.append(_PADS[pad] + _U32.pack(len(b) + 1) + b + b"\x00")
-    return at + pad + 5 + len(b)
-
-
-def _u32(out: list[bytes], at: int, n: int) -> int:
-    pad = -at % 4
-    out.append(_PADS[pad] + _U32.pack(n))
-    return at + pad + 4
-
-
 def diagnostic_array(stamp_ns: int, rows: Iterable[tuple[int, str, str, str, list[tuple[str, str]]]],
                      frame_id: str = "") -> bytes:
     """Return the serialized DiagnosticArray of ``rows`` (level, name, message, hardware id,
     key-values) stamped ``stamp_ns``."""
     rows = list(rows)
     out = [ENCAPSULATION, struct.pack("<iI", stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000)]
-    at = _string(out, 8, frame_id)
-    at = _u32(out, at, len(rows))
+    put, u32, pads = out.append, _U32.pack, _PADS
+    at = 8  # payload offset: alignment counts from the payload's start
+
+    def string(s: str) -> None:
+        nonlocal at
+        b = s.encode()
+        pad = -at % 4
+        put(pads[pad] + u32(len(b) + 1) + b + b"\x00")
+        at += pad + 5 + len(b)
+
+    def count(n: int) -> None:
+        nonlocal at
+        pad = -at % 4
+        put(pads[pad] + u32(n))
+        at += pad + 4
+
+    string(frame_id)
+    count(len(rows))
     for level, name, message, hardware_id, values in rows:
-        out.append(bytes((level & 0xFF,)))
-        at = _string(out, at + 1, name)
-        at = _string(out, at, message)
-        at = _string(out, at, hardware_id)
-        at = _u32(out, at, len(values))
+        put(bytes((level & 0xFF,)))
+        at += 1
+        string(name)
+        string(message)
+        string(hardware_id)
+        count(len(values))
         for k, v in values:
-            at = _string(out, at, k)
-            at = _string(out, at, v)
+            string(k)
+            string(v)
     return b"".join(out)
