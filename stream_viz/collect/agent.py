@@ -14,11 +14,10 @@ import socket
 import time
 from typing import Any
 
-import rclpy
 from rclpy.context import Context
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from stream_viz.collect.collector import ObserverNode
+from stream_viz.collect.collector import ObserverNode, end_node, new_node
 from stream_viz.collect.diagcdr import diagnostic_array
 from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.hostreport import AGENT_TOPIC, HostReport, encode
@@ -77,11 +76,8 @@ class Agent:
         """Create our own Context, node and the one publisher."""
         from diagnostic_msgs.msg import DiagnosticArray
 
-        ctx = Context()
         try:
-            rclpy.init(args=[], context=ctx, domain_id=self.domain_id)
-            self._ctx = ctx
-            self.node = AgentNode(self.name, context=ctx)
+            self._ctx, self.node = new_node(AgentNode, self.name, self.domain_id)
             self.pub = self.node.create_publisher(DiagnosticArray, AGENT_TOPIC, QOS)
         except Exception as e:  # rclpy raises RCLError/RuntimeError kinds we cannot name portably
             self.close()
@@ -130,14 +126,8 @@ class Agent:
 
     def close(self) -> None:
         """Destroy the node and shut our Context. Idempotent."""
-        if self.node is not None:
-            try:
-                self.node.destroy_node()
-            finally:
-                self.node = None
-        if self._ctx is not None:
-            self._ctx.try_shutdown()
-            self._ctx = None
+        node, ctx, self.node, self._ctx = self.node, self._ctx, None, None
+        end_node(node, ctx)
 
     def __enter__(self) -> Agent:
         self.start()
