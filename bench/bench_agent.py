@@ -51,7 +51,7 @@ def stop(kids: list[subprocess.Popen]) -> None:
         k.wait()
 
 
-def _mapped(agent: Agent, n: int, timeout: float = 120.0, steady: float = 20.0) -> int:
+def _mapped(agent: Agent, n: int, timeout: float = 180.0, steady: float = 40.0) -> int:
     """Wait until the agent maps all ``n`` processes, or the count has not grown for ``steady`` s;
     return the count (a loaded machine may discover fewer: the table says how many)."""
     best, since, deadline = 0, time.monotonic(), time.monotonic() + timeout

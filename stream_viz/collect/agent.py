@@ -59,9 +59,10 @@ class Agent:
         self.host = host or socket.gethostname()
         self.name = f"_stream_viz_agent_{os.getpid()}"
         self.sampler = ProcessSampler()
-        # /rosout gids are read again when the node set changes or a process exits, else seldom:
-        # a graph read costs the agent more than a sample of 50 processes (docs/hosts.md).
-        self.gids = GidCache(every_s=30.0)
+        # /rosout gids are read again when a process exits, each sample while a node that came in
+        # the last 30 s has none yet (on a loaded computer its endpoints can come seconds after its
+        # name), else every 30 s: a graph read costs more than a sample of 50 processes.
+        self.gids = GidCache(every_s=30.0, settle_s=30.0)
         self.seq = 0
         self._ctx: Context | None = None
         self.node: AgentNode | None = None
