@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
 import sys
 import textwrap
 import time
@@ -18,6 +19,7 @@ import pytest
 
 from stream_viz.testing import EXE, claim_domain
 from stream_viz.testing_hosts import NODE, OBSERVER, Lab, Samples, inner, lab_env, why_not
+from tests.cli.test_cli import check_report
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -122,3 +124,12 @@ def test_a_crash_on_another_host_is_ranked_first_with_its_host_and_process(lab, 
     assert rows["host:b"]["agent"] == "reporting" and rows["host:a"]["agent"] == "local"
     assert report["root_causes"], report["alerts"]
     assert report["root_causes"][0]["member"] == "node:/cam", report["root_causes"][:3]
+    check_report(report)  # the schema knows the host fields and process:<host>/<pid>
+    # offline, from the alert database alone: the same hosts and the same first cause
+    offline = tmp_path / "offline.json"
+    out = subprocess.run([EXE, "analyze", "--db", str(tmp_path / "a.sqlite"), "--report", str(offline)],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    again = json.loads(offline.read_text())
+    assert again["root_causes"][0]["member"] == "node:/cam"
+    assert {m["id"]: m.get("host") for m in again["members"]}["node:/cam"] == "host:b"

@@ -168,3 +168,22 @@ def test_the_agents_own_cdr_is_what_rclpy_serializes():
     raw = diagnostic_array(1700000000_123456789, rows)
     assert len(raw) == len(serialize_message(msg))  # the same layout (rclpy's padding bytes vary)
     assert deserialize_message(raw, DiagnosticArray) == msg
+
+
+def test_the_viewer_draws_the_host_level_and_groups_nodes_by_host():
+    from stream_viz.viz.layout_groups import member_groups
+    from stream_viz.viz.paths import group_path
+    from stream_viz.viz.process_tree import process_tree_arrays
+
+    G, pids = _local_graph()
+    merge_hosts(G, pids, (OWN, "a"), {REMOTE: Received(50.0, _report())}, now=50.5)
+    a = process_tree_arrays(G)
+    labels = dict(zip(a["ids"], a["labels"], strict=True))
+    assert labels["host:b"] == "b" and labels["process:b/10"] == "python (b/10)"
+    assert ("root", "host:b") in a["edges"] and ("host:b", "process:b/1") in a["edges"]
+    groups = member_groups(G, ["node:/planner", "node:/cam", "node:/lidar"], by="host")
+    assert groups == {}  # one node per host: no box of one
+    add_member(G, "node:/imu", host="b")
+    assert member_groups(G, ["node:/cam", "node:/imu", "node:/planner"], by="host") == {
+        "node:/cam": "b", "node:/imu": "b"}
+    assert group_path("host", "b") == "/host/b"
