@@ -212,6 +212,26 @@ def remote_exits(t: float, host: str, before: HostReport, now: HostReport,
     return out
 
 
+def remote_pids(G: nx.MultiDiGraph, own_name: str) -> dict[str, tuple[str, int]]:
+    """Node id → (host, pid) of the nodes of other hosts whose process is known."""
+    return {m: (d["host"], d["pid"]) for m, d in G.nodes(data=True)
+            if d.get("kind") == "node" and d.get("host", own_name) != own_name and d.get("pid") is not None}
+
+
+def remote_restarts(t: float, before: dict[str, tuple[str, int]],
+                    now: dict[str, tuple[str, int]]) -> list[Event]:
+    """``restart`` events of nodes of other hosts now in another process (as the collector's)."""
+    out = []
+    for m, (host, pid) in sorted(now.items()):
+        old = before.get(m)
+        if old is not None and old != (host, pid):
+            out.append(Event(t, "restart", m, "warn",
+                             f"node {m.partition(':')[2]} now runs in process {pid} on host {host} "
+                             f"(was {old[1]} on host {old[0]})",
+                             {"old_pid": old[1], "pid": pid, "host": host, "old_host": old[0]}))
+    return out
+
+
 class HostReports:
     """Reads the agents' reports (a raw best-effort subscription, drained at each sample) and
     merges them into the collector's model.
@@ -233,6 +253,7 @@ class HostReports:
         self.received: dict[int, Received] = {}
         self.names: dict[int, str] = {}
         self.first_seen: dict[int, float] = {}
+        self._pids: dict[str, tuple[str, int]] = {}  # remote node -> (host, pid) last sample
         self._type = DiagnosticArray
         self._sub = node.create_subscription(DiagnosticArray, AGENT_TOPIC, lambda m: None, QOS)
 
@@ -273,8 +294,12 @@ class HostReports:
             events += remote_exits(t, after.host, before, after, node_prefix)
         if self.own[0] is None:
             return events, {}
-        return events, merge_hosts(G, pids, (self.own[0], self.own[1]), self.received, t, self.names,
-                                   self.first_seen)
+        unknown = merge_hosts(G, pids, (self.own[0], self.own[1]), self.received, t, self.names,
+                              self.first_seen)
+        now = remote_pids(G, self.own[1])
+        events += remote_restarts(t, self._pids, now)
+        self._pids = now
+        return events, unknown
 
 
 def _rows(msg: Any) -> list[StatusRow]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from stream_viz.collect.hostreport import HOST_STATUS, HostReport, decode, encode, host_of_prefix
-from stream_viz.collect.hosts import Received, merge_hosts, remote_exits
+from stream_viz.collect.hosts import Received, merge_hosts, remote_exits, remote_pids, remote_restarts
 from stream_viz.collect.readings import PidInfo, ProcessReading
 from stream_viz.model.graph import PROCESS_TREE, add_member, add_tree_edge, new_graph
 from stream_viz.model.ids import pid_of
@@ -187,3 +187,14 @@ def test_the_viewer_draws_the_host_level_and_groups_nodes_by_host():
     assert member_groups(G, ["node:/cam", "node:/imu", "node:/planner"], by="host") == {
         "node:/cam": "b", "node:/imu": "b"}
     assert group_path("host", "b") == "/host/b"
+
+
+def test_a_remote_node_in_a_new_process_is_a_restart():
+    G, pids = _local_graph()
+    merge_hosts(G, pids, (OWN, "a"), {REMOTE: Received(50.0, _report())}, now=50.5)
+    now = remote_pids(G, "a")
+    assert now == {"node:/cam": ("b", 10)}  # /lidar: unknown process, /planner: this host
+    ev = remote_restarts(51.0, {"node:/cam": ("b", 7)}, now)
+    assert [(e.kind, e.member, e.level, e.data["old_pid"], e.data["pid"]) for e in ev] == [
+        ("restart", "node:/cam", "warn", 7, 10)]
+    assert remote_restarts(51.0, now, now) == []
