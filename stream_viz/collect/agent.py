@@ -1,7 +1,8 @@
 """``stream-viz agent``'s sampler: this computer's ROS processes, published as one `HostReport`.
 
 It maps the nodes whose participant's GUID prefix carries this host's id to their processes
-(`PidResolver`, as the monitor does locally), samples those processes and their ancestors
+(`PidResolver`, as the monitor does locally; the /rosout endpoints read only when their number
+changes), samples those processes and their ancestors
 (`ProcessSampler`) and publishes the report on `AGENT_TOPIC` (best effort, depth 1). Its node has
 no /rosout publisher, no parameter or type-description services and is hidden (``_`` name); it
 publishes nothing else and calls nothing.
@@ -24,11 +25,13 @@ from stream_viz.collect.hostreport import AGENT_TOPIC, HostReport, encode
 from stream_viz.collect.pidmap import PidResolver
 from stream_viz.collect.processes import ProcessSampler
 from stream_viz.collect.readings import ProcessReading
-from stream_viz.collect.rosgraph import GidCache
+from stream_viz.collect.rosgraph import UNKNOWN_NODE
 from stream_viz.errors import CollectError
 from stream_viz.model.ids import node_fqn
 
 QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
+GIDS_EVERY_S = 30.0  # the /rosout endpoints read again at least this often
+UNSURE = ("unknown", "ambiguous", "unverified")  # pid statuses resolved again each sample
 IDENTITY_EVERY = 10  # a process's command line, user and start time: when new and every 10th report
 
 
@@ -59,10 +62,9 @@ class Agent:
         self.host = host or socket.gethostname()
         self.name = f"_stream_viz_agent_{os.getpid()}"
         self.sampler = ProcessSampler()
-        # /rosout gids are read again when a process exits, each sample while a node that came in
-        # the last 30 s has none yet (on a loaded computer its endpoints can come seconds after its
-        # name), else every 30 s: a graph read costs more than a sample of 50 processes.
-        self.gids = GidCache(every_s=30.0, settle_s=30.0)
+        self._count, self._read_at, self._unsure = -1, 0.0, True
+        self._gids: dict[str, bytes] = {}
+        self._mine: dict[str, int] = {}
         self.seq = 0
         self._ctx: Context | None = None
         self.node: AgentNode | None = None
@@ -98,12 +100,10 @@ class Agent:
 
     def sample(self) -> HostReport:
         """Read this host's nodes' processes now."""
-        names = {node_fqn(ns, n): None for n, ns in self.node.get_node_names_and_namespaces()}
-        pids = self.resolver.resolve(self.gids.get(self.node, names, time.monotonic()))
-        mine = {p.prefix: p.pid for p in pids.values() if p.pid is not None and p.prefix}
+        mine = self._participants()
         ps = self.sampler.sample(set(mine.values()))
         if ps.exited:  # a node restarted under its old name has a new gid
-            self.gids.invalidate()
+            self._count = -1
         # An ended process stays (alive=False) while DDS still lists its nodes, as in the monitor.
         self._dead.update(ps.exited)
         listed = set(mine.values())
@@ -112,9 +112,28 @@ class Agent:
         for pid, r in self._dead.items():
             r.alive = False
             processes[pid] = r
-        self.resolver.forget({p.prefix for p in pids.values() if p.prefix})
         self.seq += 1
         return HostReport(self.host, self.host_id, self.seq, self.period_s, mine, processes)
+
+    def _participants(self) -> dict[str, int]:
+        """GUID prefix → pid of this host's participants. The /rosout endpoints are read again
+        only when their number changed, a process exited, a name was not discovered yet, or every
+        `GIDS_EVERY_S`; pids are resolved again while one is unsure. A graph read costs the agent
+        more than sampling 50 processes."""
+        now = time.monotonic()
+        count = self.node.count_publishers("/rosout")
+        if count != self._count or now - self._read_at >= GIDS_EVERY_S:
+            infos = self.node.get_publishers_info_by_topic("/rosout")
+            self._gids = {node_fqn(i.node_namespace, i.node_name): bytes(i.endpoint_gid)
+                          for i in infos if i.node_name != UNKNOWN_NODE}
+            self._count = count if len(self._gids) == len(infos) else -1
+            self._read_at, self._unsure = now, True
+        if self._unsure:
+            pids = self.resolver.resolve(self._gids)
+            self.resolver.forget({p.prefix for p in pids.values() if p.prefix})
+            self._mine = {p.prefix: p.pid for p in pids.values() if p.pid is not None and p.prefix}
+            self._unsure = any(p.status in UNSURE for p in pids.values())
+        return self._mine
 
     def step(self) -> None:
         """Sample and publish one report (its size in bytes, CDR, in ``last_size``)."""
