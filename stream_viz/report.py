@@ -12,6 +12,8 @@ import networkx as nx
 
 from stream_viz.errors import OutputError
 from stream_viz.model.graph import FLOW
+from stream_viz.model.ids import make_id
+from stream_viz.model.queries import process_of_node
 from stream_viz.records import Alert
 
 SCHEMA = "stream-viz.report/v2"
@@ -46,6 +48,12 @@ def build_report(
         row: dict[str, Any] = {"id": m, "kind": attrs["kind"]}
         if attrs["kind"] == "node":
             row["pid"] = attrs.get("pid")
+        if "host" in attrs:  # several computers (collect/hosts.py)
+            row["host"] = make_id("host", attrs["host"])
+            if attrs["kind"] == "node":
+                row["process"] = process_of_node(G, m)
+        if attrs["kind"] == "host":
+            row["agent"] = attrs.get("agent", "none")
         if attrs.get("gone"):
             row["gone"] = True
         members.append(row)

@@ -7,6 +7,7 @@ graph API calls, raw subscriptions; it never publishes on or calls the system's 
 from __future__ import annotations
 
 import os
+import socket
 import time
 from typing import Any
 
@@ -19,6 +20,7 @@ from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 from stream_viz.collect.build import build_model
 from stream_viz.collect.diagnostics import DiagnosticsReader
 from stream_viz.collect.fastdds import decode_gid
+from stream_viz.collect.hosts import HostReports
 from stream_viz.collect.naming import NodeNames
 from stream_viz.collect.pidmap import PidResolver
 from stream_viz.collect.processes import ProcessSampler
@@ -32,7 +34,7 @@ from stream_viz.model.graph import new_graph
 from stream_viz.model.ids import make_id, node_fqn
 from stream_viz.records import Event, Sample
 
-__all__ = ["Collector", "ObserverNode", "build_model"]
+__all__ = ["Collector", "ObserverNode", "build_model", "end_node", "new_node"]
 
 
 class _NoPublisher:
@@ -59,6 +61,27 @@ class ObserverNode(Node):
         if topic == "/parameter_events" and not hasattr(self, "_type_description_service"):
             return _NoPublisher()  # rclpy's own, asked for while the node is being constructed
         raise CollectError(f"the observer node never publishes (asked to publish on {topic})")
+
+
+def new_node(cls: type[Node], name: str, domain_id: int) -> tuple[Context, Node]:
+    """Return a Context of our own on ``domain_id`` (nothing global touched) and a node of it."""
+    ctx = Context()
+    rclpy.init(args=[], context=ctx, domain_id=domain_id)
+    try:
+        return ctx, cls(name, context=ctx)
+    except BaseException:
+        ctx.try_shutdown()
+        raise
+
+
+def end_node(node: Node | None, ctx: Context | None) -> None:
+    """Destroy ``node`` and shut its own Context (either may be None)."""
+    try:
+        if node is not None:
+            node.destroy_node()
+    finally:
+        if ctx is not None:
+            ctx.try_shutdown()
 
 
 class Collector:
@@ -94,6 +117,7 @@ class Collector:
         self.node = None
         self.topics: TopicMonitor | None = None
         self.resolver: PidResolver | None = None
+        self.hosts: HostReports | None = None
         self.sampler = ProcessSampler()
         self.qos = QosCache()
         self.gids = GidCache()
@@ -108,17 +132,15 @@ class Collector:
         """Create our own rclpy Context and observer node, subscribe to the event topics."""
         if self.node is not None:
             return
-        ctx = Context()
         try:
-            rclpy.init(args=[], context=ctx, domain_id=self.domain_id)
-            self._ctx = ctx
-            self.node = ObserverNode(self.name, context=ctx)
+            self._ctx, self.node = new_node(ObserverNode, self.name, self.domain_id)
         except Exception as e:  # rclpy raises RCLError/RuntimeError kinds we cannot name portably
             self.close()
             raise CollectError(f"cannot start the ROS 2 observer on domain {self.domain_id}: {e}") from e
         self.topics = TopicMonitor(self.node, self.window_s, metrics=self.topic_metrics)
         self.topics.start()
         self.resolver = PidResolver(self.domain_id, self._own_host())
+        self.hosts = HostReports(self.node, (self.resolver.own_host, socket.gethostname()))
 
     def _own_host(self) -> int | None:
         # Our own /rosout subscription carries our participant's prefix, hence this host's id.
@@ -167,6 +189,9 @@ class Collector:
         services, calls = self._service_calls(reading)
         G = build_model(reading, pids, processes, stats, services, calls)
         unreadable = {make_id("node", n): why for n, why in reading.skipped.items()}
+        remote_events, unreadable_remote = self.hosts.apply(G, pids, t)  # other computers' agents
+        events += remote_events
+        unreadable.update(unreadable_remote)
         for pid, why in ps.errors.items():
             if pid not in processes:  # dead ones are in the model, marked alive=False
                 unreadable[make_id("process", pid)] = why
@@ -273,14 +298,8 @@ class Collector:
         self._closed = True
         if self.topics is not None:
             self.topics.close()
-        if self.node is not None:
-            try:
-                self.node.destroy_node()
-            finally:
-                self.node = None
-        if self._ctx is not None:
-            self._ctx.try_shutdown()
-            self._ctx = None
+        node, ctx, self.node, self._ctx = self.node, self._ctx, None, None
+        end_node(node, ctx)
 
     def __enter__(self) -> Collector:
         self.start()

@@ -7,8 +7,8 @@ test) must not load rclpy or Rerun.
 
 from __future__ import annotations
 
-from stream_viz.commands import analyze, blueprint, demo, monitor, replay, snapshot
+from stream_viz.commands import agent, analyze, blueprint, demo, monitor, replay, snapshot
 
-COMMANDS = (snapshot, monitor, demo, replay, analyze, blueprint)
+COMMANDS = (snapshot, monitor, demo, replay, analyze, blueprint, agent)
 
 __all__ = ["COMMANDS"]

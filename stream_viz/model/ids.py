@@ -1,4 +1,5 @@
-"""Member ids, exactly as docs/contracts.md fixes them: ``node:/ns/name``, ``process:<pid>``, ``root``."""
+"""Member ids, exactly as docs/contracts.md fixes them: ``node:/ns/name``, ``process:<pid>`` (another
+computer's: ``process:<host>/<pid>``), ``host:<name>``, ``root``."""
 
 from __future__ import annotations
 
@@ -54,7 +55,7 @@ def name_of(member: str) -> str:
 
 
 def pid_of(member: str) -> int:
-    """Return the pid of a ``process:<pid>`` member id."""
+    """Return the pid of a ``process:<pid>`` (this host) or ``process:<host>/<pid>`` member id."""
     if kind_of(member) != "process":
         raise ModelError(f"{member!r} is not a process id")
-    return int(name_of(member))
+    return int(name_of(member).rpartition("/")[2])

@@ -113,19 +113,23 @@ def called_servers(G: nx.MultiDiGraph, node: str) -> list[str]:
 
 
 def nodes_of_process(G: nx.MultiDiGraph, process: str, *, by_pid: bool = False) -> list[str]:
-    """Return the nodes ``process`` hosts (its node children in `PROCESS_TREE`), sorted.
+    """Return the nodes ``process`` hosts (its node children in `PROCESS_TREE`), sorted; for a
+    ``host:`` member every node below it.
 
     ``by_pid`` also counts nodes whose ``pid`` attribute is the process's pid (a node the
     collector could not attach to the tree, e.g. its process ended between two reads); it
     scans every member, so it is for rare events, not for every sample.
     """
     out: set[str] = set()
+    if process in G and G.nodes[process].get("kind") == "host":  # a host takes all its nodes with it
+        return sorted(m for m in nx.descendants(tree(G), process) if G.nodes[m].get("kind") == "node")
     if process in G:
         out.update(c for c, keys in G._succ[process].items()
                    if PROCESS_TREE in keys and G.nodes[c].get("kind") == "node")
     if by_pid:
-        pid = pid_of(process)
-        out.update(m for m, d in G.nodes(data=True) if d.get("kind") == "node" and d.get("pid") == pid)
+        pid, host = pid_of(process), G.nodes[process].get("host") if process in G else None
+        out.update(m for m, d in G.nodes(data=True)
+                   if d.get("kind") == "node" and d.get("pid") == pid and d.get("host") == host)
     return sorted(out)
 
 
@@ -140,7 +144,7 @@ def process_of_node(G: nx.MultiDiGraph, node: str) -> str | None:
     pid = G.nodes[node].get("pid")
     if isinstance(pid, int) and not isinstance(pid, bool):
         proc = make_id("process", pid)
-        if proc in G:
+        if proc in G and G.nodes[proc].get("host") == G.nodes[node].get("host"):
             return proc
     return None
 

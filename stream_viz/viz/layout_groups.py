@@ -1,4 +1,4 @@
-"""Groups of the system graph drawn as labelled boxes: ROS namespaces (default) or processes.
+"""Groups of the system graph drawn as labelled boxes: ROS namespaces (default), processes or hosts.
 
 A member's namespace group is the first segment of its name when the name has more (``/amr1/scan``
 -> ``/amr1``), for namespaces that hold a ROS node (topic names alone, ``/t/a``, ``/t/b``, make
@@ -16,7 +16,7 @@ import networkx as nx
 from stream_viz.model.graph import PROCESS_TREE
 from stream_viz.model.ids import kind_of, name_of
 
-GROUPINGS = ("namespace", "process", "none")
+GROUPINGS = ("namespace", "process", "host", "none")
 
 
 def namespace_of(name: str) -> str | None:
@@ -31,7 +31,8 @@ def member_groups(G: nx.MultiDiGraph, members: Iterable[str], by: str = "namespa
     Parameters
     ----------
     by : str
-        ``namespace``, ``process`` (the hosting process's name, else ``pid <n>``) or ``none``.
+        ``namespace``, ``process`` (the hosting process's name, else ``pid <n>``), ``host`` (the
+        computer a node runs on, with several: collect/hosts.py) or ``none``.
     """
     out: dict[str, str] = {}
     for m in members:
@@ -43,6 +44,8 @@ def member_groups(G: nx.MultiDiGraph, members: Iterable[str], by: str = "namespa
             if procs:
                 p = min(procs)
                 g = str(G.nodes[p].get("name") or f"pid {name_of(p)}")
+        elif by == "host" and kind_of(m) == "node" and m in G:
+            g = G.nodes[m].get("host")
         if g is not None:
             out[m] = g
     sizes: dict[str, int] = {}

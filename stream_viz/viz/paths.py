@@ -21,7 +21,7 @@ RCA_TRAJECTORY = "/rca/trajectory"  # top fault trajectory, same positions
 RCA_REPORT = "/rca/report"  # TextDocument (markdown)
 # Groups of /system drawn as boxes: one entity per group, two invisible corner nodes; the viewer
 # captions each entity's rectangle with its path ("namespace/amr1", "process/navigation").
-GROUP_ROOTS = ("/namespace", "/process")
+GROUP_ROOTS = ("/namespace", "/process", "/host")
 
 THETA = "theta"  # leaf under a member's metric subtree: all its θ series (one entity: a small .rrd)
 ALERT_MARKERS = "alerts"  # leaf under a member's metric subtree holding SeriesPoints markers
@@ -35,8 +35,9 @@ def member_path(member: str) -> str:
 
 
 def group_path(grouping: str, group: str) -> str:
-    """Return the entity of a group's box: ``/namespace/amr1``, ``/process/<process name>``."""
-    root = GROUP_ROOTS[1] if grouping == "process" else GROUP_ROOTS[0]
+    """Return the entity of a group's box: ``/namespace/amr1``, ``/process/<process name>``,
+    ``/host/<host name>``."""
+    root = {"process": GROUP_ROOTS[1], "host": GROUP_ROOTS[2]}.get(grouping, GROUP_ROOTS[0])
     parts = [rr.escape_entity_path_part(p) for p in group.split("/") if p]
     return "/".join([root, *parts])
 

@@ -1,0 +1,135 @@
+"""Several computers on one machine (network + PID namespaces, discovery over UDP on a veth bridge).
+
+Host ``a`` runs the monitor's collector (and a node of its own), ``b`` an agent and a node, ``c``
+a node and no agent. The PIDs of the three hosts' nodes collide (each host's PID namespace
+starts at 1); the model must still put every node on its own host and process.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+
+from stream_viz.testing import EXE, claim_domain
+from stream_viz.testing_hosts import NODE, OBSERVER, Lab, Samples, inner, lab_env, why_not
+from tests.cli.test_cli import check_report
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+WHY_NOT = why_not()
+if WHY_NOT:
+    pytestmark.append(pytest.mark.skip(reason=f"cannot make network/PID namespaces here: {WHY_NOT}"))
+
+@pytest.fixture
+def lab(tmp_path):
+    with Lab(tmp_path) as lab:
+        yield lab
+
+
+def _script(tmp_path, name, code):
+    path = tmp_path / f"{name}.py"
+    path.write_text(textwrap.dedent(code))
+    return str(path)
+
+
+def test_one_model_across_three_hosts_remote_crash_and_agent_killed(lab, tmp_path):
+    env = lab_env(claim_domain())
+    a, b, c = lab.add("a"), lab.add("b"), lab.add("c")
+    node = _script(tmp_path, "node", NODE)
+    nodes = {
+        "planner": a.run([sys.executable, node, "planner", "cam"], env, tmp_path / "planner.log"),
+        "cam": b.run([sys.executable, node, "cam"], env, tmp_path / "cam.log"),
+        "imu": b.run([sys.executable, node, "imu"], env, tmp_path / "imu.log"),
+        "lidar": c.run([sys.executable, node, "lidar"], env, tmp_path / "lidar.log"),
+    }
+    agent = b.run([EXE, "agent", "--period", "0.5"], env, tmp_path / "agent.log")
+    samples = Samples(tmp_path / "samples.jsonl")
+    observe = _script(tmp_path, "observe", OBSERVER)
+    a.run([sys.executable, observe, str(samples.path)], env, tmp_path / "observe.log")
+
+    def merged(s):
+        m = s["members"]
+        return (all(f"node:/{n}" in m for n in nodes) and m["node:/cam"].get("pid_status") == "confirmed"
+                and m["node:/imu"].get("pid_status") == "confirmed" and "host" in m["node:/lidar"])
+
+    s = samples.until(merged, 40.0)
+    m, tree = s["members"], {tuple(e) for e in s["tree"]}
+    # every node on its own host, a host level under the root
+    host_c = m["node:/lidar"]["host"]  # no agent: named by its Fast DDS host id
+    hosts = {n: m[f"node:/{n}"]["host"] for n in nodes}
+    assert hosts == {"planner": "a", "cam": "b", "imu": "b", "lidar": host_c}
+    assert host_c not in ("a", "b") and len(host_c) == 4
+    assert {("root", "host:a"), ("root", "host:b")} <= tree
+    assert m["host:b"]["agent"] == "reporting"
+    # PIDs collide across the hosts' PID namespaces: the processes still differ
+    cam_pid, imu_pid, planner_pid = (m[f"node:/{n}"]["pid"] for n in ("cam", "imu", "planner"))
+    assert (f"process:b/{cam_pid}", "node:/cam") in tree and (f"process:b/{imu_pid}", "node:/imu") in tree
+    assert (f"process:{planner_pid}", "node:/planner") in tree and m[f"process:{planner_pid}"]["host"] == "a"
+    assert cam_pid < 100 and planner_pid < 100  # each host's own small PIDs
+    # host c has no agent: its node is marked, never guessed
+    lidar = m["node:/lidar"]
+    assert lidar["pid"] is None and lidar["pid_status"] == "unknown"
+    assert s["unreadable"]["node:/lidar"] == f"process unknown: no agent on host {host_c}"
+    assert (f"host:{host_c}", "node:/lidar") in tree and m[f"host:{host_c}"]["agent"] == "none"
+
+    # a crash on host b, seen from b's OS through its agent (DDS lists the node ~20 s more)
+    os.kill(inner(nodes["cam"]), signal.SIGKILL)
+    t_kill = time.time()
+    s = samples.until(lambda s: any(e[:3] == ["exit", "node:/cam", "error"] for e in s["events"]), 10.0)
+    exit_t = next(e[3] for e in s["events"] if e[1] == "node:/cam")
+    assert exit_t - t_kill < 3.0
+    assert {"exit", f"process:b/{cam_pid}", "error"} == set(next(
+        e[:3] for e in s["events"] if e[1] == f"process:b/{cam_pid}"))
+    assert s["members"]["node:/cam"]["alive"] is False
+
+    # the agent killed mid-run: b's members become unknown, nothing else is lost
+    os.kill(inner(agent), signal.SIGKILL)
+    s = samples.until(lambda s: s["members"]["host:b"]["agent"] == "silent", 10.0)
+    m = s["members"]
+    assert m["node:/imu"]["pid_status"] == "unknown" and "silent" in s["unreadable"]["node:/imu"]
+    assert "silent" in s["unreadable"][f"process:b/{imu_pid}"]
+    assert m["node:/imu"]["host"] == "b" and f"process:b/{imu_pid}" in m  # kept, marked, not dropped
+    assert m["node:/planner"]["pid_status"] == "confirmed" and "node:/planner" not in s["unreadable"]
+    assert all(not k.startswith("process:") or "/" in k for k in s["unreadable"])  # no local one
+
+
+def test_a_crash_on_another_host_is_ranked_first_with_its_host_and_process(lab, tmp_path):
+    env = lab_env(claim_domain())
+    a, b = lab.add("a"), lab.add("b")
+    node = _script(tmp_path, "node", NODE)
+    a.run([sys.executable, node, "planner", "cam"], env, tmp_path / "planner.log")
+    cam = b.run([sys.executable, node, "cam"], env, tmp_path / "cam.log")
+    b.run([sys.executable, node, "imu"], env, tmp_path / "imu.log")
+    b.run([EXE, "agent", "--period", "0.5"], env, tmp_path / "agent.log")
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[monitor]\nperiod = 0.5\n")
+    rep = tmp_path / "r.json"
+    monitor = a.run([EXE, "monitor", "--duration", "22", "--viewer", "none", "--config", str(cfg),
+                     "--report", str(rep), "--db", str(tmp_path / "a.sqlite")], env, tmp_path / "monitor.log")
+    time.sleep(12.0)  # discovery, the agent's first reports, the monitor's warm-up
+    os.kill(inner(cam), signal.SIGKILL)
+    assert monitor.wait(timeout=60) == 0, (tmp_path / "monitor.log").read_text()
+    report = json.loads(rep.read_text())
+    rows = {m["id"]: m for m in report["members"]}
+    cam_row = rows["node:/cam"]
+    assert cam_row["host"] == "host:b" and cam_row["process"] == f"process:b/{cam_row['pid']}"
+    assert rows["node:/planner"]["host"] == "host:a" and rows["node:/imu"]["host"] == "host:b"
+    assert rows["host:b"]["agent"] == "reporting" and rows["host:a"]["agent"] == "local"
+    assert report["root_causes"], report["alerts"]
+    assert report["root_causes"][0]["member"] == "node:/cam", report["root_causes"][:3]
+    check_report(report)  # the schema knows the host fields and process:<host>/<pid>
+    # offline, from the alert database alone: the same hosts and the same first cause
+    offline = tmp_path / "offline.json"
+    out = subprocess.run([EXE, "analyze", "--db", str(tmp_path / "a.sqlite"), "--report", str(offline)],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    again = json.loads(offline.read_text())
+    assert again["root_causes"][0]["member"] == "node:/cam"
+    assert {m["id"]: m.get("host") for m in again["members"]}["node:/cam"] == "host:b"

@@ -1,0 +1,200 @@
+"""Several hosts, pure parts: the agent's report rows, the merge into the model, remote exits."""
+
+from __future__ import annotations
+
+import math
+
+from stream_viz.collect.hostreport import HOST_STATUS, HostReport, decode, encode, host_of_prefix
+from stream_viz.collect.hosts import Received, merge_hosts, remote_exits, remote_pids, remote_restarts
+from stream_viz.collect.readings import PidInfo, ProcessReading
+from stream_viz.model.graph import PROCESS_TREE, add_member, add_tree_edge, new_graph
+from stream_viz.model.ids import pid_of
+from stream_viz.model.queries import nodes_of_process, process_of_node, tree
+from stream_viz.model.theta import make_theta, theta_dict
+
+OWN = 0x1111
+REMOTE = 0x2222
+PRE_LOCAL = "010f1111" + "0a00" + "0000" + "00000000"
+PRE_B = "010f2222" + "0a00" + "1234" + "00000000"  # pid 10 on host b: collides with the local pid 10
+PRE_C = "010f3333" + "0b00" + "0000" + "00000000"
+
+
+def _report(alive: bool = True, seq: int = 1) -> HostReport:
+    procs = {
+        1: ProcessReading(1, None, "init", "", 100.0),
+        10: ProcessReading(10, 1, "python", "python cam.py", 101.5, "robot",
+                           {"cpu_percent": 12.5, "rss_mb": 40.0}, alive=alive),
+    }
+    return HostReport("b", REMOTE, seq, 0.5, {PRE_B: 10}, procs)
+
+
+def test_report_rows_round_trip_host_processes_participants():
+    rows = encode(_report())
+    assert [r.name for r in rows] == [HOST_STATUS, "process 1", "process 10"]
+    assert rows[0].hardware_id == "b" and dict(rows[0].values)["host_id"] == str(REMOTE)
+    assert dict(rows[2].values)["participants"] == PRE_B
+    back = decode(rows)
+    assert (back.host, back.host_id, back.seq, back.period_s) == ("b", REMOTE, 1, 0.5)
+    assert back.participants == {PRE_B: 10}
+    p = back.processes[10]
+    assert (p.ppid, p.name, p.cmdline, p.username, p.alive) == (1, "python", "python cam.py", "robot", True)
+    assert p.metrics == {"cpu_percent": 12.5, "rss_mb": 40.0} and p.create_time == 101.5
+    assert back.processes[1].ppid is None
+    assert decode(encode(_report(alive=False))).processes[10].alive is False
+    assert decode(rows[1:]) is None  # not an agent's array (an ordinary /diagnostics one)
+
+
+def test_host_of_prefix_reads_bytes_2_3():
+    assert host_of_prefix(PRE_B) == REMOTE and host_of_prefix(PRE_LOCAL) == OWN
+
+
+def _local_graph():
+    """This host: process 1 (launch) → process 10 → node /planner; node /cam on host b; /lidar on c."""
+    G = new_graph()
+    for n in ("node:/planner", "node:/cam", "node:/lidar"):
+        add_member(G, n, pid=None, pid_status="remote")
+    for p in ("process:1", "process:10"):
+        add_member(G, p, pid=pid_of(p), theta=make_theta("process", {"cpu_percent": 1.0}))
+    add_tree_edge(G, "process:1", "process:10")
+    add_tree_edge(G, "process:10", "node:/planner")
+    G.nodes["node:/planner"].update(pid=10, pid_status="confirmed")
+    pids = {"/planner": PidInfo(10, "confirmed", (10,), PRE_LOCAL),
+            "/cam": PidInfo(None, "remote", prefix=PRE_B), "/lidar": PidInfo(None, "remote", prefix=PRE_C)}
+    return G, pids
+
+
+def test_merge_gives_the_tree_a_host_level_and_remote_processes_their_own_ids():
+    G, pids = _local_graph()
+    unknown = merge_hosts(G, pids, (OWN, "a"), {REMOTE: Received(50.0, _report())}, now=50.5)
+    T = tree(G)
+    assert sorted(T.successors("root")) == ["host:3333", "host:a", "host:b"]
+    assert list(T.successors("host:a")) == ["process:1"]
+    assert list(T.successors("host:b")) == ["process:b/1"]
+    assert list(T.successors("process:b/1")) == ["process:b/10"]
+    assert list(T.successors("process:b/10")) == ["node:/cam"]
+    assert process_of_node(G, "node:/cam") == "process:b/10"
+    assert process_of_node(G, "node:/planner") == "process:10"  # same pid, other host: no mix-up
+    cam = G.nodes["node:/cam"]
+    assert (cam["host"], cam["pid"], cam["pid_status"], cam["alive"]) == ("b", 10, "confirmed", True)
+    assert G.nodes["node:/planner"]["host"] == "a" and G.nodes["process:10"]["host"] == "a"
+    assert theta_dict("process", G.nodes["process:b/10"]["theta"])["cpu_percent"] == 12.5
+    assert G.nodes["host:b"]["agent"] == "reporting" and G.nodes["host:3333"]["agent"] == "none"
+    # host c has no agent: its node hangs under the host, marked, never guessed
+    assert list(T.successors("host:3333")) == ["node:/lidar"]
+    assert G.nodes["node:/lidar"]["pid"] is None and G.nodes["node:/lidar"]["pid_status"] == "unknown"
+    assert unknown == {"node:/lidar": "process unknown: no agent on host 3333"}
+    assert nodes_of_process(G, "host:b") == ["node:/cam"]
+    assert nodes_of_process(G, "process:b/10", by_pid=True) == ["node:/cam"]
+    assert nodes_of_process(G, "process:10", by_pid=True) == ["node:/planner"]
+
+
+def test_a_silent_agent_marks_its_members_unknown_and_keeps_everything_else():
+    G, pids = _local_graph()
+    unknown = merge_hosts(G, pids, (OWN, "a"), {REMOTE: Received(40.0, _report())}, now=50.0)
+    why = "process unknown: the agent on host b has been silent for 10 s"
+    assert unknown == {"node:/cam": why, "process:b/1": why, "process:b/10": why,
+                       "node:/lidar": "process unknown: no agent on host 3333"}
+    assert G.nodes["host:b"]["agent"] == "silent"
+    assert all(math.isnan(x) for x in G.nodes["process:b/10"]["theta"])  # unknown, not a stale value
+    assert G.nodes["node:/cam"]["pid_status"] == "unknown" and "process:b/10" in G
+    assert theta_dict("process", G.nodes["process:10"]["theta"])["cpu_percent"] == 1.0
+
+
+def test_one_host_leaves_the_model_as_it_was():
+    G, pids = _local_graph()
+    pids = {"/planner": pids["/planner"]}
+    G.remove_nodes_from(["node:/cam", "node:/lidar"])
+    before = (sorted(G.nodes(data="kind")), sorted(G.edges(keys=True)))
+    assert merge_hosts(G, pids, (OWN, "a"), {}, now=1.0) == {}
+    assert (sorted(G.nodes(data="kind")), sorted(G.edges(keys=True))) == before
+    assert "host" not in G.nodes["node:/planner"]
+
+
+def test_remote_exit_is_an_error_while_dds_still_lists_the_node():
+    ev = remote_exits(5.0, "b", _report(), _report(alive=False, seq=2), {"/cam": PRE_B})
+    assert [(e.member, e.kind, e.level) for e in ev] == [("node:/cam", "exit", "error"),
+                                                          ("process:b/10", "exit", "error")]
+    assert ev[0].data["host"] == "b" and ev[0].data["pid"] == 10
+    assert remote_exits(5.0, "b", _report(), _report(seq=2), {"/cam": PRE_B}) == []
+    gone = _report(seq=2)
+    del gone.processes[10]
+    ev = remote_exits(5.0, "b", _report(), gone, {})  # ended cleanly: DDS no longer lists /cam
+    assert [(e.member, e.level) for e in ev] == [("process:b/10", "warn")]
+
+
+def test_tree_of_merge_is_a_tree():
+    G, pids = _local_graph()
+    merge_hosts(G, pids, (OWN, "a"), {REMOTE: Received(50.0, _report())}, now=50.5)
+    parents = {}
+    for u, v, k in G.edges(keys=True):
+        if k == PROCESS_TREE:
+            assert v not in parents, v
+            parents[v] = u
+    assert set(G) - set(parents) == {"root"}
+
+
+def test_a_host_just_seen_waits_for_its_agent_before_it_is_named_by_its_id():
+    G, pids = _local_graph()
+    unknown = merge_hosts(G, pids, (OWN, "a"), {REMOTE: Received(50.0, _report())}, now=50.5,
+                          first_seen={REMOTE: 49.0, 0x3333: 49.0})
+    assert "host:3333" not in G and "node:/lidar" not in unknown
+    assert G.nodes["node:/lidar"]["pid_status"] == "remote"  # as on one computer, for now
+    merge_hosts(G, pids, (OWN, "a"), {}, now=53.0, first_seen={REMOTE: 49.0, 0x3333: 49.0})
+    assert "host:3333" in G
+
+
+def test_identity_left_out_for_known_processes_is_taken_from_the_report_before():
+    rows = encode(_report(seq=2), known={1, 10})
+    assert "cmdline" not in dict(rows[2].values) and "create_time" not in dict(rows[2].values)
+    back = decode(rows, before=_report())
+    assert (back.processes[10].cmdline, back.processes[10].create_time) == ("python cam.py", 101.5)
+    assert back.processes[10].metrics == {"cpu_percent": 12.5, "rss_mb": 40.0}
+    assert decode(rows).processes[10].create_time is None  # nothing before: unknown, not made up
+
+
+def test_the_agents_own_cdr_is_what_rclpy_serializes():
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from stream_viz.collect.diagcdr import diagnostic_array
+
+    rows = encode(_report())
+    rows[1] = rows[1]._replace(message="ünïcode", values=[])  # odd lengths, padding, UTF-8
+    msg = DiagnosticArray()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 1700000000, 123456789
+    msg.status = [DiagnosticStatus(level=bytes([r.level]), name=r.name, message=r.message,
+                                   hardware_id=r.hardware_id,
+                                   values=[KeyValue(key=k, value=v) for k, v in r.values]) for r in rows]
+    raw = diagnostic_array(1700000000_123456789, rows)
+    assert len(raw) == len(serialize_message(msg))  # the same layout (rclpy's padding bytes vary)
+    assert deserialize_message(raw, DiagnosticArray) == msg
+
+
+def test_the_viewer_draws_the_host_level_and_groups_nodes_by_host():
+    from stream_viz.viz.layout_groups import member_groups
+    from stream_viz.viz.paths import group_path
+    from stream_viz.viz.process_tree import process_tree_arrays
+
+    G, pids = _local_graph()
+    merge_hosts(G, pids, (OWN, "a"), {REMOTE: Received(50.0, _report())}, now=50.5)
+    a = process_tree_arrays(G)
+    labels = dict(zip(a["ids"], a["labels"], strict=True))
+    assert labels["host:b"] == "b" and labels["process:b/10"] == "python (b/10)"
+    assert ("root", "host:b") in a["edges"] and ("host:b", "process:b/1") in a["edges"]
+    groups = member_groups(G, ["node:/planner", "node:/cam", "node:/lidar"], by="host")
+    assert groups == {}  # one node per host: no box of one
+    add_member(G, "node:/imu", host="b")
+    assert member_groups(G, ["node:/cam", "node:/imu", "node:/planner"], by="host") == {
+        "node:/cam": "b", "node:/imu": "b"}
+    assert group_path("host", "b") == "/host/b"
+
+
+def test_a_remote_node_in_a_new_process_is_a_restart():
+    G, pids = _local_graph()
+    merge_hosts(G, pids, (OWN, "a"), {REMOTE: Received(50.0, _report())}, now=50.5)
+    now = remote_pids(G, "a")
+    assert now == {"node:/cam": ("b", 10)}  # /lidar: unknown process, /planner: this host
+    ev = remote_restarts(51.0, {"node:/cam": ("b", 7)}, now)
+    assert [(e.kind, e.member, e.level, e.data["old_pid"], e.data["pid"]) for e in ev] == [
+        ("restart", "node:/cam", "warn", 7, 10)]
+    assert remote_restarts(51.0, now, now) == []
