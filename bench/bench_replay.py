@@ -84,7 +84,7 @@ def replay(path: Path, workdir: Path, crash_at: int | None, config: Path | None 
     report = mon.close()
     return {"cpu": cpu, "loop": loop, "alerts": alerts, "members": members, "nodes": nodes,
             "causes": [rc["member"] for rc in report["root_causes"][:8]], "crash_at": crash_at,
-            "size": path.stat().st_size}
+            "size": path.stat().st_size, "report": report}
 
 
 def _timed(fn: Callable, into: list[float]) -> Callable:
