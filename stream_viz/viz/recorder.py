@@ -23,7 +23,6 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from stream_viz.errors import ConfigError, OutputError, StreamVizError
-from stream_viz.model.graph import FLOW, flow_edges
 from stream_viz.output import check_writable
 from stream_viz.records import SEVERITY_RANK, Alert
 from stream_viz.viz import paths, style
@@ -36,7 +35,7 @@ from stream_viz.viz.process_tree import log_process_tree
 from stream_viz.viz.rca import log_rca, log_report
 from stream_viz.viz.screenshot import rerun_executable
 from stream_viz.viz.serve import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, WebViewerServer
-from stream_viz.viz.system import drawn_status, log_system_arrays, system_view, with_gone
+from stream_viz.viz.system import drawn_status, log_system_arrays, signatures, system_view, with_gone
 
 VIEWER_MODES = ("spawn", "serve", "none")
 GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
@@ -318,9 +317,7 @@ class Recorder:
         if t is not None:
             log_health(self.rec, self.health.set_gone(t, gone_all))
         colouring = drawn_status(self.status, gone_all)
-        sig = (frozenset(G.nodes), frozenset(flow_edges(G)), gone_all, colouring,
-               frozenset((m, lab) for m, lab in G.nodes(data="label")))
-        tree_sig = (frozenset((u, v, k) for u, v, k in G.edges(keys=True) if k != FLOW), gone_all)
+        sig, tree_sig = signatures(G, gone_all, colouring)
         if tree_sig != self._tree_sig or force:
             log_process_tree(self.rec, G)
             self._tree_sig = tree_sig

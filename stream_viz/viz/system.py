@@ -10,7 +10,7 @@ import networkx as nx
 import rerun as rr
 
 from stream_viz.errors import ModelError
-from stream_viz.model.graph import flow_edges
+from stream_viz.model.graph import FLOW, flow_edges
 from stream_viz.model.ids import kind_of, name_of
 from stream_viz.viz import paths, style
 from stream_viz.viz.graph_arrays import graph_archetypes
@@ -73,6 +73,20 @@ def drawn_status(status: Mapping[str, str], gone: Collection[str] = ()) -> froze
     there (not processes, hosts, the root) and not drawn as gone."""
     return frozenset((m, s) for m, s in status.items()
                      if m not in gone and kind_of(m) not in ("process", "host", "root"))
+
+
+def signatures(G: nx.MultiDiGraph, gone: frozenset[str], colouring: frozenset) -> tuple[tuple, tuple]:
+    """Return what ``/system`` and ``/process_tree`` are drawn from, comparable between samples:
+    members, flow edges, ``gone``, ``colouring`` (`drawn_status`) and labels; tree edges and ``gone``.
+    One pass over the edges (a large graph is compared every sample)."""
+    flow, tree = set(), set()
+    for u, v, key, kind in G.edges(keys=True, data="kind"):
+        if key == FLOW:
+            flow.add((u, v, kind))
+        else:
+            tree.add((u, v, key))
+    return ((frozenset(G.nodes), frozenset(flow), gone, colouring, frozenset(G.nodes(data="label"))),
+            (frozenset(tree), gone))
 
 
 def group_boxes(layout: Layout) -> dict[str, list[Pos]]:
