@@ -26,7 +26,7 @@ def graph_archetypes(a: Mapping[str, Any], show_labels: bool) -> tuple[rr.GraphN
     ``radii``, ``positions``, ``edges``; ``labels`` if present)."""
     n = len(a["ids"])
     nodes = rr.GraphNodes(a["ids"], labels=a.get("labels"),
-                          colors=np.asarray(a["colors"], dtype=np.uint8).reshape(n, -1),
+                          colors=np.asarray(a["colors"], dtype=np.uint8).reshape(n, -1 if n else 3),
                           radii=np.asarray(a["radii"], dtype=np.float32),
                           positions=np.asarray(a["positions"], dtype=np.float32).reshape(n, 2),
                           show_labels=show_labels)
