@@ -30,6 +30,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 STEPS = (("read", "collector", "sample"), ("record", "shadow", "record"), ("detect", "detector", "detect"),
          ("store", "store", "add_sample"), ("diagnose", "engine", "update"), ("show", "view", "update"))
@@ -58,8 +59,11 @@ def record(nodes: int, samples: int, crash_at: int, path: Path) -> tuple[int, fl
     return members, 1e3 * cpu / samples, group
 
 
-def replay(path: Path, workdir: Path, crash_at: int | None, config: Path | None = None) -> dict:
-    """Replay ``path`` through a real Monitor, timing each step; return what was measured."""
+def replay(path: Path, workdir: Path, crash_at: int | None, config: Path | None = None,
+           after: Callable[[Any, int], None] | None = None) -> dict:
+    """Replay ``path`` through a real Monitor, timing each step; return what was measured.
+
+    ``after(monitor, i)`` is called after sample ``i`` (untimed)."""
     from stream_viz.collect.replay import ReplayCollector
     from stream_viz.commands.replay import PLUGIN_TIMEOUT_S, replay_config
     from stream_viz.monitor import Monitor
@@ -80,11 +84,13 @@ def replay(path: Path, workdir: Path, crash_at: int | None, config: Path | None 
         loop.append(time.process_time() - t0)
         alerts.append(mon.n_alerts)
         members.append(mon.seen.number_of_nodes())
+        if after is not None:
+            after(mon, len(loop) - 1)
     nodes = sum(1 for _, k in mon.seen.nodes(data="kind") if k == "node")
     report = mon.close()
     return {"cpu": cpu, "loop": loop, "alerts": alerts, "members": members, "nodes": nodes,
             "causes": [rc["member"] for rc in report["root_causes"][:8]], "crash_at": crash_at,
-            "size": path.stat().st_size}
+            "size": path.stat().st_size, "report": report}
 
 
 def _timed(fn: Callable, into: list[float]) -> Callable:

@@ -9,6 +9,7 @@ shift count less.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -95,6 +96,15 @@ def cooccurrence(
     a, b = _series(a), _series(b)
     if len(a) == 0 or len(b) == 0:
         return Cooccurrence(0.0, 0.0, 0.0, 0)
+    # Each RCA update aligns mostly the same series again: the result is kept per pair of series.
+    return _aligned(a.tobytes(), b.tobytes(), float(tolerance), float(max_offset), int(max_iter))
+
+
+@functools.lru_cache(maxsize=4096)
+def _aligned(a_bytes: bytes, b_bytes: bytes, tolerance: float, max_offset: float,
+             max_iter: int) -> Cooccurrence:
+    """`cooccurrence` of two non-empty `_series`, given as their float64 bytes."""
+    a, b = np.frombuffer(a_bytes), np.frombuffer(b_bytes)
     best: Cooccurrence | None = None
     for start in dict.fromkeys((0.0, float(b[0] - a[0]))):
         offset, iters = icp_offset(a, b, start, max_iter)

@@ -9,6 +9,7 @@ from stream_viz.model.graph import PROCESS_TREE
 from stream_viz.model.ids import ROOT, kind_of, name_of
 from stream_viz.model.queries import tree
 from stream_viz.viz import paths, style
+from stream_viz.viz.graph_arrays import graph_archetypes
 from stream_viz.viz.layout import tree_layout
 
 
@@ -40,9 +41,4 @@ def process_tree_arrays(G: nx.MultiDiGraph, layer: int = PROCESS_TREE) -> dict[s
 def log_process_tree(rec: rr.RecordingStream, G: nx.MultiDiGraph, layer: int = PROCESS_TREE) -> None:
     """Log tree ``T_layer`` (default the process tree) at ``/process_tree`` at the current time."""
     a = process_tree_arrays(G, layer)
-    rec.log(
-        paths.PROCESS_TREE,
-        rr.GraphNodes(a["ids"], labels=a["labels"], colors=a["colors"], radii=a["radii"],
-                      positions=a["positions"], show_labels=True),
-        rr.GraphEdges(a["edges"], graph_type=rr.GraphType.Directed),
-    )
+    rec.log(paths.PROCESS_TREE, *graph_archetypes(a, show_labels=True))

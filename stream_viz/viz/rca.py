@@ -14,8 +14,9 @@ import rerun as rr
 from stream_viz.errors import ModelError
 from stream_viz.model.ids import kind_of
 from stream_viz.viz import paths, style
+from stream_viz.viz.graph_arrays import graph_archetypes
 from stream_viz.viz.layout import Layout
-from stream_viz.viz.system import log_system
+from stream_viz.viz.system import log_system, log_system_arrays
 
 
 def _radius(member: str) -> float:
@@ -132,10 +133,7 @@ def _log_overlay(rec: rr.RecordingStream, path: str, a: dict[str, list]) -> None
     if not a["ids"]:
         rec.log(path, rr.Clear(recursive=False))
         return
-    rec.log(path,
-            rr.GraphNodes(a["ids"], colors=a["colors"], radii=a["radii"], positions=a["positions"],
-                          show_labels=False),
-            rr.GraphEdges(a["edges"], graph_type=rr.GraphType.Directed))
+    rec.log(path, *graph_archetypes(a, show_labels=False))
 
 
 def log_rca(
@@ -147,6 +145,7 @@ def log_rca(
     gone: Sequence[str] = (),
     status: Mapping[str, str] | None = None,
     incidents: Sequence[Mapping[str, Any]] = (),
+    system: Mapping[str, list] | None = None,
 ) -> Layout:
     """Log RCA iteration ``j`` on both timelines (``time`` = its ``t``, ``rca_iteration`` = ``j``).
 
@@ -162,11 +161,17 @@ def log_rca(
         Ranked best first, ``{"member", "score", "trajectory": [...]}`` (report JSON form).
     incidents : sequence of mapping
         Every incident (report JSON form), listed in the report.
+    system : mapping, optional
+        The ``/system`` arrays of ``G`` with ``layout``, ``gone`` and ``status`` (`system_view`),
+        when the caller has them: not computed again.
     """
     rec.set_time(paths.TIME, timestamp=float(iteration["t"]))
     rec.set_time(paths.RCA_ITERATION, sequence=int(iteration["j"]))
     try:
-        layout = log_system(rec, G, layout, gone=gone, status=status)
+        if system is None or layout is None:
+            layout = log_system(rec, G, layout, gone=gone, status=status)
+        else:
+            log_system_arrays(rec, system, layout)
         _log_overlay(rec, paths.RCA_SUBGRAPH, subgraph_arrays(iteration, layout))
         _log_overlay(rec, paths.RCA_TRAJECTORY, trajectory_arrays(root_causes, layout))
         log_report(rec, report_markdown(root_causes, iteration, incidents=incidents))

@@ -23,7 +23,6 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from stream_viz.errors import ConfigError, OutputError, StreamVizError
-from stream_viz.model.graph import FLOW, flow_edges
 from stream_viz.output import check_writable
 from stream_viz.records import SEVERITY_RANK, Alert
 from stream_viz.viz import paths, style
@@ -36,7 +35,7 @@ from stream_viz.viz.process_tree import log_process_tree
 from stream_viz.viz.rca import log_rca, log_report
 from stream_viz.viz.screenshot import rerun_executable
 from stream_viz.viz.serve import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, WebViewerServer
-from stream_viz.viz.system import log_system, with_gone
+from stream_viz.viz.system import drawn_status, log_system_arrays, signatures, system_view, with_gone
 
 VIEWER_MODES = ("spawn", "serve", "none")
 GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
@@ -190,6 +189,8 @@ class Recorder:
         self.server: WebViewerServer | None = None
         self.status: dict[str, str] = {}
         self._system_sig: Any = None
+        # The /system arrays last drawn and what they were drawn from: (G, gone, colouring status).
+        self._drawn: tuple[nx.MultiDiGraph, frozenset[str], frozenset, dict[str, list]] | None = None
         self._tree_sig: Any = None
         self._closed = False
         self.enabled = viewer != "none" or self.save is not None
@@ -315,21 +316,24 @@ class Recorder:
         gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
         if t is not None:
             log_health(self.rec, self.health.set_gone(t, gone_all))
-        sig = (frozenset(G.nodes), frozenset(flow_edges(G)), gone_all, frozenset(self.status.items()),
-               frozenset((m, lab) for m, lab in G.nodes(data="label")))
-        tree_sig = (frozenset((u, v, k) for u, v, k in G.edges(keys=True) if k != FLOW), gone_all)
+        colouring = drawn_status(self.status, gone_all)
+        sig, tree_sig = signatures(G, gone_all, colouring)
         if tree_sig != self._tree_sig or force:
             log_process_tree(self.rec, G)
             self._tree_sig = tree_sig
         settled = self.layout is not None and self.layout.pending is None
-        if sig == self._system_sig and settled and not force:
+        unchanged = sig == self._system_sig and self._drawn is not None
+        if unchanged and settled and not force:
+            self._drawn = (G, gone_all, colouring, self._drawn[3])
             return False  # nothing drawn changed and no new structure is waiting to settle
         # Laid out again only once a changed structure has settled (`settle`, once per sample).
         layout = settle(with_gone(G, gone_all), self.layout, grouping=self.grouping)
-        if sig == self._system_sig and layout is self.layout and not force:
+        if unchanged and layout is self.layout and not force:
+            self._drawn = (G, gone_all, colouring, self._drawn[3])
             return False
-        self.layout = log_system(self.rec, G, layout, gone=gone_all, status=self.status)
-        self._system_sig = sig
+        self.layout, arrays = system_view(G, layout, gone_all, self.status)
+        log_system_arrays(self.rec, arrays, self.layout)
+        self._system_sig, self._drawn = sig, (G, gone_all, colouring, arrays)
         return True
 
     def metrics(self, batch: Iterable[Any]) -> int:
@@ -347,11 +351,21 @@ class Recorder:
     def rca(self, G: nx.MultiDiGraph, iteration: Mapping[str, Any],
             root_causes: Sequence[Mapping[str, Any]] = (), gone: Collection[str] = (),
             incidents: Sequence[Mapping[str, Any]] = ()) -> None:
-        """Log one RCA iteration (overlays + report, with the incidents) on both timelines."""
+        """Log one RCA iteration (overlays + report, with the incidents) on both timelines.
+
+        ``/system`` is drawn with the arrays of the last `system` call when ``G`` is that call's
+        graph, unchanged since (the caller calls `system` after changing ``G``), and no alert
+        changed a colour since.
+        """
         self._last_rca, self._last_report = (G, iteration, root_causes, gone, incidents), None
         gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
-        self.layout = log_rca(self.rec, G, self.layout, iteration, root_causes,
-                              gone=sorted(gone_all), status=self.status, incidents=incidents)
+        drawn = self._drawn
+        same = (drawn is not None and drawn[0] is G and drawn[1] == gone_all
+                and drawn[2] == drawn_status(self.status, gone_all))
+        layout = log_rca(self.rec, G, self.layout, iteration, root_causes, gone=sorted(gone_all),
+                         status=self.status, incidents=incidents, system=drawn[3] if same else None)
+        if layout is not self.layout:
+            self.layout, self._drawn = layout, None  # the arrays drawn before have other places
         self.focus(G, root_causes)
 
     def focus(self, G: nx.MultiDiGraph, root_causes: Sequence[Mapping[str, Any]]) -> bool:

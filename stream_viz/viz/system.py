@@ -10,9 +10,10 @@ import networkx as nx
 import rerun as rr
 
 from stream_viz.errors import ModelError
-from stream_viz.model.graph import flow_edges
+from stream_viz.model.graph import FLOW, flow_edges
 from stream_viz.model.ids import kind_of, name_of
 from stream_viz.viz import paths, style
+from stream_viz.viz.graph_arrays import graph_archetypes
 from stream_viz.viz.layout import Layout, Pos, display_members, provisional, settle
 from stream_viz.viz.layout_groups import short_label
 
@@ -67,6 +68,27 @@ def system_arrays(
             "positions": positions, "edges": edges}
 
 
+def drawn_status(status: Mapping[str, str], gone: Collection[str] = ()) -> frozenset[tuple[str, str]]:
+    """Return the part of ``status`` (member -> severity) that colours ``/system``: members drawn
+    there (not processes, hosts, the root) and not drawn as gone."""
+    return frozenset((m, s) for m, s in status.items()
+                     if m not in gone and kind_of(m) not in ("process", "host", "root"))
+
+
+def signatures(G: nx.MultiDiGraph, gone: frozenset[str], colouring: frozenset) -> tuple[tuple, tuple]:
+    """Return what ``/system`` and ``/process_tree`` are drawn from, comparable between samples:
+    members, flow edges, ``gone``, ``colouring`` (`drawn_status`) and labels; tree edges and ``gone``.
+    One pass over the edges (a large graph is compared every sample)."""
+    flow, tree = set(), set()
+    for u, v, key, kind in G.edges(keys=True, data="kind"):
+        if key == FLOW:
+            flow.add((u, v, kind))
+        else:
+            tree.add((u, v, key))
+    return ((frozenset(G.nodes), frozenset(flow), gone, colouring, frozenset(G.nodes(data="label"))),
+            (frozenset(tree), gone))
+
+
 def group_boxes(layout: Layout) -> dict[str, list[Pos]]:
     """Return entity path -> the two corners of each group's box (top-left, bottom-right).
 
@@ -93,6 +115,24 @@ def log_groups(rec: rr.RecordingStream, layout: Layout) -> None:
     _drawn_groups[rec] = set(boxes)
 
 
+def system_view(
+    G: nx.MultiDiGraph,
+    layout: Layout | None = None,
+    gone: Collection[str] = frozenset(),
+    status: Mapping[str, str] | None = None,
+) -> tuple[Layout, dict[str, list]]:
+    """Return the layout and the arrays `log_system` draws (parameters as there)."""
+    G = with_gone(G, gone)  # vanished before we ever saw their edges: still shown, as gone
+    layout = settle(G, None) if layout is None else provisional(G, layout)
+    return layout, system_arrays(G, layout, gone, status)
+
+
+def log_system_arrays(rec: rr.RecordingStream, a: Mapping[str, list], layout: Layout) -> None:
+    """Log arrays ``a`` (`system_view`) at ``/system`` and the layout's group boxes."""
+    rec.log(paths.SYSTEM, *graph_archetypes(a, show_labels=True))
+    log_groups(rec, layout)
+
+
 def log_system(
     rec: rr.RecordingStream,
     G: nx.MultiDiGraph,
@@ -116,14 +156,6 @@ def log_system(
     status : mapping, optional
         Member -> alert severity, to colour alerted members.
     """
-    G = with_gone(G, gone)  # vanished before we ever saw their edges: still shown, as gone
-    layout = settle(G, None) if layout is None else provisional(G, layout)
-    a = system_arrays(G, layout, gone, status)
-    rec.log(
-        paths.SYSTEM,
-        rr.GraphNodes(a["ids"], labels=a["labels"], colors=a["colors"], radii=a["radii"],
-                      positions=a["positions"], show_labels=True),
-        rr.GraphEdges(a["edges"], graph_type=rr.GraphType.Directed),
-    )
-    log_groups(rec, layout)
+    layout, a = system_view(G, layout, gone, status)
+    log_system_arrays(rec, a, layout)
     return layout
