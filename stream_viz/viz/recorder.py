@@ -212,9 +212,9 @@ class Recorder:
         rid = str(uuid.uuid4())
         self._live = self._stream(rid) if self.viewer != "none" else None
         self._file = self._stream(rid) if self.save is not None else None
-        # Nothing to send to: a disabled stream, so nothing is buffered for the whole run.
-        self.rec = Tee([s for s in (self._live, self._file) if s is not None]
-                       or [rr.RecordingStream(self.app_id, default_enabled=False)])
+        # Nothing to send to: no stream at all (a disabled one buffers nothing, but warns on
+        # every flush and disconnect at exit: noise on a headless monitor's terminal).
+        self.rec = Tee([s for s in (self._live, self._file) if s is not None])
         try:
             if self._live is not None:
                 self.url = self._connect(self._live, memory_limit, web_port, grpc_port, bind)
