@@ -27,6 +27,7 @@ from stream_viz.collect.hostreport import AGENT_TOPIC, HostReport, StatusRow, de
 from stream_viz.collect.readings import PidInfo
 from stream_viz.model.graph import PROCESS_TREE, add_member, add_tree_edge
 from stream_viz.model.ids import ROOT, make_id
+from stream_viz.model.queries import predecessors
 from stream_viz.model.theta import SCHEMAS, make_theta
 from stream_viz.records import Event
 
@@ -98,7 +99,7 @@ def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, st
         return {}  # one computer: the model stays as it always was
     _host_member(G, own_name, own_id, "local")
     tops = [m for m, k in G.nodes(data="kind") if k == "process"
-            and not any(PROCESS_TREE in keys for keys in G._pred[m].values())]
+            and not predecessors(G, m, layer=PROCESS_TREE)]
     for m, k in list(G.nodes(data="kind")):
         if k == "process":
             G.nodes[m]["host"] = own_name

@@ -47,7 +47,9 @@ class TopicWindow:
             self.s_d2 += d * d
             # A stall of the monitor stretches receive intervals only; a clock offset between two
             # publishers' hosts, source intervals only: a quiet of the topic stretches both.
-            g = min(d, src - last[1])
+            g = src - last[1]
+            if d < g:
+                g = d
             if g > self.gap_ns:
                 self.gap_ns = g
             if seq is not None and last[3] is not None and seq > last[3] + 1:
