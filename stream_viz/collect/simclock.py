@@ -11,6 +11,8 @@ aged on whichever of the two clocks its stamp is nearer to. Without ``/clock`` n
 from __future__ import annotations
 
 from bisect import bisect_right
+from collections.abc import Callable
+from operator import sub
 
 ROS_CLOCK = "/clock"
 CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
@@ -48,6 +50,11 @@ class SimClock:
         span = r[i] - r[i - 1]
         pace = (s[i] - s[i - 1]) / span if span > 0 else 1.0
         return s[i - 1] + round(pace * (recv - r[i - 1]))
+
+    def aging(self) -> Callable[[int, int], int]:
+        """Return what ages a stamp now: `age`, or plain ``recv - stamp`` while no ``/clock``
+        tick was seen (every stamped message goes through it: the common case stays a C call)."""
+        return self.age if self.recv else sub
 
     def age(self, recv: int, stamp: int) -> int:
         """Return the age (ns) at ``recv`` of data stamped ``stamp``, on the clock it was stamped

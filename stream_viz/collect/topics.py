@@ -215,12 +215,12 @@ class TopicMonitor:
         """Take what waits on one subscription: through rcl with gids, else through rclpy."""
         rcl = self.rcl
         if rcl is not None and rcl.available and w.kind != "log":
-            age = self.clock.age if w.stamped else None
+            age = self.clock.aging() if w.stamped else None
             n = rcl.drain(handle, w.window.add, age, w.sink, payload=w.kind == "diag")
             if rcl.available:
                 return n
         raw, take, msg_type, n = w.kind != "log", handle.take_message, w.sub.msg_type, 0
-        add, sink, stamped = w.window.add, w.sink, w.stamped
+        add, sink, stamped, age = w.window.add, w.sink, w.stamped, self.clock.aging()
         while (got := take(msg_type, raw)) is not None:
             msg, info = got
             n += 1
@@ -231,7 +231,7 @@ class TopicMonitor:
                 sink(recv, src, size, seq, None, msg)
             elif stamped:
                 stamp = header_stamp_ns(msg)
-                add(recv, src, size, seq, None, None if stamp is None else self.clock.age(recv, stamp))
+                add(recv, src, size, seq, None, None if stamp is None else age(recv, stamp))
             else:
                 add(recv, src, size, seq)
         return n

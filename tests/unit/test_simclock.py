@@ -19,6 +19,12 @@ def half_speed(n: int = 11) -> SimClock:
 def test_without_clock_the_age_is_ours():
     assert SimClock().age(WALL + S, WALL) == S
     assert SimClock().now(WALL) is None
+    assert SimClock().aging()(WALL + S, WALL) == S
+
+
+def test_aging_follows_the_clock_once_it_ticks():
+    c = half_speed()
+    assert c.aging() == c.age and c.aging()(WALL + S // 2, 1000 * S + S // 4) == 0
 
 
 def test_simulated_time_between_and_after_the_ticks():
