@@ -17,7 +17,6 @@ from __future__ import annotations
 import gzip
 import io
 import json
-import math
 import zlib
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
@@ -29,6 +28,7 @@ import numpy as np
 from stream_viz.errors import SamplesError
 from stream_viz.model.diff import diff
 from stream_viz.model.graph import new_graph
+from stream_viz.model.serialize import theta_from_list, theta_to_list
 from stream_viz.model.theta import SCHEMAS
 from stream_viz.output import check_writable
 from stream_viz.records import Event, Sample
@@ -52,14 +52,6 @@ def _plain(value: Any) -> Any:
 
 def _dumps(record: Mapping[str, Any]) -> str:
     return json.dumps(record, separators=(",", ":"), default=_plain)
-
-
-def _theta_out(theta: np.ndarray) -> list[float | None]:
-    return [None if math.isnan(x) else x for x in theta.tolist()]
-
-
-def _theta_in(row: list[float | None]) -> np.ndarray:
-    return np.array([np.nan if x is None else x for x in row], dtype=float)
 
 
 def run_header(config: Any, started_at: float) -> dict[str, Any]:
@@ -123,7 +115,7 @@ class SampleEncoder:
                 continue
             now = th.tobytes()
             if self._theta.get(m) != now:
-                theta[m] = _theta_out(th)
+                theta[m] = theta_to_list(th)
                 self._theta[m] = now
         if theta:
             rec["theta"] = theta
@@ -172,7 +164,7 @@ class SampleDecoder:
             if row is None:
                 self._theta.pop(m, None)
             else:
-                th = _theta_in(row)
+                th = theta_from_list(row)
                 remap = self._remap.get(self._members[m].get("kind"))
                 self._theta[m] = th if remap is None else remap(th)
         if "unreadable" in rec:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import networkx as nx
@@ -12,9 +13,19 @@ from stream_viz.model.graph import add_member, new_graph
 _SKIP = {"kind", "active", "label", "theta"}
 
 
+def theta_to_list(theta: np.ndarray) -> list[float | None]:
+    """θ as JSON holds it: floats, None for NaN (not measured)."""
+    return [None if math.isnan(x) else x for x in theta.tolist()]
+
+
+def theta_from_list(row: list[float | None]) -> np.ndarray:
+    """The inverse of `theta_to_list`."""
+    return np.array([np.nan if x is None else x for x in row], dtype=float)
+
+
 def _plain(value: Any) -> Any:
     if isinstance(value, np.ndarray):
-        return [None if np.isnan(x) else float(x) for x in value]
+        return theta_to_list(value)
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, dict):
@@ -51,7 +62,7 @@ def from_data(data: dict[str, Any]) -> nx.MultiDiGraph:
     for row in data.get("members", []):
         attrs = {k: v for k, v in row.items() if k not in ("id", "kind", "theta")}
         if row.get("theta") is not None:
-            attrs["theta"] = np.array([np.nan if x is None else x for x in row["theta"]], dtype=float)
+            attrs["theta"] = theta_from_list(row["theta"])
         add_member(G, row["id"], **attrs)
     for e in data.get("edges", []):
         extra = {k: v for k, v in e.items() if k not in ("src", "dst", "kind", "layer")}
