@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, streak
+from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, held, streak
 from stream_viz.detect.rhythm import Rhythm, follow, newest_message, quiet_limit
 from stream_viz.model.qos import qos_policy
 from stream_viz.records import Alert
@@ -23,8 +23,9 @@ class TopicRate(Plugin):
 
     * silence (error): quiet (no message, from the age of the newest one, ``age_s``; without one,
       a zero rate means none for the collector's ``rate_window_s``, 3 s) for longer than
-      ``max(silence_periods / rate, silence_min_s)``, or ``gap_margin`` × the longest healthy gap
-      the topic has shown. Judged only once the topic's rhythm is settled: it published for
+      ``max(silence_periods / rate, silence_min_s)`` (the rate while publishing, not counting a
+      bursty topic's quiets: `stream_viz.detect.rhythm`), or ``gap_margin`` × the longest healthy gap
+      or quiet the topic has shown. Judged only once the topic's rhythm is settled: it published for
       ``warmup_s`` without such a quiet, or showed ``min_gaps`` healthy gaps. Never while it has
       no publisher (graph_anomalies' orphans), while all its publishers are transient-local (a
       latched topic publishes when its data changes; ``judge_latched``), or when a publisher
@@ -35,9 +36,9 @@ class TopicRate(Plugin):
     * drop (warn): ``rate < drop_ratio × baseline`` and ``≥ drop_k`` σ below it for ``confirm``
       samples, the baseline being the median of the topic's own rate after ``warmup_s`` (frozen
       while alerting); only on a continuous topic (settled, no healthy gap: a bursty topic's rate
-      baseline says nothing); the rate compared is the recent one (``rate_recent_hz``, the last
-      few intervals) where measured, so a slowed topic shows before the collector's window has
-      turned over;
+      baseline says nothing), lasting longer than its longest healthy quiet; the rate compared
+      is the recent one (``rate_recent_hz``, the last few intervals) where measured, so a slowed
+      topic shows before the collector's window has turned over;
     * below expectation (warn): ``rate < (1 - expected_tolerance) × expected_rate_hz`` from the
       config, for ``confirm`` samples.
     """
@@ -102,8 +103,8 @@ def _forget(ctx: PluginContext, rhythms: dict[str, Rhythm]) -> None:
 
 
 def _ref_hz(r: Rhythm, base: Baseline) -> float:
-    """The topic's usual rate: its baseline, else the last non-zero rate seen."""
-    return base[0] if base and base[0] > 0 else r.rate
+    """The topic's usual rate while publishing (`Rhythm.rate`), else its baseline."""
+    return r.rate if r.rate > 0 else base[0] if base and base[0] > 0 else 0.0
 
 
 def _base_limit(s: dict[str, Any], ref_hz: float) -> float:
@@ -186,12 +187,17 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     s = ctx.settings
     if base is None or base[0] < s["min_baseline_hz"] or not r.settled or r.gaps:
         return None
+    if r.longest >= _base_limit(s, _ref_hz(r, base)):  # quiets no continuous topic shows: sparse bursts
+        return None
     recent = ctx.value(topic, "rate_recent_hz")
     now_rate = recent if recent == recent else rate
     med, sigma, _ = base
     quieting = quiet is not None and quiet >= _base_limit(s, med)
-    low = not quieting and now_rate < s["drop_ratio"] * med and med - now_rate >= s["drop_k"] * sigma
-    if streak(ctx.state, (topic, "drop"), low) < s["confirm"]:
+    # An empty window is a quiet (judged by `_silence`), not a lower rate.
+    low = not quieting and 0 < now_rate < s["drop_ratio"] * med and med - now_rate >= s["drop_k"] * sigma
+    # A drop lasts longer than any healthy pause of the topic (its recent rate counts a pause).
+    samples, lasted = streak(ctx.state, (topic, "drop"), low), held(ctx.state, (topic, "drop"), low, ctx.t)
+    if samples < s["confirm"] or lasted < r.longest:
         return None
     return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {med:.3g} Hz",
                      symptom="rate_drop", rate_hz=now_rate, baseline_hz=med)

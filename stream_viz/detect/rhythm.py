@@ -19,7 +19,14 @@ from what the collector shows every sample (the receive time of the newest messa
   known), or, having shown some, is in a run longer than ``margin`` times its longest earlier run;
   settled is for good, so a topic that starts to flap stays judged and its flaps are never learned;
 * a settled topic's silence limit is the base limit, or ``margin`` times its longest healthy gap
-  when it has any.
+  or its longest healthy quiet of any length, when longer (a quiet judged not notable against a
+  rate known only roughly at the time is still the topic's own: a few sparse messages every few
+  seconds settle as continuous, and the limit must not fall below what they showed);
+* the topic's **rate** (behind the base limit) is its rate while publishing: the median of the
+  window's rate over the recent samples whose newest message was less than half a window old. A
+  bursty topic's window also holds its quiets (its rate falls as a burst leaves the window, its
+  median over time counts the quiets as zeros): against that rate a quiet of its own rhythm would
+  not be notable, and the gaps a silence is judged by would go unlearned.
 
 Pure: `Rhythm` is plain data, changed only by `follow`.
 """
@@ -28,7 +35,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 GAP_MEMORY = 32  # healthy gaps and runs remembered per topic (the newest)
+RATE_MEMORY = 15  # window rates while publishing, per topic (the newest), behind `Rhythm.rate`
 # ``t - age_s`` of one message moves between samples by how long the collector took from the
 # sample's time to its topic metrics (graph reads first: milliseconds, more on a loaded host). A
 # newer newest message ends a quiet only when the window holds more messages than before, or when
@@ -47,7 +57,10 @@ class Rhythm:
     run_start : float or None
         The first message of the current run (published without a notable quiet).
     rate : float
-        The window's rate the last time it was above zero (Hz).
+        The topic's rate while publishing (Hz; 0 before it is known): the median of ``rates``.
+    rates : list of float
+        The window's rate at the recent samples that saw the topic publishing, at most
+        `RATE_MEMORY`.
     count : int
         Messages in the window at the last sample.
     gaps, runs : list of float
@@ -56,6 +69,8 @@ class Rhythm:
         Its silence can be judged (see the module docstring); for good once true.
     peak : float
         The longest quiet seen at a sample during the current quiet.
+    longest : float
+        The longest quiet, notable or not, that ended with a message and was no symptom.
     departed : bool
         The current quiet was a symptom: it is not learned when it ends.
     explained : bool
@@ -66,11 +81,13 @@ class Rhythm:
     newest: float | None = None
     run_start: float | None = None
     rate: float = 0.0
+    rates: list[float] = field(default_factory=list)
     count: int = 0
     gaps: list[float] = field(default_factory=list)
     runs: list[float] = field(default_factory=list)
     settled: bool = False
     peak: float = 0.0
+    longest: float = 0.0
     departed: bool = False
     explained: bool = False
 
@@ -111,8 +128,6 @@ def follow(r: Rhythm, t: float, newest: float | None, rate: float, *, window_s: 
     gap : float
         The longest interval between messages received since the previous sample (s; 0 unknown).
     """
-    if rate > 0:
-        r.rate = rate
     count, before = round(rate * window_s), r.count
     r.count = count
     if newest is not None and (r.newest is None or newest > r.newest):
@@ -125,6 +140,9 @@ def follow(r: Rhythm, t: float, newest: float | None, rate: float, *, window_s: 
         return None
     quiet = t - r.newest if newest is not None else max(t - r.newest, window_s)
     r.peak = max(r.peak, quiet)
+    if rate > 0 and quiet < window_s / 2:  # publishing: the window is mostly the current run
+        r.rates = [*r.rates, rate][-RATE_MEMORY:]
+        r.rate = float(np.median(r.rates))
     if not r.settled:
         r.settled = _settles(r, settle_s, margin, min_gaps)
     return quiet
@@ -134,12 +152,15 @@ def _message(r: Rhythm, newest: float, notable: float) -> None:
     """A message newer than any seen: a notable quiet before it ends, and is learned if healthy."""
     if r.newest is None:
         r.run_start = newest
-    elif r.peak >= notable:
+    else:
         if not r.departed:
-            r.gaps = [*r.gaps, newest - r.newest][-GAP_MEMORY:]
-            start = r.newest if r.run_start is None else r.run_start
-            r.runs = [*r.runs, r.newest - start][-GAP_MEMORY:]
-        r.run_start = newest
+            r.longest = max(r.longest, r.peak)
+        if r.peak >= notable:
+            if not r.departed:
+                r.gaps = [*r.gaps, newest - r.newest][-GAP_MEMORY:]
+                start = r.newest if r.run_start is None else r.run_start
+                r.runs = [*r.runs, r.newest - start][-GAP_MEMORY:]
+            r.run_start = newest
     r.newest = newest
     r.peak, r.departed, r.explained = 0.0, False, False
 
@@ -153,5 +174,5 @@ def _settles(r: Rhythm, settle_s: float, margin: float, min_gaps: int) -> bool:
 
 def quiet_limit(r: Rhythm, base_s: float, margin: float) -> float:
     """Return how long ``r``'s topic may be quiet while healthy: ``base_s``, or ``margin`` × its
-    longest healthy gap when longer."""
-    return max(base_s, margin * max(r.gaps, default=0.0))
+    longest healthy gap or quiet when longer."""
+    return max(base_s, margin * max([r.longest, *r.gaps]))

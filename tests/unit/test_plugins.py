@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from stream_viz.detect.api import record_history
 from stream_viz.detect.plugin_set import PluginSet
@@ -47,7 +48,7 @@ def drive(plugin, frames, *, settings=None, expected=None, watch=None, full=Fals
         record_history(hist, G, t)
         alerts, problems = ps.run(t, G, watch if watch is not None else G.nodes, hist, events, diff(prev, G),
                                   expected)
-        assert problems == []
+        assert problems == [], problems
         out += alerts if full else [(a.t, a.member, a.severity) for a in alerts]
         prev = G
     return out
@@ -149,6 +150,17 @@ def test_topic_rate_bursty_topic_is_quiet_when_healthy_and_silent_when_hung_past
     alerts = drive("topic_rate", sampled(hung, HALF), full=True)
     assert [(a.t, a.severity, a.data["symptom"]) for a in alerts][:1] == [(63.5, "error", "silence")]
     assert round(alerts[0].data["limit_s"], 2) == 13.2 and "longest healthy gap 6.6 s" in alerts[0].message
+
+
+def test_topic_rate_short_bursts_are_judged_by_their_rate_while_publishing():
+    # 5 messages at 10 Hz every 6 s: the 3 s window's rate is at most 1.7 Hz and mostly lower
+    # (0.3 Hz as a burst leaves it), so a 5.6 s quiet is notable only against the burst's rate.
+    healthy = bursts(range(0, 120, 6), on=0.5)
+    assert drive("topic_rate", sampled(healthy, HALF)) == []
+    hung = bursts(range(0, 49, 6), on=0.5)  # hung after the burst at 48 (last message 48.4)
+    alerts = drive("topic_rate", sampled(hung, HALF), full=True)
+    assert [(a.t, a.data["symptom"]) for a in alerts][:1] == [(60.5, "silence")]
+    assert alerts[0].data["limit_s"] == pytest.approx(12.0)  # twice its learned gaps (6.4 - 0.4)
 
 
 def test_topic_rate_a_continuous_topic_that_starts_to_flap_is_one_flapping_symptom():

@@ -43,6 +43,9 @@ def test_a_bursty_topic_learns_its_gaps_and_settles_after_three():
     r, quiets = run(cycle(0))
     assert [round(q, 2) for q in quiets] == [0.0, 0.05, 0.1, 1.1, 2.1, 3.1, 4.1, 5.1]
     assert r.gaps == [] and not r.settled  # a 2 s run is no continuity
+    # Its rate is the burst's, from the samples less than half a window (1.5 s) after a message:
+    # not the 0.3 Hz of the burst's tail in the window (3 periods of that: a 10 s quiet).
+    assert r.rates == [3.3, 6.7, 6.3, 3.3] and r.rate == 4.8
     r, _ = run(cycle(1) + cycle(2), r)
     assert [round(g, 2) for g in r.gaps] == [6.1, 6.1] and [round(x, 2) for x in r.runs] == [1.9, 1.9]
     assert not r.settled
