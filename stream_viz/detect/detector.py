@@ -88,8 +88,9 @@ class Detector:
             sample.t, sample.graph, self.watchlist, history, sample.events, sample.diff, self.expected_rates,
         )
         alerts = [a for a in fired if a.member != self.own_process]
-        # Process-metric anomalies count as evidence too, not only as watchlist entries.
-        evidence = {m: 1.0 for m in sorted(anomalous)}
+        # Process-metric anomalies count as evidence too, not only as watchlist entries: on the
+        # process, which the RCA shares among its nodes (a change of a node's own it is not).
+        evidence = {m: 1.0 for m in sorted(anomalous) if m.startswith("process:")}
         changed = evidence != self.evidence
         self.evidence = evidence
         return Detection(alerts, problems, evidence, changed)

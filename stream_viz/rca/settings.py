@@ -36,6 +36,10 @@ class RcaSettings:
         ``cooccurrence``, ``timelag``, ``evidence``); zero switches one off.
     severity : dict
         Anomaly strength of one alert per severity (``info``, ``warn``, ``error``, ``fatal``).
+    metric : float
+        Anomaly strength of metric evidence at full strength (a process's CPU or memory out of
+        its own normal range): by default a ``warn``'s, as `process_resources` alerts on the same
+        finding, so a metric change alone never outweighs an error such as a crash.
     direct_plugins : tuple of str
         Plugins whose alert on a node or its process is evidence of a fault in that node.
     charge : float
@@ -72,6 +76,7 @@ class RcaSettings:
     method: str = setting("trajectory", choices=METHODS)
     weights: dict[str, float] = setting(WEIGHTS, ge=0, rule=(lambda w: any(w.values()), "at least one > 0"))
     severity: dict[str, float] = setting(SEVERITY_WEIGHTS, ge=0)
+    metric: float = setting(SEVERITY_WEIGHTS["warn"], ge=0, le=1)
     direct_plugins: tuple[str, ...] = DIRECT_PLUGINS
     charge: float = setting(0.8, gt=0, le=1)
     window: float = setting(600.0, ge=0)

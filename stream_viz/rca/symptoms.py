@@ -219,7 +219,7 @@ def node_views(
     subscribers only), a number in [0, 1] (no time) or `Evidence` with its since/until.
     """
     views: dict[str, NodeView] = {}
-    ev_passive = _metric_views(G, views, evidence or {})
+    ev_passive = _metric_views(G, views, evidence or {}, settings.metric)
     shared_by = _alert_views(G, views, s, settings.charge, settings.tolerance)
     _charge_shared(G, s, views, shared_by, settings)
     stalled = siblings.stalls(G, views, settings.tolerance)
@@ -242,13 +242,15 @@ def _view(views: dict[str, NodeView], n: str) -> NodeView:
 
 def _metric_views(
     G: nx.MultiDiGraph, views: dict[str, NodeView], evidence: Mapping[str, float | Evidence],
+    weight: float,
 ) -> dict[str, Evidence]:
-    """Put metric evidence on the nodes it is about (a process's on its nodes, as shared); return
-    the evidence of passive members (topics), which only excuses their subscribers."""
+    """Put metric evidence, its strength × ``weight``, on the nodes it is about (a process's on
+    its nodes, as shared); return the evidence of passive members (topics), which only excuses
+    their subscribers."""
     ev_passive: dict[str, Evidence] = {}
     for m, x in evidence.items():
         e = as_evidence(x)
-        e = Evidence(_clip(e.strength), e.since, e.until)
+        e = Evidence(_clip(e.strength) * weight, e.since, e.until)
         if e.strength <= 0:
             continue
         if is_node(G, m):

@@ -59,9 +59,10 @@ def test_the_detector_keeps_the_watchlist_runs_the_plugins_and_reports_the_evide
     assert watchlist.sources("process:2") == {CONFIGURED}
     assert calm[-1].alerts == [Alert("process:2", "every", 11.0, "warn", "watched")]
     assert calm[-1].problems == [] and calm[-1].evidence == {} and not calm[-1].evidence_changed
-    # /planner's process spikes: it and its node are evidence and join the watchlist
+    # /planner's process spikes: the process is evidence (its nodes share it in the RCA), and it
+    # and its node join the watchlist
     hot = det.detect(_sample(history, 12.0, 95.0), history)
-    assert hot.evidence == {"process:2": 1.0, "node:/planner": 1.0}
+    assert hot.evidence == {"process:2": 1.0}
     assert hot.evidence_changed and hot.new_evidence == hot.evidence and det.evidence == hot.evidence
     assert watchlist.sources("node:/planner") == {PROCESS_ANOMALY}
     assert watchlist.pending == {"topic:/scan", "process:1", "process:2", "node:/planner"}
@@ -76,5 +77,5 @@ def test_the_monitors_own_process_is_never_evidence():
     for t in range(12):
         det.detect(_sample(history, float(t), 5.0, cpu1=5.0 + t % 3), history)
     hot = det.detect(_sample(history, 12.0, 5.0, cpu1=95.0), history)
-    # only the process itself is left out, as its alerts are
-    assert hot.evidence == {"node:/camera": 1.0} and hot.alerts == []
+    # the monitor's process is left out, as its alerts are (its nodes share its evidence: none)
+    assert hot.evidence == {} and hot.alerts == []

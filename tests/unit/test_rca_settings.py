@@ -27,7 +27,7 @@ def test_roundtrip_through_asdict():
     [
         ({"polcy": "both"}, "[rca] unknown key 'polcy' (known: charge, direct_plugins, episode_gap, "
                             "icp_iterations, incident_hops, max_offset, max_trajectory, method, "
-                            "pagerank_alpha, policy, replay, severity, shortlist, tolerance, top_k, "
+                            "metric, pagerank_alpha, policy, replay, severity, shortlist, tolerance, top_k, "
                             "weights, window)"),
         ({"policy": "sideways"}, '[rca] policy = "sideways": expected one of downstream, upstream, both'),
         ({"method": "magic"},

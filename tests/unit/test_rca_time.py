@@ -95,29 +95,29 @@ def test_a_crashed_node_reported_once_still_excuses_later_victims():
 
 
 def test_process_evidence_is_judged_in_time_like_an_alert():
-    G = graph()
+    G = graph()  # metric evidence at full strength (metric=1.0): this is about its time
     fault = [al(PLAN, "rosout", 100)]
     # Untimed evidence (no since): it counts at any time, as before.
-    assert views(G, fault, {PROC: 1.0})[PLAN].upstream == 1.0
+    assert views(G, fault, {PROC: 1.0}, metric=1.0)[PLAN].upstream == 1.0
     # Evidence that held from 30 to 50 does not excuse the planner's fault at 100 ...
-    v = views(G, fault, {PROC: Evidence(1.0, 30.0, 50.0)})
+    v = views(G, fault, {PROC: Evidence(1.0, 30.0, 50.0)}, metric=1.0)
     assert v[PLAN].upstream == 0.0
     assert v[PERC].onset == 30.0 and v[PERC].evidence == 1.0  # ... and has an onset, like an alert
     # ... evidence that still holds does.
-    assert views(G, fault, {PROC: Evidence(1.0, 30.0)})[PLAN].upstream == 1.0
+    assert views(G, fault, {PROC: Evidence(1.0, 30.0)}, metric=1.0)[PLAN].upstream == 1.0
     # Evidence that began after the planner's fault is no cause of it.
-    assert views(G, fault, {PROC: Evidence(1.0, 110.0)})[PLAN].upstream == 0.0
+    assert views(G, fault, {PROC: Evidence(1.0, 110.0)}, metric=1.0)[PLAN].upstream == 0.0
 
 
 def test_the_engine_stamps_evidence_with_the_update_time():
     G = graph()
-    eng = RcaEngine(RcaSettings(), watchlist=None)
+    eng = RcaEngine(RcaSettings(metric=1.0), watchlist=None)
     eng.update(G, [], {PROC: 1.0}, t=10.0)
     eng.update(G, [], {}, t=20.0)  # the process is normal again
     res = eng.update(G, [al(PLAN, "rosout", 100)], t=100.0)
     planner = next(rc for rc in res.root_causes if rc.member == PLAN)
     assert planner.evidence["upstream"] == 0.0
-    eng = RcaEngine(RcaSettings(), watchlist=None)
+    eng = RcaEngine(RcaSettings(metric=1.0), watchlist=None)
     eng.update(G, [], {PROC: 1.0}, t=10.0)  # still anomalous when the planner's fault comes
     res = eng.update(G, [al(PLAN, "rosout", 100)], t=100.0)
     planner = next(rc for rc in res.root_causes if rc.member == PLAN)
