@@ -5,8 +5,10 @@
 For every faulty run of ``runs.jsonl`` in the suite's output folder, reads the run's alert
 database (model snapshot, alerts, watchlist) as ``stream-viz analyze`` does, ranks with the
 default settings, and scores the ranking against the run's truth (strict and process level,
-ties as expected values, as `bench.eval.metrics`). Writes one CSV row per run and prints the
-means per system. The live ranking of the run is in the CSV beside it, for comparison.
+ties as expected values, as `bench.eval.metrics`). With ``--replay``, the run's recorded samples
+(a suite run with ``--samples``) go through today's detection and RCA instead (``stream-viz
+replay``: the live pipeline, process-monitoring evidence included). Writes one CSV row per run
+and prints the means per system. The live ranking of the run is in the CSV beside it.
 """
 
 from __future__ import annotations
@@ -14,6 +16,9 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import subprocess
+import sys
+import tempfile
 from pathlib import Path
 
 from bench.eval.metrics import hit_at, tie_blocks
@@ -36,10 +41,23 @@ def rerank(db: Path) -> list:
     return tie_blocks((rc.member, round(rc.score, 6)) for rc in result.root_causes)
 
 
+def replayed(samples: Path) -> list:
+    """Today's live diagnosis of the run recorded in ``samples``: its final ranking, ties as tuples."""
+    with tempfile.TemporaryDirectory() as d:
+        report = Path(d) / "report.json"
+        subprocess.run([sys.executable, "-m", "stream_viz.cli", "replay", str(samples), "--viewer", "none",
+                        "--report", str(report), "--db", str(Path(d) / "alerts.sqlite")],
+                       check=True, capture_output=True, timeout=600)
+        causes = json.loads(report.read_text())["root_causes"]
+    return tie_blocks((rc["member"], round(rc["score"], 6)) for rc in causes)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path, help="the suite's output folder (runs.jsonl, a folder per run)")
     ap.add_argument("--csv", type=Path, required=True, help="where to write one row per run")
+    ap.add_argument("--replay", action="store_true",
+                    help="replay each run's samples.jsonl.gz through today's detection and RCA")
     args = ap.parse_args(argv)
     rows = []
     for line in (args.out / "runs.jsonl").read_text().splitlines():
@@ -48,9 +66,11 @@ def main(argv: list[str] | None = None) -> int:
             continue
         spec = run["spec"]
         db = args.out / run_id(spec) / "alerts.sqlite"
-        if not db.exists():
+        samples = db.parent / "samples.jsonl.gz"
+        if not (samples if args.replay else db).exists():
             continue
-        now, live = blocks_of(rerank(db)), blocks_of(run["rankings"]["live"])
+        now = blocks_of(replayed(samples) if args.replay else rerank(db))
+        live = blocks_of(run["rankings"]["live"])
         strict, proc = set(run["truth_strict"]), set(run["truth_process"])
         rows.append({"run": db.parent.name, "system": spec["system"], "fault": spec["fault"],
                      "target": spec["target"],
