@@ -2,8 +2,10 @@
 (`tests/data/`, recorded on commit b75c65e with ``stream-viz demo --fault crash|errlog --at 8
 --duration 22 --samples FILE`` on a shared machine under heavy load: the crash run also has a
 false ``topic_rate`` alert on ``/imu``), and of the generated 50-node system with a crash of
-``/n000_l0``'s process after 25 s (commit 5d60a55, in-process ``Monitor(samples=…)``), replayed
-through the real monitor, no ROS needed."""
+``/n000_l0``'s process after 25 s (commit 5d60a55, in-process ``Monitor(samples=…)``), and of
+the AMR with a CPU hog in ``/amr1/pallet_detector``'s thread of the container it shares with
+``/amr1/image_rectifier`` (commit ae7a2b7, ``bench/eval.sh --short --samples``), replayed through
+the real monitor, no ROS needed."""
 
 from __future__ import annotations
 
@@ -12,7 +14,10 @@ from pathlib import Path
 import pytest
 
 from stream_viz.collect.replay import ReplayCollector
+from stream_viz.commands.analyze import read_run
 from stream_viz.commands.replay import PLUGIN_TIMEOUT_S, replay_config
+from stream_viz.rca import RcaSettings
+from stream_viz.rca.engine import analyze
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 
@@ -43,3 +48,17 @@ def test_a_recorded_run_is_diagnosed_as_live(tmp_path, name, plugin, nodes):
     assert (target, plugin) in alerted, sorted(alerted)
     seen = {m["id"] for m in report["members"] if m["kind"] == "node"}
     assert len(seen) == nodes and target in seen
+
+
+def test_a_process_metric_change_ties_its_nodes_live_and_offline(tmp_path):
+    # The hog burns a core in the container's process: process monitoring's evidence is the
+    # process's, which its two nodes share, so neither is ranked before the other for it, live
+    # (the replay) or offline (the database keeps no evidence), and the report names the process.
+    report = replayed("amr_cpu.jsonl.gz", tmp_path)
+    pair = {"node:/amr1/pallet_detector", "node:/amr1/image_rectifier"}
+    top = report["root_causes"][:2]
+    assert {c["member"] for c in top} == pair and top[0]["score"] == top[1]["score"], report["root_causes"]
+    assert top[0]["evidence"]["process"] == top[1]["evidence"]["process"]
+    G, alerts, watch, *_ = read_run(tmp_path / "a.sqlite")
+    offline = analyze(G, alerts, RcaSettings(), set(watch) if watch else None).root_causes[:2]
+    assert {c.member for c in offline} == pair and offline[0].score == offline[1].score
