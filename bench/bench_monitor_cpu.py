@@ -43,7 +43,7 @@ STAGES = [
     ("  diff", "stream_viz.collect.collector", "diff"),
     ("remember (the seen graph)", "stream_viz.model.shadow", "remember"),
     ("History.add", "stream_viz.model.history", "History.add"),
-    ("process_anomalies", "stream_viz.detect.detector", "process_anomalies"),
+    ("anomalous_processes", "stream_viz.detect.detector", "anomalous_processes"),
     ("initial_watchlist", "stream_viz.detect.detector", "initial_watchlist"),
     ("PluginSet.run (main thread's part)", "stream_viz.detect.plugin_set", "PluginSet.run"),
     ("AlertStore.add", "stream_viz.detect.store", "AlertStore.add"),

@@ -9,7 +9,7 @@ from typing import Any
 
 from stream_viz.detect.plugin_set import PluginSet
 from stream_viz.detect.problems import PluginProblem
-from stream_viz.detect.process import process_anomalies
+from stream_viz.detect.process import anomalous_processes, with_nodes
 from stream_viz.detect.watchlist import CONFIGURED, PROCESS_ANOMALY, Watchlist, initial_watchlist
 from stream_viz.model.history import History
 from stream_viz.records import Alert, Sample
@@ -77,9 +77,10 @@ class Detector:
         self._samples += 1
         # [plugins.process_resources] tunes this evidence and the plugin alike (detect/process.py).
         rule = self.plugins.settings_of("process_resources")
-        anomalous = process_anomalies(sample.graph, history, rule) if self._samples > 1 else set()
+        found = anomalous_processes(sample.graph, history, rule) if self._samples > 1 else set()
         # The monitor is an ancestor of what it starts (the demo): its own footprint is no symptom.
-        anomalous.discard(self.own_process)
+        procs = found - {self.own_process}
+        anomalous = with_nodes(sample.graph, found) - {self.own_process}
         # W_0 as the paper says: configured members and process monitoring; "auto"/"all" modes
         # keep adding members as they appear.
         self.watchlist.add(initial_watchlist(sample.graph, self.settings, None), CONFIGURED)
@@ -90,7 +91,7 @@ class Detector:
         alerts = [a for a in fired if a.member != self.own_process]
         # Process-metric anomalies count as evidence too, not only as watchlist entries: on the
         # process, which the RCA shares among its nodes (a change of a node's own it is not).
-        evidence = {m: 1.0 for m in sorted(anomalous) if m.startswith("process:")}
+        evidence = {m: 1.0 for m in sorted(procs)}
         changed = evidence != self.evidence
         self.evidence = evidence
         return Detection(alerts, problems, evidence, changed)

@@ -19,8 +19,9 @@ The callers:
   ``trend_s``/12, /6, /2 and ``trend_s`` (a fast leak shows in the short span, a slow one in the
   long) and must be steady: at least ``growth_steady`` of the steps rising, over at least
   ``growth_min_samples`` samples, so one big allocation is no leak.
-* the evidence (`process_anomalies`): every sample, for the watchlist and the RCA's ranking
-  (a hint, not an alert). It holds no state (it reads the history) and does not confirm, so it
+* the evidence (`anomalous_processes`; with their nodes, `process_anomalies`): every sample, for
+  the watchlist (the processes and their nodes) and the RCA's ranking (the processes; a hint,
+  not an alert). It holds no state (it reads the history) and does not confirm, so it
   speaks a sample or more before the plugin. From the same keys (`evidence_rule`): the same
   ``k``, floors, ``growth_mb_per_s``, ``growth_min_mb`` and ``window``; the baseline is the
   median of the window's earlier samples; growth is checked over one span, the trend window's
@@ -258,9 +259,9 @@ def process_anomaly(times: np.ndarray, values: np.ndarray, now: float,
     return out
 
 
-def process_anomalies(G: nx.MultiDiGraph, history: History,
-                      settings: Mapping[str, Any] | None = None) -> set[str]:
-    """Return processes whose metrics are anomalous vs their own past, and the nodes they host.
+def anomalous_processes(G: nx.MultiDiGraph, history: History,
+                        settings: Mapping[str, Any] | None = None) -> set[str]:
+    """Return the processes whose metrics are anomalous vs their own past.
 
     Parameters
     ----------
@@ -280,5 +281,15 @@ def process_anomalies(G: nx.MultiDiGraph, history: History,
         times, values = history.series(m, rule.window)
         if process_anomaly(times, values, times[-1], rule):
             out.add(m)
-            out.update(nodes_of_process(G, m))
     return out
+
+
+def with_nodes(G: nx.MultiDiGraph, processes: set[str]) -> set[str]:
+    """Return ``processes`` and the nodes they host (what process monitoring adds to the watchlist)."""
+    return processes.union(*(nodes_of_process(G, p) for p in processes))
+
+
+def process_anomalies(G: nx.MultiDiGraph, history: History,
+                      settings: Mapping[str, Any] | None = None) -> set[str]:
+    """Return `anomalous_processes` and the nodes they host."""
+    return with_nodes(G, anomalous_processes(G, history, settings))
