@@ -154,7 +154,8 @@ def test_topic_rate_bursty_topic_is_quiet_when_healthy_and_silent_when_hung_past
 
 def test_topic_rate_short_bursts_are_judged_by_their_rate_while_publishing():
     # 5 messages at 10 Hz every 6 s: the 3 s window's rate is at most 1.7 Hz and mostly lower
-    # (0.3 Hz as a burst leaves it), so a 5.6 s quiet is notable only against the burst's rate.
+    # (0.3 Hz as a burst leaves it); its 5.6 s quiets are its rhythm, learned as gaps. (The grid of
+    # rhythms in test_topic_rhythms.py holds the cases the window's rate got wrong.)
     healthy = bursts(range(0, 120, 6), on=0.5)
     assert drive("topic_rate", sampled(healthy, HALF)) == []
     hung = bursts(range(0, 49, 6), on=0.5)  # hung after the burst at 48 (last message 48.4)
