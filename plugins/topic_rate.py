@@ -60,6 +60,7 @@ class TopicRate(Plugin):
         "min_gaps": 3,
         "flap_window_s": 30.0,
         "transition_grace_s": 2.0,
+        "input_grace_s": 2.0,
         "judge_latched": False,
     }
 
@@ -76,14 +77,16 @@ class TopicRate(Plugin):
         if ctx.diff.removed_members:
             _forget(ctx, rhythms)
         transitions = _transitions(ctx)
+        followed = []  # every rhythm is followed before any is judged: a quiet is judged with its inputs'
         for topic in watched:
             rate = ctx.value(topic, "rate_hz")
             if math.isnan(rate):
                 continue  # not measured
             base = cached_baseline(ctx, topic, "rate_hz", frozen=topic in alerting)
             r = rhythms.setdefault(topic, Rhythm())
-            quiet = _follow(ctx, r, topic, rate, base)
-            alert = (_silence(ctx, topic, r, quiet, base, transitions)
+            followed.append((topic, r, rate, base, _follow(ctx, r, topic, rate, base)))
+        for topic, r, rate, base, quiet in followed:
+            alert = (_silence(ctx, topic, r, quiet, base, transitions, rhythms)
                      or _drop(ctx, topic, r, quiet, rate, base))
             expected = _below_expected(ctx, topic, rate)  # its streak counts every sample
             alert = alert or expected  # one alert per topic and sample
@@ -124,7 +127,7 @@ def _follow(ctx: PluginContext, r: Rhythm, topic: str, rate: float, base: Baseli
 
 
 def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, base: Baseline,
-             transitions: dict[str, float]) -> Alert | None:
+             transitions: dict[str, float], rhythms: dict[str, Rhythm]) -> Alert | None:
     """Quiet for longer than the topic's own rhythm allows (see `TopicRate`)."""
     s = ctx.settings
     ref = _ref_hz(r, base)
@@ -135,6 +138,9 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
         return None
     if not r.departed and _healthy_quiet(ctx, topic, r, transitions):
         r.explained = True
+        return None
+    if not r.departed and _inherited(ctx, topic, r, rhythms):
+        r.explained = r.inherited = True
         return None
     if not r.departed:  # a new silence: count it for flapping
         r.departed = True
@@ -157,6 +163,32 @@ def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[
         return True
     since = (r.newest or ctx.t) - ctx.settings["transition_grace_s"]
     return any(transitions.get(p, -math.inf) >= since for p in ctx.publishers(topic))
+
+
+def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm]) -> bool:
+    """True when every publisher of ``topic`` has an input that went quiet just before it did.
+
+    An input counts when its last message came at most ``input_grace_s`` before the topic's last
+    one (data computed from it, or forwarded until a mux's timeout) and it is quiet by its own
+    base limit now. The topic's quiet is then the input's: judged on the input, as a symptom or
+    as healthy (a burst ending, a lifecycle transition), never twice.
+    """
+    pubs = ctx.publishers(topic)
+    if not pubs or r.newest is None:
+        return False
+    s, grace = ctx.settings, ctx.settings["input_grace_s"]
+
+    def stopped(node: str) -> bool:
+        for name in ctx.subscribed_topics(node):
+            i = rhythms.get(name)
+            if name == topic or i is None or i.newest is None:
+                continue
+            stopped_at = r.newest - grace <= i.newest <= r.newest
+            if stopped_at and ctx.t - i.newest >= _base_limit(s, _ref_hz(i, None)):
+                return True
+        return False
+
+    return all(stopped(p) for p in pubs)
 
 
 def latched(qos: Any) -> bool:

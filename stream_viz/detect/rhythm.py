@@ -75,6 +75,10 @@ class Rhythm:
     explained : bool
         The current quiet has a healthy cause (its publisher changed lifecycle state): it is not
         a symptom, and is learned when it ends.
+    inherited : bool
+        The current quiet is an input's: its publisher's input went quiet just before it (data
+        that stops downstream of a stopped input). Not a symptom, and not learned: the input's
+        rhythm, not the topic's own.
     """
 
     newest: float | None = None
@@ -89,6 +93,7 @@ class Rhythm:
     longest: float = 0.0
     departed: bool = False
     explained: bool = False
+    inherited: bool = False
 
 
 def newest_message(t: float, rate: float, age: float) -> float | None:
@@ -149,7 +154,7 @@ def follow(r: Rhythm, t: float, newest: float | None, rate: float, *, window_s: 
 
 def _message(r: Rhythm, newest: float, notable: float) -> None:
     """A message newer than any seen: a notable quiet before it ends, and is learned if healthy."""
-    if r.newest is None:
+    if r.newest is None or r.inherited:
         r.run_start = newest
     else:
         if not r.departed:
@@ -161,7 +166,7 @@ def _message(r: Rhythm, newest: float, notable: float) -> None:
                 r.runs = [*r.runs, r.newest - start][-GAP_MEMORY:]
             r.run_start = newest
     r.newest = newest
-    r.peak, r.departed, r.explained = 0.0, False, False
+    r.peak, r.departed, r.explained, r.inherited = 0.0, False, False, False
 
 
 def _settles(r: Rhythm, settle_s: float, margin: float, min_gaps: int) -> bool:

@@ -221,6 +221,35 @@ def test_topic_rate_a_deactivated_lifecycle_publisher_is_not_silent():
     assert round(alerts[0].data["limit_s"], 1) == 41.2
 
 
+def chain_model(img, det, t, latched_img=False):
+    """`model` plus /detector -> /det: messages of /img at ``img``, of /det at ``det``."""
+    G = latched_model(**seen(img, t)) if latched_img else model(**seen(img, t))
+    d = seen(det, t)
+    add_member(G, "topic:/det", theta=make_theta("topic", {
+        "rate_hz": d["rate"], "publishers": 1, **({"age_s": d["age"]} if "age" in d else {})}))
+    add_flow_edge(G, "node:/detector", "topic:/det", "pub")
+    return G
+
+
+def test_topic_rate_a_quiet_that_follows_its_inputs_is_the_inputs():
+    # /det is computed from /img (50 ms later). Healthy: /img comes from a latched publisher that
+    # stops at 20 s (its quiet is healthy, so is the detections' that follows it): no alert.
+    img = [i / 10 for i in range(200)]
+    det = [m + 0.05 for m in img]
+    frames = [(t, chain_model(img, det, t, latched_img=True), []) for t in HALF[:40]]
+    assert drive("topic_rate", frames) == []
+    # /img's publisher hangs at 20 s: the silence is /img's, not again on /det.
+    frames = [(t, chain_model(img, det, t), []) for t in HALF[:40]]
+    assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img"}
+    # The detector hangs while /img goes on: /det is silent.
+    img_on = [i / 10 for i in range(400)]
+    frames = [(t, chain_model(img_on, det, t), []) for t in HALF[:40]]
+    assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/det", "error")]
+    # An input that stopped long before /det did (> input_grace_s) does not explain it.
+    frames = [(t, chain_model(img[:150], det, t, latched_img=True), []) for t in HALF[:40]]
+    assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/det", "error")]
+
+
 def test_topic_rate_a_topic_whose_publisher_left_is_not_silent():
     def gone(**kw):
         G = model(**kw)
