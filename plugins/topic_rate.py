@@ -31,8 +31,10 @@ class TopicRate(Plugin):
       latched topic publishes when its data changes; ``judge_latched``), or when a publisher
       changed lifecycle state (a message on its ``transition_event`` topic) within
       ``transition_grace_s`` of the last message (a deactivated lifecycle publisher is silent);
-      such a quiet is healthy and learned. A silence again within ``flap_window_s`` of the last
-      alert is the same episode (``episode_hold_s``), counted (``flaps``);
+      such a quiet is healthy and learned. Nor when every publisher has an input that went quiet
+      up to ``input_grace_s`` before the topic did: the quiet is the input's (`_inherited`).
+      A silence again within ``flap_window_s`` of the last alert is the same episode
+      (``episode_hold_s``), counted (``flaps``);
     * drop (warn): ``rate < drop_ratio × baseline`` and ``≥ drop_k`` σ below it for ``confirm``
       samples, the baseline being the median of the topic's own rate after ``warmup_s`` (frozen
       while alerting); only on a continuous topic (settled, no healthy gap: a bursty topic's rate
