@@ -4,8 +4,9 @@ real monitor against real rclpy nodes in subprocesses.
 A healthy system full of dynamics (a topic published in bursts, a latched topic published once,
 a lifecycle node that deactivates and activates again, a job that ends with exit code 0, a
 parameter changed every few seconds, a console that joins late) raises no alert; then the bursty
-topic's publisher hangs for longer than its own gaps, and that is a silence. A node started four
-times under one name is one symptom of that node.
+topic's publisher hangs for longer than its own gaps, and that is a silence. A relay of a
+deactivated lifecycle publisher stops with its input (the input's quiet, no alert); the relay's
+own hang is a silence. A node started four times under one name is one symptom of that node.
 """
 
 from __future__ import annotations
@@ -194,6 +195,70 @@ def test_healthy_dynamics_raise_no_alert_and_a_hang_past_the_own_gaps_is_a_silen
         assert a.severity == "error" and a.t > t_stop
         assert a.data["limit_s"] == pytest.approx(2 * max(gaps), abs=0.01)
         assert a.data["limit_s"] <= a.data["silent_s"] < a.data["limit_s"] + 3.0
+    finally:
+        mon.close()
+
+
+# A lifecycle source active from its start for 16 s, inactive 8 s, then active again; a relay
+# forwards each of its messages (data computed from an input stops with it).
+SOURCE = HEAD + """
+from rclpy.lifecycle import LifecycleNode
+n = LifecycleNode("pose_source")
+pub = n.create_lifecycle_publisher(String, "/pose", 10)
+n.create_timer(0.1, lambda: pub.publish(String(data="pose")))
+n.trigger_configure()
+n.trigger_activate()
+t0, active = time.monotonic(), True
+def cycle():
+    global active
+    want = not 16.0 <= time.monotonic() - t0 < 24.0
+    if want != active:
+        active = want
+        (n.trigger_activate if want else n.trigger_deactivate)()
+n.create_timer(0.1, cycle)
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+RELAY = HEAD + """
+n = Node("pose_relay")
+pub = n.create_publisher(String, "/pose_relayed", 10)
+n.create_subscription(String, "/pose", pub.publish, 10)
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+
+def test_a_quiet_that_follows_its_input_is_the_inputs_and_a_hang_of_its_own_is_a_silence(children,
+                                                                                        tmp_path):
+    relay = children.python(RELAY, name="relay")
+    mon = _monitor(children, tmp_path)
+    try:
+        wait_for(lambda: (mon.step(), "node:/pose_relay" in mon.seen)[1], timeout=20, period=1.0)
+        source = children.python(SOURCE, name="source")
+        t0 = time.monotonic()
+        _observe(mon, 26.0)  # on for 16 s (> warmup_s: continuous), off 8 s, on again
+        assert source.poll() is None
+        alerts = mon.store.alerts()
+        assert alerts == [], "a relay of a deactivated publisher raised alerts:\n" + "\n".join(
+            f"{a.member} {a.plugin} {a.severity}: {a.message}" for a in alerts)
+        rhythms = _plugin(mon, "topic_rate").state["rhythms"]
+        relayed = rhythms["topic:/pose_relayed"]
+        assert relayed.settled and relayed.gaps == [], relayed  # the input's quiet, not learned
+        assert rhythms["topic:/pose"].gaps, rhythms["topic:/pose"]  # the lifecycle pause, learned
+
+        # The relay itself hangs while its input goes on: that is a silence of its output.
+        wait_for(lambda: time.monotonic() - t0 > 27.0, timeout=5, period=0.2)
+        os.killpg(relay.pid, signal.SIGSTOP)
+        try:
+            found = []
+            deadline = time.monotonic() + 10.0
+            while not found and time.monotonic() < deadline:
+                _observe(mon, 1.0)
+                found = [a for a in mon.store.alerts() if a.data.get("symptom") == "silence"]
+        finally:
+            os.killpg(relay.pid, signal.SIGCONT)
+        assert [a.member for a in found] == ["topic:/pose_relayed"], mon.store.alerts()
     finally:
         mon.close()
 
