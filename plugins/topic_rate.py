@@ -13,6 +13,7 @@ from stream_viz.model.qos import qos_policy
 from stream_viz.records import Alert
 
 Baseline = tuple[float, float, int] | None
+TRANSITIONS_KEPT = 8  # per node: enough for the changes around one quiet
 FORGET_S = 600.0  # as long as the monitor keeps a vanished member by default (forget_gone_s)
 
 
@@ -29,10 +30,12 @@ class TopicRate(Plugin):
       ``warmup_s`` without such a quiet, or showed ``min_gaps`` healthy gaps. Never while it has
       no publisher (graph_anomalies' orphans), while all its publishers are transient-local (a
       latched topic publishes when its data changes; ``judge_latched``), or when a publisher
-      changed lifecycle state (a message on its ``transition_event`` topic) within
-      ``transition_grace_s`` of the last message (a deactivated lifecycle publisher is silent);
-      such a quiet is healthy and learned. Nor when every publisher has an input that went quiet
-      up to ``input_grace_s`` before the topic did: the quiet is the input's (`_inherited`).
+      changed state within ``transition_grace_s`` of the last message — a lifecycle transition
+      (a message on its ``transition_event`` topic: a deactivated publisher is silent) or a goal
+      of an action it serves ending (a controller stops when its goal is reached);
+      such a quiet is healthy, and not learned (its length is the state's, not the rhythm's).
+      Nor when every publisher has an input that went quiet up to ``input_grace_s`` before the
+      topic did: the quiet is the input's (`_inherited`), not learned either.
       A silence again within ``flap_window_s`` of the last alert is the same episode
       (``episode_hold_s``), counted (``flaps``);
     * drop (warn): ``rate < drop_ratio × baseline`` and ``≥ drop_k`` σ below it for ``confirm``
@@ -129,7 +132,7 @@ def _follow(ctx: PluginContext, r: Rhythm, topic: str, rate: float, base: Baseli
 
 
 def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, base: Baseline,
-             transitions: dict[str, float], rhythms: dict[str, Rhythm]) -> Alert | None:
+             transitions: dict[str, list[float]], rhythms: dict[str, Rhythm]) -> Alert | None:
     """Quiet for longer than the topic's own rhythm allows (see `TopicRate`)."""
     s = ctx.settings
     ref = _ref_hz(r, base)
@@ -142,7 +145,7 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
         r.explained = True
         return None
     if not r.departed and _inherited(ctx, topic, r, rhythms):
-        r.explained = r.inherited = True
+        r.explained = True
         return None
     if not r.departed:  # a new silence: count it for flapping
         r.departed = True
@@ -156,15 +159,18 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
                      episode_hold_s=s["flap_window_s"])
 
 
-def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[str, float]) -> bool:
+def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[str, list[float]]) -> bool:
     """True when a quiet has a healthy cause: no publisher (an orphan is graph_anomalies' case),
-    only transient-local publishers, or a publisher's lifecycle transition by its last message."""
+    only transient-local publishers, or a publisher's change of state (a lifecycle transition, a
+    goal of its action ending) within ``transition_grace_s`` of the last message."""
     if ctx.value(topic, "publishers") == 0:
         return True
     if not ctx.settings["judge_latched"] and latched(ctx.attr(topic, "qos")):
         return True
-    since = (r.newest or ctx.t) - ctx.settings["transition_grace_s"]
-    return any(transitions.get(p, -math.inf) >= since for p in ctx.publishers(topic))
+    grace = ctx.settings["transition_grace_s"]
+    last = r.newest or ctx.t
+    near = (x for p in ctx.publishers(topic) for x in transitions.get(p, ()))
+    return any(last - grace <= x <= last + grace for x in near)
 
 
 def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm]) -> bool:
@@ -200,17 +206,27 @@ def latched(qos: Any) -> bool:
     return bool(pubs) and all(qos_policy(q, "durability") == "transient_local" for q in pubs)
 
 
-def _transitions(ctx: PluginContext) -> dict[str, float]:
-    """Node → receive time of the newest message on a ``…/transition_event`` topic it publishes
-    (a lifecycle node's state change), kept across samples."""
-    last = ctx.state.setdefault("transitions", {})
+def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
+    """Node → times of its recent changes of state (the newest `TRANSITIONS_KEPT`), kept across
+    samples: a message on a ``…/transition_event`` topic it publishes (a lifecycle transition),
+    a goal of an action it serves ending (a ``goal`` event: `stream_viz.collect.goals`)."""
+    last: dict[str, list[float]] = ctx.state.setdefault("transitions", {})
+
+    def note(node: str, at: float) -> None:
+        times = last.setdefault(node, [])
+        if at not in times:
+            times[:] = sorted([*times, at])[-TRANSITIONS_KEPT:]
+
     lifecycle = ctx.structural(lambda: [m for m in ctx.members("topic") if m.endswith("/transition_event")],
                                key="lifecycle")
     for topic in lifecycle:
         age = ctx.value(topic, "age_s")
         if age == age:
             for node in ctx.publishers(topic):
-                last[node] = max(last.get(node, -math.inf), ctx.t - age)
+                note(node, round(ctx.t - age, 3))  # the same message seen again: one time
+    for e in ctx.events:
+        if e.kind == "goal":
+            note(e.member, e.t)
     return last
 
 

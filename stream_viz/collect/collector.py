@@ -20,6 +20,7 @@ from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 from stream_viz.collect.build import build_model
 from stream_viz.collect.diagnostics import DiagnosticsReader
 from stream_viz.collect.fastdds import decode_gid
+from stream_viz.collect.goals import GoalTracker
 from stream_viz.collect.hosts import HostReports
 from stream_viz.collect.naming import NodeNames
 from stream_viz.collect.pidmap import PidResolver
@@ -122,6 +123,7 @@ class Collector:
         self.qos = QosCache()
         self.gids = GidCache()
         self.diagnostics = DiagnosticsReader()
+        self.goals = GoalTracker()
         self.calls = ServiceCalls(window_s=window_s)
         self._prev = new_graph()
         self._prev_pids: dict[str, int | None] = {}
@@ -157,7 +159,8 @@ class Collector:
         t = time.time()
         reading = read_graph(self.node, own=self.own, include_hidden=self.include_hidden,
                              include_internal=self.include_internal, qos=self.qos, gids=self.gids)
-        self.topics.update(reading.topics, reading.service_events)
+        self.topics.update(reading.topics, reading.service_events, reading.goal_status)
+        self.goals.forget(set(reading.goal_status))
         pids = self.resolver.resolve(reading.rosout_gids)
         for fqn in reading.nodes:
             pids.setdefault(fqn, PidInfo(None, "unknown"))
@@ -249,6 +252,8 @@ class Collector:
                 elif topic in DIAGNOSTICS:
                     publisher = self._publisher(reading, topic, gid)
                     out += self.diagnostics.events(topic, msg, recv / 1e9, publisher, index)
+                elif topic in reading.goal_status:
+                    out += self.goals.events(topic, msg, recv, reading.goal_status[topic])
             except (AttributeError, TypeError, ValueError) as e:  # a malformed message: say so, go on
                 out.append(Event(t, "observe_error", make_id("topic", topic), "warn",
                                  f"cannot read a {topic} message: {e}"))

@@ -46,6 +46,7 @@ class GraphReading:
     rosout_gids: dict[str, bytes] = field(default_factory=dict)  # node fqn -> gid of its /rosout pub
     publisher_gids: dict[str, dict[bytes, str]] = field(default_factory=dict)  # topic -> gid -> node
     service_events: dict[str, str] = field(default_factory=dict)  # service -> its event topic's type
+    goal_status: dict[str, list[str]] = field(default_factory=dict)  # action status topic -> servers
     skipped: dict[str, str] = field(default_factory=dict)  # node fqn -> why it was skipped
 
 

@@ -12,6 +12,7 @@ from typing import Any
 
 from rclpy.node import Node, NodeNameNonExistentError
 
+from stream_viz.collect.goals import GOAL_STATUS_TYPE, STATUS_SUFFIX
 from stream_viz.collect.readings import Endpoint, GraphReading, NodeReading
 from stream_viz.collect.services import EVENT_SUFFIX
 from stream_viz.model.ids import node_fqn
@@ -219,6 +220,8 @@ def read_graph(node: Node, *, own: str, include_hidden: bool = False,
                 elif role == "pub" and topic.endswith(EVENT_SUFFIX) and types:
                     # service introspection: observed whether or not hidden names are kept
                     r.service_events.setdefault(topic[: -len(EVENT_SUFFIX)], types[0])
+                elif role == "pub" and topic.endswith(STATUS_SUFFIX) and GOAL_STATUS_TYPE in types:
+                    r.goal_status.setdefault(topic, []).append(fqn)  # an action server's goals
     deadline = time.monotonic() + qos.budget_s
     for topic in sorted(r.topics):
         pubs_, subs_ = sorted(set(ends["pub"].get(topic, []))), sorted(set(ends["sub"].get(topic, [])))

@@ -16,7 +16,7 @@ from __future__ import annotations
 import importlib
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,6 +26,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.serialization import deserialize_message
 
 from stream_viz.collect.cdr import has_header, header_stamp_ns, is_service_event, service_event_info
+from stream_viz.collect.goals import GOAL_STATUS_TYPE, STATUS_SUFFIX
 from stream_viz.collect.naming import NodeNames, named_in_text
 from stream_viz.collect.rcltake import RclTake
 from stream_viz.collect.readings import TopicStats
@@ -113,15 +114,18 @@ class TopicMonitor:
         self._thread = threading.Thread(target=self._run, name="stream-viz-topics", daemon=True)
         self._thread.start()
 
-    def update(self, topics: dict[str, list[str]], service_events: dict[str, str] | None = None) -> None:
+    def update(self, topics: dict[str, list[str]], service_events: dict[str, str] | None = None,
+               goal_status: Iterable[str] = ()) -> None:
         """Follow the graph: subscribe to new topics, drop vanished ones (keeps the event topics).
 
         ``topics``: topic → types (measured when ``metrics``; /diagnostics_agg always);
-        ``service_events``: service → its event topic's type (service introspection).
+        ``service_events``: service → its event topic's type (service introspection);
+        ``goal_status``: action servers' status topics (`stream_viz.collect.goals`).
         """
         want = {t: types[0] for t, types in topics.items()
                 if types and t not in NO_RAW and (self.metrics or t in DIAGNOSTICS)}
         want.update({s + EVENT_SUFFIX: ty for s, ty in (service_events or {}).items()})
+        want.update(dict.fromkeys(goal_status, GOAL_STATUS_TYPE))
         with self._lock:
             for t in list(self._watches):
                 w = self._watches[t]
@@ -145,6 +149,7 @@ class TopicMonitor:
             self._failed[topic] = f"message type {type_name} is not installed ({e.__class__.__name__})"
             return
         kind = ("log" if topic in LOGS else "diag" if topic in DIAGNOSTICS
+                else "status" if topic.endswith(STATUS_SUFFIX) and type_name == GOAL_STATUS_TYPE
                 else "event" if topic.endswith(EVENT_SUFFIX) and is_service_event(cls)
                 else "clock" if topic == ROS_CLOCK and type_name == CLOCK_TYPE else "raw")
         try:
@@ -175,11 +180,11 @@ class TopicMonitor:
                 if info is not None:
                     events.append((service, recv, info, gid))
             return event
-        if kind in ("diag", "log"):
+        if kind in ("diag", "log", "status"):
             messages = self._messages
 
             def keep(recv: int, src: int, size: int, seq: int, gid: bytes | None, msg: Any) -> None:
-                # the diagnostics arrays come as bytes (deserialised later), with a Header
+                # diagnostics and goal status arrays come as bytes (deserialised later)
                 stamp = header_stamp_ns(msg) if kind == "diag" else None
                 add(recv, src, size, seq, gid, None if stamp is None else clock.age(recv, stamp))
                 messages.append((topic, msg, recv, gid))
@@ -243,7 +248,7 @@ class TopicMonitor:
         with self._lock:  # the sinks hold the list: empty it, do not replace it
             out = self._messages[:]
             self._messages.clear()
-            types = {t: w.sub.msg_type for t, w in self._watches.items() if w.kind == "diag"}
+            types = {t: w.sub.msg_type for t, w in self._watches.items() if w.kind in ("diag", "status")}
         for i, (topic, msg, recv, gid) in enumerate(out):
             if isinstance(msg, bytes) and topic in types:
                 try:
@@ -267,7 +272,7 @@ class TopicMonitor:
         out: dict[str, TopicStats] = {t: TopicStats(False, why) for t, why in self._failed.items()}
         with self._lock:
             for t, w in self._watches.items():
-                if w.kind == "event":
+                if w.kind in ("event", "status"):  # events, not metrics
                     continue
                 w.window.expire(now - self.window_ns)
                 m = w.window.metrics(now, w.created_ns, self.window_ns, publishers.get(t, 0),

@@ -11,7 +11,8 @@ from what the collector shows every sample (the receive time of the newest messa
 * a quiet that began and ended between two samples (the monitor was busy, or the gap was
   short) is seen in the collector's longest interval since the last sample (``gap_s``) and
   counts as if a sample had seen it;
-* a notable quiet that ends without having been a symptom is a **healthy gap**, and is learned
+* a notable quiet that ends without having been a symptom, nor explained by a cause outside the
+  rhythm (``Rhythm.explained``: judged by ``topic_rate``), is a **healthy gap**, and is learned
   (its length from the newest message before it to the newest after it: an upper bound, off by at
   most a sample period, so a repeat of the same gap never exceeds what was learned);
 * a topic is **settled** (its silence can be judged) once it has published without a notable
@@ -73,12 +74,9 @@ class Rhythm:
     departed : bool
         The current quiet was a symptom: it is not learned when it ends.
     explained : bool
-        The current quiet has a healthy cause (its publisher changed lifecycle state): it is not
-        a symptom, and is learned when it ends.
-    inherited : bool
-        The current quiet is an input's: its publisher's input went quiet just before it (data
-        that stops downstream of a stopped input). Not a symptom, and not learned: the input's
-        rhythm, not the topic's own.
+        The current quiet has a healthy cause outside the topic's rhythm (its publisher changed
+        state, or its input stopped just before it): it is not a symptom, and not learned (its
+        length is the cause's, not the topic's).
     """
 
     newest: float | None = None
@@ -93,7 +91,6 @@ class Rhythm:
     longest: float = 0.0
     departed: bool = False
     explained: bool = False
-    inherited: bool = False
 
 
 def newest_message(t: float, rate: float, age: float) -> float | None:
@@ -154,7 +151,7 @@ def follow(r: Rhythm, t: float, newest: float | None, rate: float, *, window_s: 
 
 def _message(r: Rhythm, newest: float, notable: float) -> None:
     """A message newer than any seen: a notable quiet before it ends, and is learned if healthy."""
-    if r.newest is None or r.inherited:
+    if r.newest is None or r.explained:
         r.run_start = newest
     else:
         if not r.departed:
@@ -166,7 +163,7 @@ def _message(r: Rhythm, newest: float, notable: float) -> None:
                 r.runs = [*r.runs, r.newest - start][-GAP_MEMORY:]
             r.run_start = newest
     r.newest = newest
-    r.peak, r.departed, r.explained, r.inherited = 0.0, False, False, False
+    r.peak, r.departed, r.explained = 0.0, False, False
 
 
 def _settles(r: Rhythm, settle_s: float, margin: float, min_gaps: int) -> bool:

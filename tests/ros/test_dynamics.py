@@ -172,11 +172,12 @@ def test_healthy_dynamics_raise_no_alert_and_a_hang_past_the_own_gaps_is_a_silen
         alerts = mon.store.alerts()
         assert alerts == [], "healthy dynamics raised alerts:\n" + "\n".join(
             f"{a.member} {a.plugin} {a.severity}: {a.message}" for a in alerts)
-        # What was learned: /detections' 5 s gaps, /dock_pose's deactivation (a lifecycle change).
+        # What was learned: /detections' 5 s gaps; /dock_pose's deactivation was seen as a change of
+        # its node's state (a lifecycle transition), the cause of its quiet.
         rhythms = _plugin(mon, "topic_rate").state["rhythms"]
         gaps = rhythms["topic:/detections"].gaps
         assert len(gaps) >= 3 and all(4.5 <= g <= 7.5 for g in gaps), gaps
-        assert rhythms["topic:/dock_pose"].gaps, rhythms["topic:/dock_pose"]
+        assert _plugin(mon, "topic_rate").state["transitions"].get("node:/dock"), "no transition seen"
 
         # The burst publisher hangs: silent for longer than twice its longest gap is a silence.
         os.killpg(bursts.pid, signal.SIGSTOP)
@@ -245,7 +246,6 @@ def test_a_quiet_that_follows_its_input_is_the_inputs_and_a_hang_of_its_own_is_a
         rhythms = _plugin(mon, "topic_rate").state["rhythms"]
         relayed = rhythms["topic:/pose_relayed"]
         assert relayed.settled and relayed.gaps == [], relayed  # the input's quiet, not learned
-        assert rhythms["topic:/pose"].gaps, rhythms["topic:/pose"]  # the lifecycle pause, learned
 
         # The relay itself hangs while its input goes on: that is a silence of its output.
         wait_for(lambda: time.monotonic() - t0 > 27.0, timeout=5, period=0.2)
@@ -259,6 +259,76 @@ def test_a_quiet_that_follows_its_input_is_the_inputs_and_a_hang_of_its_own_is_a
         finally:
             os.killpg(relay.pid, signal.SIGCONT)
         assert [a.member for a in found] == ["topic:/pose_relayed"], mon.store.alerts()
+    finally:
+        mon.close()
+
+
+# An action server that drives /cmd at 10 Hz while it executes a goal (14 s; > warmup_s, so /cmd
+# is a continuous topic), then succeeds; a mission client sends a goal, waits for its result,
+# pauses 8 s and sends the next (a controller and its goals, as a navigation stack has them).
+CONTROLLER = HEAD + """
+from rclpy.action import ActionServer
+from test_msgs.action import Fibonacci
+n = Node("controller")
+pub = n.create_publisher(String, "/cmd", 10)
+def execute(goal):
+    end = time.monotonic() + 14.0
+    while time.monotonic() < end:
+        pub.publish(String(data="go"))
+        time.sleep(0.1)
+    goal.succeed()
+    return Fibonacci.Result()
+ActionServer(n, Fibonacci, "/follow", execute)
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+MISSION = HEAD + """
+from rclpy.action import ActionClient
+from test_msgs.action import Fibonacci
+n = Node("mission")
+client = ActionClient(n, Fibonacci, "/follow")
+client.wait_for_server()
+while True:
+    sent = client.send_goal_async(Fibonacci.Goal(order=1))
+    rclpy.spin_until_future_complete(n, sent)
+    done = sent.result().get_result_async()
+    rclpy.spin_until_future_complete(n, done)
+    print("goal done", flush=True)
+    end = time.monotonic() + 8.0
+    while time.monotonic() < end:
+        rclpy.spin_once(n, timeout_sec=0.1)
+"""
+
+
+def test_a_controller_stopping_when_its_goal_ends_is_no_silence_and_its_hang_is(children, tmp_path):
+    controller = children.python(CONTROLLER, name="controller")
+    mon = _monitor(children, tmp_path)
+    try:
+        wait_for(lambda: (mon.step(), "node:/controller" in mon.seen)[1], timeout=20, period=1.0)
+        _observe(mon, 2.0)  # the status topic is followed before the first goal
+        mission = children.python(MISSION, name="mission")
+        _observe(mon, 28.0)  # a goal of 14 s, a pause of 8 s, the next goal
+        log = (tmp_path / f"mission_{children.procs.index(mission)}.log").read_text()
+        assert "goal done" in log, log
+        # The goal's end was seen (a `goal` event: the controller's only change of state).
+        assert _plugin(mon, "topic_rate").state["transitions"].get("node:/controller"), "no goal end seen"
+        alerts = mon.store.alerts()
+        assert alerts == [], "a controller whose goal ended raised alerts:\n" + "\n".join(
+            f"{a.member} {a.plugin} {a.severity}: {a.message}" for a in alerts)
+        assert _plugin(mon, "topic_rate").state["rhythms"]["topic:/cmd"].settled
+
+        # The controller hangs in the middle of a goal: no goal ends, /cmd is silent.
+        os.killpg(controller.pid, signal.SIGSTOP)
+        try:
+            found = []
+            deadline = time.monotonic() + 10.0
+            while not found and time.monotonic() < deadline:
+                _observe(mon, 1.0)
+                found = [a for a in mon.store.alerts() if a.data.get("symptom") == "silence"]
+        finally:
+            os.killpg(controller.pid, signal.SIGCONT)
+        assert [a.member for a in found] == ["topic:/cmd"], mon.store.alerts()
     finally:
         mon.close()
 

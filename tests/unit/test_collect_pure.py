@@ -334,3 +334,29 @@ def test_topic_window_running_sums_equal_a_fresh_computation():
         assert w.publisher_rates(now, 0, 3 * s) == {g: n / 3 for g, n in per_gid.items()}, step
         for k in want:
             assert got[k] == pytest.approx(want[k], rel=1e-9, abs=1e-9), (step, k)
+
+
+def _statuses(*goals: tuple[int, int]):
+    from action_msgs.msg import GoalStatus, GoalStatusArray
+
+    msg = GoalStatusArray()
+    for uid, status in goals:
+        s = GoalStatus(status=status)
+        s.goal_info.goal_id.uuid = [uid] * 16
+        msg.status_list.append(s)
+    return msg
+
+
+def test_goal_tracker_an_event_per_goal_that_ended_since_the_last_array():
+    from stream_viz.collect.goals import GoalTracker
+
+    g, topic = GoalTracker(), "/nav/follow/_action/status"
+    # The first array lists a goal that ended before we looked: no time for its end, no event.
+    assert g.events(topic, _statuses((1, 4)), 1_000_000_000, ["/nav/controller"]) == []
+    assert g.events(topic, _statuses((1, 4), (2, 2)), 2_000_000_000, ["/nav/controller"]) == []  # executing
+    (e,) = g.events(topic, _statuses((1, 4), (2, 6)), 3_500_000_000, ["/nav/controller"])
+    assert (e.t, e.kind, e.member, e.level) == (3.5, "goal", "node:/nav/controller", "info")
+    assert e.data == {"action": "/nav/follow", "goal": "02" * 16, "status": "aborted"}
+    assert g.events(topic, _statuses((2, 6)), 4_000_000_000, ["/nav/controller"]) == []  # unchanged
+    g.forget(set())
+    assert g.events(topic, _statuses((3, 5)), 5_000_000_000, ["/nav/controller"]) == []  # first again

@@ -215,10 +215,26 @@ def test_topic_rate_a_deactivated_lifecycle_publisher_is_not_silent():
     transitions = [20.0, 40.0]
     frames = [(t, lifecycle_model(transitions, t, **seen(msgs, t)), []) for t in HALF[:110]]
     alerts = drive("topic_rate", frames, full=True)
-    # The 20 s deactivation is healthy and learned (gap 40.5 - 19.9 = 20.6 s): the hang after 59.9
-    # is a silence only after twice that.
-    assert [(a.t, a.member) for a in alerts][:1] == [(101.5, "topic:/img")]
-    assert round(alerts[0].data["limit_s"], 1) == 41.2
+    # The 20 s deactivation is healthy, and its length is the state's, not the topic's rhythm (not
+    # learned): the hang after 59.9 is a silence at the base limit, as on any continuous topic.
+    assert [(a.t, a.member) for a in alerts][:1] == [(61.5, "topic:/img")]
+    assert alerts[0].data["limit_s"] == 1.5
+
+
+def test_topic_rate_a_goal_ending_by_the_last_message_explains_the_quiet():
+    # /camera serves an action; its goal ends at 20.0, its output's last message is at 19.9.
+    msgs = [i / 10 for i in range(200)]
+    ended = Event(20.0, "goal", "node:/camera", "info", "goal 1a2b3c4d of /dock succeeded",
+                  {"action": "/dock", "goal": "1a2b3c4d", "status": "succeeded"})
+    frames = [(t, model(**seen(msgs, t)), [ended] if t == 20.5 else []) for t in HALF[:40]]
+    assert drive("topic_rate", frames) == []
+    # A goal that ends well after the output stopped (cancelled because it hung: 2.5 s after the
+    # last message, > transition_grace_s) explains nothing, though it comes before the limit (5 s).
+    late = Event(19.4, "goal", "node:/camera", "info", "goal 1a2b3c4d of /dock canceled",
+                 {"action": "/dock", "goal": "1a2b3c4d", "status": "canceled"})
+    hung = [(t, model(**seen(msgs[:170], t)), [late] if t == 19.5 else []) for t in HALF[:40]]
+    silences = [a for a in drive("topic_rate", hung, settings={"silence_min_s": 5.0}) if a[2] == "error"]
+    assert silences[:1] == [(22.5, "topic:/img", "error")]
 
 
 def chain_model(img, det, t, latched_img=False):

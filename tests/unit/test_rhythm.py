@@ -61,10 +61,13 @@ def test_a_symptom_quiet_is_not_learned_and_a_settled_topic_stays_judged():
     r.departed = True  # the plugin alerted on it
     r, _ = run([(14.0, 13.95, 3.0), (15.0, 13.95, 6.0), (16.0, 15.95, 3.0)], r)  # flapping
     assert r.gaps == [] and r.settled and round(r.peak, 2) == 0.05
-    # The same quiet without an alert (say its publisher changed lifecycle state) is learned.
+    # A quiet with a cause outside the rhythm (its publisher changed state) is not learned
+    # either; the same quiet without alert or cause is.
     r.explained = True
     r, _ = run([(17.0, 15.95, 3.0), (18.0, 15.95, 3.0), (19.0, 18.95, 3.0)], r)
-    assert r.gaps == [3.0] and r.runs == [2.0] and not r.explained
+    assert r.gaps == [] and r.run_start == 18.95 and not r.explained
+    r, _ = run([(20.0, 19.95, 6.0), (21.0, 19.95, 3.0), (22.0, 19.95, 3.0), (23.0, 22.95, 3.0)], r)
+    assert r.gaps == [3.0] and r.runs == [1.0]
     assert quiet_limit(r, 1.5, 2.0) == 6.0
 
 
