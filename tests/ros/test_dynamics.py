@@ -311,11 +311,11 @@ def test_a_controller_stopping_when_its_goal_ends_is_no_silence_and_its_hang_is(
         _observe(mon, 28.0)  # a goal of 14 s, a pause of 8 s, the next goal
         log = (tmp_path / f"mission_{children.procs.index(mission)}.log").read_text()
         assert "goal done" in log, log
-        # The goal's end was seen (a `goal` event: the controller's only change of state).
-        assert _plugin(mon, "topic_rate").state["transitions"].get("node:/controller"), "no goal end seen"
         alerts = mon.store.alerts()
         assert alerts == [], "a controller whose goal ended raised alerts:\n" + "\n".join(
             f"{a.member} {a.plugin} {a.severity}: {a.message}" for a in alerts)
+        # The goal's end was seen (a `goal` event: the controller's only change of state).
+        assert _plugin(mon, "topic_rate").state["transitions"].get("node:/controller"), "no goal end seen"
         assert _plugin(mon, "topic_rate").state["rhythms"]["topic:/cmd"].settled
 
         # The controller hangs in the middle of a goal: no goal ends, /cmd is silent.
