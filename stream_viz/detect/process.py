@@ -7,9 +7,14 @@ The rule, on a process's θ against its own past:
 
 * **rise**: ``cpu_percent`` or ``rss_mb`` − median ≥ max(``k``·σ, floor) (σ = 1.4826·MAD; the
   absolute floors ``cpu_min_rise`` percentage points and ``rss_min_rise_mb`` keep idle noise
-  quiet), `stream_viz.detect.baseline.exceeds`;
+  quiet), `stream_viz.detect.baseline.exceeds`; memory only while it rose lately (at least half
+  its floor above the lowest RSS of the last ``trend_s``/2): a process whose memory rose to a new
+  level and stays there (a map loaded, a buffer grown to its size) has a new normal;
 * **growth**: the least-squares slope of RSS over a recent span of the last ``trend_s`` is at
-  least ``growth_mb_per_s``, RSS having grown at least ``growth_min_mb`` in it.
+  least ``growth_mb_per_s``, RSS having grown at least ``growth_min_mb`` in it — unless the
+  process grew from when it was first seen (half ``growth_min_mb`` in its first ``warmup_s``)
+  and was seen for less than ``startup_s``: that is its start-up (a costmap or a model
+  allocated), and a process still growing after ``startup_s`` is judged as any other.
 
 The callers:
 
@@ -58,6 +63,7 @@ SETTINGS: dict[str, Any] = {
     "trend_s": 60.0,
     "growth_steady": 0.7,
     "growth_min_samples": 4,
+    "startup_s": 120.0,
 }
 
 # The attributes a rise is looked for in: (θ attribute, the setting of its floor, symptom, unit).
@@ -102,41 +108,70 @@ def symptoms(ctx: PluginContext, procs: Iterable[str]) -> Iterator[tuple[str, li
 
 def _symptoms(ctx: PluginContext, proc: str, alerting: set) -> list[Symptom]:
     found = []
+    rate = _leak(ctx, proc)  # first: it keeps the RSS window the memory rise reads
     for attr, floor, what, unit in RESOURCES:
         risen = rise(ctx, proc, attr, ctx.settings[floor], alerting)
-        if risen is not None:
+        if risen is not None and (what != "memory" or _rose_lately(ctx, proc, risen[0])):
             value, med = risen
             found.append((what, f"{what} {value:.0f}{unit}, normally {med:.0f}{unit}",
                           {"value": value, "baseline": med}))
-    rate = _leak(ctx, proc)
     if rate is not None:
         found.append(("memory_growth", f"memory growing {rate:.1f} MB/s", {"mb_per_s": rate}))
     return found
 
 
+def _rose_lately(ctx: PluginContext, proc: str, value: float) -> bool:
+    """True when ``value`` is at least half the memory floor above the process's lowest RSS of the
+    last ``trend_s``/2: memory that rose to a new level and stays there (a map loaded, a buffer
+    grown to its size) is the process's new normal, not a symptom for ever."""
+    w, since = ctx.state["rss"][proc], ctx.t - ctx.settings["trend_s"] / 2
+    low = min((v for t, v in w.q if t >= since and v == v), default=value)
+    return value - low >= ctx.settings["rss_min_rise_mb"] / 2
+
+
 def _leak(ctx: PluginContext, proc: str) -> float | None:
     """Return the RSS growth rate (MB/s) of ``proc`` when its memory grows steadily, else None."""
     s = ctx.settings
-    first, q = _rss_window(ctx, proc)
-    q.append((ctx.t, ctx.value(proc, "rss_mb")))
+    w = _rss_window(ctx, proc)
+    now = ctx.value(proc, "rss_mb")
+    w.add(ctx.t, now, s["warmup_s"])
+    q = w.q
     while q and q[0][0] < ctx.t - s["trend_s"]:
         q.popleft()
-    if ctx.t - first < s["warmup_s"] or len(q) < s["growth_min_samples"]:
+    if ctx.t - w.first < s["warmup_s"] or len(q) < s["growth_min_samples"]:
         return None
+    if w.high - w.low >= s["growth_min_mb"] / 2 and ctx.t - w.first < s["startup_s"]:
+        return None  # growing since it was first seen: its start-up, judged after startup_s
     rss = [v for _, v in q if v == v]
     if not rss or rss[-1] - min(rss) < s["growth_min_mb"]:
         return None  # the common, healthy case: no numpy needed
     return steady_growth(np.array([t for t, _ in q]), np.array([v for _, v in q]), ctx.t, s)
 
 
-def _rss_window(ctx: PluginContext, proc: str) -> tuple[float, deque]:
-    """``(first seen, deque of (t, rss))`` of ``proc``: an own bounded window per process, cheaper
-    than reading the whole history each sample."""
+@dataclass
+class _RssWindow:
+    """A process's recent RSS (an own bounded window, cheaper than reading the history each
+    sample) and its range over its first ``warmup_s`` seen (``low``, ``high``)."""
+
+    first: float
+    q: deque
+    low: float = np.inf
+    high: float = -np.inf
+
+    def add(self, t: float, rss: float, warmup_s: float) -> None:
+        self.q.append((t, rss))
+        if t - self.first <= warmup_s and rss == rss:
+            self.low, self.high = min(self.low, rss), max(self.high, rss)
+
+
+def _rss_window(ctx: PluginContext, proc: str) -> _RssWindow:
+    """The process's `_RssWindow`, started from its history when first asked for."""
     windows = ctx.state["rss"]
     if proc not in windows:
         times, values = ctx.past(proc, "rss_mb")
-        windows[proc] = (times[0] if len(times) else ctx.t,
-                         deque(zip(times.tolist(), values.tolist(), strict=True)))
+        w = windows[proc] = _RssWindow(times[0] if len(times) else ctx.t, deque())
+        for t, v in zip(times.tolist(), values.tolist(), strict=True):
+            w.add(t, v, ctx.settings["warmup_s"])
     return windows[proc]
 
 
@@ -185,6 +220,8 @@ class EvidenceRule:
         Earlier samples needed before judging.
     window : int
         Samples compared (the present and its past).
+    startup_s : float
+        Growth since a process was first seen is its start-up until it was seen this long.
     """
 
     k: float
@@ -196,6 +233,7 @@ class EvidenceRule:
     growth_samples: int
     warmup: int
     window: int
+    startup_s: float
 
 
 def evidence_rule(settings: Mapping[str, Any] | None = None) -> EvidenceRule:
@@ -206,7 +244,7 @@ def evidence_rule(settings: Mapping[str, Any] | None = None) -> EvidenceRule:
         k=s["k"], cpu_min_rise=s["cpu_min_rise"], rss_min_rise_mb=s["rss_min_rise_mb"],
         growth_mb_per_s=s["growth_mb_per_s"], growth_min_mb=s["growth_min_mb"],
         trend_s=s["trend_s"] / 2, growth_samples=s["growth_min_samples"] + 1,
-        warmup=round(s["warmup_s"]), window=s["window"],
+        warmup=round(s["warmup_s"]), window=s["window"], startup_s=s["startup_s"],
     )
 
 
@@ -239,6 +277,8 @@ def process_anomaly(times: np.ndarray, values: np.ndarray, now: float,
     if len(times) < rule.warmup + 1:
         return []
     past, cur = values[:-1], values[-1]
+    recent = times >= now - rule.trend_s
+    span = values[recent, _RSS]
     out = []
     for col, floor, what in ((_CPU, rule.cpu_min_rise, "cpu"), (_RSS, rule.rss_min_rise_mb, "memory")):
         # The median is at least the minimum: a value not `floor` above the minimum cannot be
@@ -246,17 +286,29 @@ def process_anomaly(times: np.ndarray, values: np.ndarray, now: float,
         # fmin/fmax skip NaN (an unread sample) as nanmin/nanmax do, in one ufunc call each.
         if not np.isfinite(cur[col]) or not cur[col] - np.fmin.reduce(past[:, col], initial=np.inf) >= floor:
             continue
+        if what == "memory" and cur[col] - np.fmin.reduce(span, initial=np.inf) < floor / 2:
+            continue  # risen long ago and level since: its new normal (`_rose_lately`)
         med, sigma, _ = robust(past[:, col])
         if np.isfinite(med) and exceeds(cur[col], med, sigma, rule.k, floor):
             out.append(what)
-    recent = times >= now - rule.trend_s
-    span = values[recent, _RSS]
     grew = np.fmax.reduce(span, initial=-np.inf) - np.fmin.reduce(span, initial=np.inf)
-    if recent.sum() >= rule.growth_samples and grew >= rule.growth_min_mb:
+    growing = recent.sum() >= rule.growth_samples and grew >= rule.growth_min_mb
+    if growing and not _starting(times, values, rule):
         s = slope(times[recent], span)
         if np.isfinite(s) and s >= rule.growth_mb_per_s:
             out.append("memory_growth")
     return out
+
+
+def _starting(times: np.ndarray, values: np.ndarray, rule: EvidenceRule) -> bool:
+    """True when the samples are the process's first (fewer than ``window``), seen for less than
+    ``startup_s``, and its RSS grew by half ``growth_min_mb`` in its first ``warmup`` samples:
+    memory growing since it started is its start-up."""
+    if len(times) >= rule.window or times[-1] - times[0] >= rule.startup_s:
+        return False
+    early = values[: rule.warmup + 1, _RSS]
+    return bool(np.fmax.reduce(early, initial=-np.inf) - np.fmin.reduce(early, initial=np.inf)
+                >= rule.growth_min_mb / 2)
 
 
 def anomalous_processes(G: nx.MultiDiGraph, history: History,

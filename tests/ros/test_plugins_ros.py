@@ -21,6 +21,7 @@ from stream_viz.detect.api import record_history
 from stream_viz.detect.plugin_set import PluginSet
 from stream_viz.model.diff import GraphDiff
 from stream_viz.model.history import History
+from stream_viz.model.theta import SCHEMAS
 from stream_viz.testing import wait_for
 
 pytestmark = pytest.mark.ros
@@ -233,6 +234,36 @@ def test_process_resources_memory_leak(children, tmp_path, run_of):
     _ready(run, "node:/talker")
     a = _sick_after_healthy(run, flag, "process_resources", "node:/talker", healthy_s=8.0)
     assert {"memory", "memory_growth"} & set(a.data["symptoms"])
+
+
+GROWER = """
+import rclpy, time
+from rclpy.node import Node
+from std_msgs.msg import String
+rclpy.init()
+n = Node("costmap")
+pub = n.create_publisher(String, "/costmap", 10)
+grid, t0 = [], time.monotonic()
+def tick():
+    pub.publish(String(data="grid"))
+    if time.monotonic() - t0 < 14.0:  # its start-up: 16 MB/s for 14 s, then level
+        grid.append(bytearray(8 * 1024 * 1024))
+        grid[-1][::4096] = b'x' * len(grid[-1][::4096])
+n.create_timer(0.5, tick)
+rclpy.spin(n)
+"""
+
+
+def test_process_resources_memory_growing_from_the_start_is_start_up(children, tmp_path, run_of):
+    run = run_of(["process_resources"])
+    children.python(GROWER, name="costmap")
+    _ready(run, "node:/costmap")
+    run.observe(22.0)
+    proc = f"process:{run.G.nodes['node:/costmap']['pid']}"
+    rss = run.history.values(proc)[:, SCHEMAS["process"].index("rss_mb")]
+    assert np.nanmax(rss) - np.nanmin(rss) >= 100.0, rss  # it did grow, > the 20 MB a leak needs
+    assert run.alerts == [], run.alerts
+    assert run.problems == []
 
 
 def test_member_gone_on_sigkill(children, tmp_path, run_of):

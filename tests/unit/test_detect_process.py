@@ -13,7 +13,7 @@ def test_the_evidence_parameters_derive_from_the_plugin_settings():
     # The defaults give exactly the evidence's documented parameters.
     assert evidence_rule() == evidence_rule(SETTINGS) == EvidenceRule(
         k=5.0, cpu_min_rise=25.0, rss_min_rise_mb=100.0, growth_mb_per_s=1.0, growth_min_mb=20.0,
-        trend_s=30.0, growth_samples=5, warmup=10, window=120)
+        trend_s=30.0, growth_samples=5, warmup=10, window=120, startup_s=120.0)
     tuned = evidence_rule({"k": 7.0, "cpu_min_rise": 40.0, "trend_s": 120.0, "warmup_s": 20.0,
                            "growth_min_samples": 6, "window": 60})
     assert (tuned.k, tuned.cpu_min_rise, tuned.trend_s, tuned.warmup, tuned.growth_samples, tuned.window) == (

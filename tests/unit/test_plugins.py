@@ -377,6 +377,26 @@ def test_process_resources_one_big_allocation_is_not_a_leak():
                                                   (32.0, "node:/camera", "warn")]
 
 
+def test_process_resources_memory_at_a_new_level_is_its_new_normal():
+    # +120 MB in one step at 30 s, level after: a symptom while it is recent (the trend's last
+    # half, 30 s), then the process's new normal (a map loaded, a buffer grown to its size).
+    rss = [80.0 + RNG.normal(0, 0.2) for _ in range(30)] + [200.0 + RNG.normal(0, 0.2) for _ in range(60)]
+    frames = [(float(t), model(rss=r), []) for t, r in enumerate(rss)]
+    times = [t for t, _, _ in drive("process_resources", frames)]
+    assert times[0] <= 31.0 and set(range(31, 60)) <= set(times) and max(times) == 59.0
+
+
+def test_process_resources_growth_from_the_start_is_start_up_until_startup_s():
+    # 150 MB over the first 40 s, then level: its start-up, no alert; the same growth after 30 s
+    # of a level RSS is a leak (the previous test's).
+    rss = [80.0 + min(t, 40) * 3.75 + RNG.normal(0, 0.2) for t in range(90)]
+    assert drive("process_resources", [(float(t), model(rss=r), []) for t, r in enumerate(rss)]) == []
+    # Still growing after startup_s (120 s): a leak after all.
+    rss = [80.0 + t * 1.5 + RNG.normal(0, 0.2) for t in range(130)]
+    alerts = drive("process_resources", [(float(t), model(rss=r), []) for t, r in enumerate(rss)])
+    assert alerts and alerts[0][0] == 120.0
+
+
 def test_process_resources_slow_leak():
     rss = [80.0 + RNG.normal(0, 0.2) for _ in range(30)] + [80.0 + 1.5 * i for i in range(1, 41)]
     frames = [(float(t), model(rss=r), []) for t, r in enumerate(rss)]
