@@ -20,7 +20,9 @@ The callers:
 
 * the ``process_resources`` plugin (`symptoms`): confirmed alerts. The baseline is learnt over
   ``warmup_s`` seconds and ``min_samples`` samples, cached and frozen while the process alerts;
-  a rise must hold ``confirm`` samples in a row; growth is checked over the last
+  a rise must hold ``confirm`` samples in a row, and a CPU rise must outlast ``burst_margin`` ×
+  the longest of the process's earlier CPU rises that ended within ``burst_max_s`` (its bursts:
+  the first is a rise, those like it are its rhythm, `_beyond_bursts`); growth is checked over the last
   ``trend_s``/12, /6, /2 and ``trend_s`` (a fast leak shows in the short span, a slow one in the
   long) and must be steady: at least ``growth_steady`` of the steps rising, over at least
   ``growth_min_samples`` samples, so one big allocation is no leak.
@@ -46,7 +48,7 @@ import networkx as nx
 import numpy as np
 
 from stream_viz.detect.api import PluginContext, reads_settings
-from stream_viz.detect.baseline import BASELINE_SETTINGS, exceeds, rise, robust, slope
+from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, exceeds, excess, robust, slope
 from stream_viz.model.history import History
 from stream_viz.model.queries import nodes_of_process
 from stream_viz.model.theta import SCHEMAS
@@ -64,6 +66,8 @@ SETTINGS: dict[str, Any] = {
     "growth_steady": 0.7,
     "growth_min_samples": 4,
     "startup_s": 120.0,
+    "burst_max_s": 10.0,
+    "burst_margin": 1.5,
 }
 
 # The attributes a rise is looked for in: (θ attribute, the setting of its floor, symptom, unit).
@@ -98,8 +102,10 @@ def symptoms(ctx: PluginContext, procs: Iterable[str]) -> Iterator[tuple[str, li
     """
     alerting = ctx.state.setdefault("alerting", set())  # (process, attribute): baseline frozen
     windows = ctx.state.setdefault("rss", {})
+    runs = ctx.state.setdefault("cpu_runs", {})
     for gone in ctx.diff.removed_members:  # bound the state when processes come and go
         windows.pop(gone, None)
+        runs.pop(gone, None)
     for proc in procs:
         found = _symptoms(ctx, proc, alerting)
         if found:
@@ -110,7 +116,10 @@ def _symptoms(ctx: PluginContext, proc: str, alerting: set) -> list[Symptom]:
     found = []
     rate = _leak(ctx, proc)  # first: it keeps the RSS window the memory rise reads
     for attr, floor, what, unit in RESOURCES:
-        risen = rise(ctx, proc, attr, ctx.settings[floor], alerting)
+        seen = excess(ctx, proc, attr, ctx.settings[floor], alerting)
+        if what == "cpu":
+            seen = _beyond_bursts(ctx, proc, seen)
+        risen = confirm(ctx, proc, attr, seen, alerting)
         if risen is not None and (what != "memory" or _rose_lately(ctx, proc, risen[0])):
             value, med = risen
             found.append((what, f"{what} {value:.0f}{unit}, normally {med:.0f}{unit}",
@@ -118,6 +127,28 @@ def _symptoms(ctx: PluginContext, proc: str, alerting: set) -> list[Symptom]:
     if rate is not None:
         found.append(("memory_growth", f"memory growing {rate:.1f} MB/s", {"mb_per_s": rate}))
     return found
+
+
+def _beyond_bursts(ctx: PluginContext, proc: str,
+                   seen: tuple[float, float, bool] | None) -> tuple[float, float, bool] | None:
+    """`excess` of the process's CPU, risen only once it outlasts ``burst_margin`` × the longest
+    of its earlier rises that ended within ``burst_max_s`` (its bursts: a planner's plans, a map
+    re-inflated), so bursts it has shown are its rhythm; a hog lasts longer. The first is a rise."""
+    if seen is None:
+        return None
+    runs = ctx.state.setdefault("cpu_runs", {})
+    start, bursts = runs.get(proc, (None, []))
+    s = ctx.settings
+    if not seen[2]:
+        if start is not None and ctx.t - start <= s["burst_max_s"]:
+            bursts = [*bursts, ctx.t - start][-8:]
+        runs[proc] = (None, bursts)
+        return seen
+    start = ctx.t if start is None else start
+    runs[proc] = (start, bursts)
+    if bursts and ctx.t - start <= s["burst_margin"] * max(bursts):
+        return seen[0], seen[1], False
+    return seen
 
 
 def _rose_lately(ctx: PluginContext, proc: str, value: float) -> bool:

@@ -397,6 +397,14 @@ def test_process_resources_growth_from_the_start_is_start_up_until_startup_s():
     assert alerts and alerts[0][0] == 120.0
 
 
+def test_process_resources_cpu_bursts_it_has_shown_are_its_rhythm_a_hog_outlasts_them():
+    # A planner busy for 2 s every 20 s: the first burst is a rise (nothing known yet), the next
+    # ones are its rhythm; then a hog from 100 s on is a rise once it outlasts 1.5 × 2 s.
+    cpu = [90.0 if t >= 20 and t % 20 < 2 else noisy(5.0, 0.2) for t in range(100)] + [95.0] * 10
+    alerts = drive("process_resources", [(float(t), model(cpu=c), []) for t, c in enumerate(cpu)])
+    assert [t for t, _, _ in alerts] == [21.0, 105.0, 106.0, 107.0, 108.0, 109.0]  # 3 s, then 2 samples
+
+
 def test_process_resources_slow_leak():
     rss = [80.0 + RNG.normal(0, 0.2) for _ in range(30)] + [80.0 + 1.5 * i for i in range(1, 41)]
     frames = [(float(t), model(rss=r), []) for t, r in enumerate(rss)]
