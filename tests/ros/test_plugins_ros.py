@@ -266,6 +266,43 @@ def test_process_resources_memory_growing_from_the_start_is_start_up(children, t
     assert run.problems == []
 
 
+PLANNER = """
+import rclpy, time
+from rclpy.node import Node
+rclpy.init()
+n = Node("planner")
+t0 = time.monotonic()
+def plan():  # a plan every 8 s, computed for 1.5 s (on its own thread: the executor goes on)
+    end = time.monotonic() + 1.5
+    while time.monotonic() < end:
+        sum(i * i for i in range(1000))
+import threading
+def loop():
+    while True:
+        time.sleep(8.0 - (time.monotonic() - t0) % 8.0)
+        plan()
+threading.Thread(target=loop, daemon=True).start()
+rclpy.spin(n)
+"""
+
+
+def test_process_resources_cpu_bursts_after_the_first_are_its_rhythm(children, tmp_path, run_of):
+    run = run_of(["process_resources"])
+    children.python(PLANNER, name="planner")
+    _ready(run, "node:/planner")
+    run.observe(34.0)
+    proc = f"process:{run.G.nodes['node:/planner']['pid']}"
+    times, values = run.history.series(proc)
+    busy = values[:, SCHEMAS["process"].index("cpu_percent")] >= 50.0
+    starts = times[1:][busy[1:] & ~busy[:-1]]  # the bursts seen
+    if len(starts) < 3:
+        pytest.xfail(f"the planner's bursts did not get the CPU on this loaded machine ({len(starts)} seen)")
+    alerts = [a for a in run.alerts if a.plugin == "process_resources"]
+    # At most the first burst alerts (nothing known of the process yet); none after it.
+    assert all(a.t < starts[1] for a in alerts), (starts, alerts)
+    assert run.problems == []
+
+
 def test_member_gone_on_sigkill(children, tmp_path, run_of):
     _, talker, _ = _start(children, tmp_path, "none")
     run = run_of(["member_gone"])
