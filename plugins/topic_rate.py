@@ -8,7 +8,7 @@ from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, held, streak
-from stream_viz.detect.rhythm import Rhythm, follow, newest_message, quiet_limit
+from stream_viz.detect.rhythm import SAME_MESSAGE_S, Rhythm, follow, newest_message, quiet_limit
 from stream_viz.model.qos import qos_policy
 from stream_viz.records import Alert
 
@@ -214,7 +214,7 @@ def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
 
     def note(node: str, at: float) -> None:
         times = last.setdefault(node, [])
-        if at not in times:
+        if all(abs(x - at) > SAME_MESSAGE_S for x in times):  # the same message seen again
             times[:] = sorted([*times, at])[-TRANSITIONS_KEPT:]
 
     lifecycle = ctx.structural(lambda: [m for m in ctx.members("topic") if m.endswith("/transition_event")],
@@ -223,7 +223,7 @@ def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
         age = ctx.value(topic, "age_s")
         if age == age:
             for node in ctx.publishers(topic):
-                note(node, round(ctx.t - age, 3))  # the same message seen again: one time
+                note(node, ctx.t - age)
     for e in ctx.events:
         if e.kind == "goal":
             note(e.member, e.t)

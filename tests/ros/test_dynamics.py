@@ -72,18 +72,20 @@ print("ready", flush=True)
 rclpy.spin(n)
 """
 
-# A lifecycle node: its publisher is silent while inactive. Active 12 s, inactive 8 s, ...
+# A lifecycle node: its publisher is silent while inactive. Arguments: node name, topic, period
+# (s), then active for ON s and inactive for OFF s, again and again.
 LIFECYCLE = HEAD + """
 from rclpy.lifecycle import LifecycleNode
-n = LifecycleNode("dock")
-pub = n.create_lifecycle_publisher(String, "/dock_pose", 10)
-n.create_timer(0.2, lambda: pub.publish(String(data="pose")))
+name, topic, period, on, off = sys.argv[1], sys.argv[2], *map(float, sys.argv[3:6])
+n = LifecycleNode(name)
+pub = n.create_lifecycle_publisher(String, topic, 10)
+n.create_timer(period, lambda: pub.publish(String(data="pose")))
 n.trigger_configure()
 n.trigger_activate()
 t0, active = time.monotonic(), True
 def cycle():
     global active
-    want = (time.monotonic() - t0) % 20.0 < 12.0
+    want = (time.monotonic() - t0) % (on + off) < on
     if want != active:
         active = want
         (n.trigger_activate if want else n.trigger_deactivate)()
@@ -146,6 +148,27 @@ def _observe(mon: Monitor, seconds: float) -> None:
         time.sleep(max(0.0, 1.0 - (time.monotonic() - t0)))
 
 
+def _no_alerts(mon: Monitor, what: str) -> None:
+    alerts = mon.store.alerts()
+    assert alerts == [], f"{what} raised alerts:\n" + "\n".join(
+        f"{a.member} {a.plugin} {a.severity}: {a.message}" for a in alerts)
+
+
+def _silences_while_stopped(mon: Monitor, proc, member: str | None, timeout: float):
+    """SIGSTOP ``proc`` and observe until a silence (of ``member``, or any) or ``timeout``; resume it."""
+    os.killpg(proc.pid, signal.SIGSTOP)
+    try:
+        found = []
+        deadline = time.monotonic() + timeout
+        while not found and time.monotonic() < deadline:
+            _observe(mon, 1.0)
+            found = [a for a in mon.store.alerts() if a.data.get("symptom") == "silence"
+                     and member in (None, a.member)]
+    finally:
+        os.killpg(proc.pid, signal.SIGCONT)
+    return found
+
+
 def _plugin(mon: Monitor, name: str):
     (p,) = [p for p in mon.plugins.plugins if p.name == name]
     return p
@@ -154,7 +177,7 @@ def _plugin(mon: Monitor, name: str):
 def test_healthy_dynamics_raise_no_alert_and_a_hang_past_the_own_gaps_is_a_silence(children, tmp_path):
     bursts = children.python(BURSTS, name="bursts")
     children.python(LATCHED, name="latched")
-    children.python(LIFECYCLE, name="lifecycle")
+    children.python(LIFECYCLE, "dock", "/dock_pose", "0.2", "12", "8", name="lifecycle")
     job = children.python(JOB, name="job")
     children.python(LISTENER, "listener", "/detections", "/job_progress", "/dock_pose", name="listener")
     tuner = children.python(TUNER, name="tuner")
@@ -169,9 +192,7 @@ def test_healthy_dynamics_raise_no_alert_and_a_hang_past_the_own_gaps_is_a_silen
         assert "node:/console" in mon.seen and mon.seen.nodes["node:/job"].get("gone")
         assert "set 3" in (tmp_path / f"tuner_{children.procs.index(tuner)}.log").read_text()
         assert console.poll() is None
-        alerts = mon.store.alerts()
-        assert alerts == [], "healthy dynamics raised alerts:\n" + "\n".join(
-            f"{a.member} {a.plugin} {a.severity}: {a.message}" for a in alerts)
+        _no_alerts(mon, "healthy dynamics")
         # What was learned: /detections' 5 s gaps; /dock_pose's deactivation was seen as a change of
         # its node's state (a lifecycle transition), the cause of its quiet.
         rhythms = _plugin(mon, "topic_rate").state["rhythms"]
@@ -180,17 +201,8 @@ def test_healthy_dynamics_raise_no_alert_and_a_hang_past_the_own_gaps_is_a_silen
         assert _plugin(mon, "topic_rate").state["transitions"].get("node:/dock"), "no transition seen"
 
         # The burst publisher hangs: silent for longer than twice its longest gap is a silence.
-        os.killpg(bursts.pid, signal.SIGSTOP)
         t_stop = time.time()
-        try:
-            found = []
-            deadline = time.monotonic() + 30.0
-            while not found and time.monotonic() < deadline:
-                _observe(mon, 1.0)
-                found = [a for a in mon.store.alerts() if a.member == "topic:/detections"
-                         and a.data.get("symptom") == "silence"]
-        finally:
-            os.killpg(bursts.pid, signal.SIGCONT)
+        found = _silences_while_stopped(mon, bursts, "topic:/detections", 30.0)
         assert found, f"no silence of the hung burst topic; alerts: {mon.store.alerts()}"
         a = found[0]
         assert a.severity == "error" and a.t > t_stop
@@ -200,27 +212,7 @@ def test_healthy_dynamics_raise_no_alert_and_a_hang_past_the_own_gaps_is_a_silen
         mon.close()
 
 
-# A lifecycle source active from its start for 16 s, inactive 8 s, then active again; a relay
-# forwards each of its messages (data computed from an input stops with it).
-SOURCE = HEAD + """
-from rclpy.lifecycle import LifecycleNode
-n = LifecycleNode("pose_source")
-pub = n.create_lifecycle_publisher(String, "/pose", 10)
-n.create_timer(0.1, lambda: pub.publish(String(data="pose")))
-n.trigger_configure()
-n.trigger_activate()
-t0, active = time.monotonic(), True
-def cycle():
-    global active
-    want = not 16.0 <= time.monotonic() - t0 < 24.0
-    if want != active:
-        active = want
-        (n.trigger_activate if want else n.trigger_deactivate)()
-n.create_timer(0.1, cycle)
-print("ready", flush=True)
-rclpy.spin(n)
-"""
-
+# A relay forwards each message of its input (data computed from an input stops with it).
 RELAY = HEAD + """
 n = Node("pose_relay")
 pub = n.create_publisher(String, "/pose_relayed", 10)
@@ -236,28 +228,19 @@ def test_a_quiet_that_follows_its_input_is_the_inputs_and_a_hang_of_its_own_is_a
     mon = _monitor(children, tmp_path)
     try:
         wait_for(lambda: (mon.step(), "node:/pose_relay" in mon.seen)[1], timeout=20, period=1.0)
-        source = children.python(SOURCE, name="source")
+        # A lifecycle source active from its start for 16 s, inactive 8 s, then active again.
+        source = children.python(LIFECYCLE, "pose_source", "/pose", "0.1", "16", "8", name="source")
         t0 = time.monotonic()
         _observe(mon, 26.0)  # on for 16 s (> warmup_s: continuous), off 8 s, on again
         assert source.poll() is None
-        alerts = mon.store.alerts()
-        assert alerts == [], "a relay of a deactivated publisher raised alerts:\n" + "\n".join(
-            f"{a.member} {a.plugin} {a.severity}: {a.message}" for a in alerts)
+        _no_alerts(mon, "a relay of a deactivated publisher")
         rhythms = _plugin(mon, "topic_rate").state["rhythms"]
         relayed = rhythms["topic:/pose_relayed"]
         assert relayed.settled and relayed.gaps == [], relayed  # the input's quiet, not learned
 
         # The relay itself hangs while its input goes on: that is a silence of its output.
         wait_for(lambda: time.monotonic() - t0 > 27.0, timeout=5, period=0.2)
-        os.killpg(relay.pid, signal.SIGSTOP)
-        try:
-            found = []
-            deadline = time.monotonic() + 10.0
-            while not found and time.monotonic() < deadline:
-                _observe(mon, 1.0)
-                found = [a for a in mon.store.alerts() if a.data.get("symptom") == "silence"]
-        finally:
-            os.killpg(relay.pid, signal.SIGCONT)
+        found = _silences_while_stopped(mon, relay, None, 10.0)
         assert [a.member for a in found] == ["topic:/pose_relayed"], mon.store.alerts()
     finally:
         mon.close()
@@ -311,23 +294,13 @@ def test_a_controller_stopping_when_its_goal_ends_is_no_silence_and_its_hang_is(
         _observe(mon, 28.0)  # a goal of 14 s, a pause of 8 s, the next goal
         log = (tmp_path / f"mission_{children.procs.index(mission)}.log").read_text()
         assert "goal done" in log, log
-        alerts = mon.store.alerts()
-        assert alerts == [], "a controller whose goal ended raised alerts:\n" + "\n".join(
-            f"{a.member} {a.plugin} {a.severity}: {a.message}" for a in alerts)
+        _no_alerts(mon, "a controller whose goal ended")
         # The goal's end was seen (a `goal` event: the controller's only change of state).
         assert _plugin(mon, "topic_rate").state["transitions"].get("node:/controller"), "no goal end seen"
         assert _plugin(mon, "topic_rate").state["rhythms"]["topic:/cmd"].settled
 
         # The controller hangs in the middle of a goal: no goal ends, /cmd is silent.
-        os.killpg(controller.pid, signal.SIGSTOP)
-        try:
-            found = []
-            deadline = time.monotonic() + 10.0
-            while not found and time.monotonic() < deadline:
-                _observe(mon, 1.0)
-                found = [a for a in mon.store.alerts() if a.data.get("symptom") == "silence"]
-        finally:
-            os.killpg(controller.pid, signal.SIGCONT)
+        found = _silences_while_stopped(mon, controller, None, 10.0)
         assert [a.member for a in found] == ["topic:/cmd"], mon.store.alerts()
     finally:
         mon.close()

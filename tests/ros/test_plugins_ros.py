@@ -254,13 +254,19 @@ rclpy.spin(n)
 """
 
 
+def _process_alone(run, children, code: str, node: str, seconds: float, attr: str):
+    """Start ``code`` (one node, ``node``), observe it for ``seconds`` with ``run``; return the
+    sample times and values of its process's ``attr``."""
+    children.python(code, name=node)
+    _ready(run, f"node:/{node}")
+    run.observe(seconds)
+    times, values = run.history.series(f"process:{run.G.nodes[f'node:/{node}']['pid']}")
+    return times, values[:, SCHEMAS["process"].index(attr)]
+
+
 def test_process_resources_memory_growing_from_the_start_is_start_up(children, tmp_path, run_of):
     run = run_of(["process_resources"])
-    children.python(GROWER, name="costmap")
-    _ready(run, "node:/costmap")
-    run.observe(22.0)
-    proc = f"process:{run.G.nodes['node:/costmap']['pid']}"
-    rss = run.history.values(proc)[:, SCHEMAS["process"].index("rss_mb")]
+    _, rss = _process_alone(run, children, GROWER, "costmap", 22.0, "rss_mb")
     assert np.nanmax(rss) - np.nanmin(rss) >= 100.0, rss  # it did grow, > the 20 MB a leak needs
     assert run.alerts == [], run.alerts
     assert run.problems == []
@@ -288,12 +294,8 @@ rclpy.spin(n)
 
 def test_process_resources_cpu_bursts_after_the_first_are_its_rhythm(children, tmp_path, run_of):
     run = run_of(["process_resources"])
-    children.python(PLANNER, name="planner")
-    _ready(run, "node:/planner")
-    run.observe(34.0)
-    proc = f"process:{run.G.nodes['node:/planner']['pid']}"
-    times, values = run.history.series(proc)
-    busy = values[:, SCHEMAS["process"].index("cpu_percent")] >= 50.0
+    times, cpu = _process_alone(run, children, PLANNER, "planner", 34.0, "cpu_percent")
+    busy = cpu >= 50.0
     starts = times[1:][busy[1:] & ~busy[:-1]]  # the bursts seen
     if len(starts) < 3:
         pytest.xfail(f"the planner's bursts did not get the CPU on this loaded machine ({len(starts)} seen)")
