@@ -65,7 +65,7 @@ class TopicRate(Plugin):
         "min_gaps": 3,
         "flap_window_s": 30.0,
         "transition_grace_s": 2.0,
-        "input_grace_s": 2.0,
+        "input_grace_s": 5.0,
         "judge_latched": False,
     }
 

@@ -262,7 +262,7 @@ def test_topic_rate_a_quiet_that_follows_its_inputs_is_the_inputs():
     frames = [(t, chain_model(img_on, det, t), []) for t in HALF[:40]]
     assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/det", "error")]
     # An input that stopped long before /det did (> input_grace_s) does not explain it.
-    frames = [(t, chain_model(img[:150], det, t, latched_img=True), []) for t in HALF[:40]]
+    frames = [(t, chain_model(img[:120], det, t, latched_img=True), []) for t in HALF[:40]]
     assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/det", "error")]
 
 
