@@ -6,8 +6,11 @@ import math
 from collections.abc import Iterator
 from typing import Any, ClassVar
 
+import numpy as np
+
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, held, streak
+from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, exceeds, held, robust, streak
+from stream_viz.detect.process import SETTINGS as PROCESS_SETTINGS
 from stream_viz.detect.rhythm import SAME_MESSAGE_S, Rhythm, follow, newest_message, quiet_limit
 from stream_viz.model.qos import qos_policy
 from stream_viz.records import Alert
@@ -35,7 +38,9 @@ class TopicRate(Plugin):
       of an action it serves ending (a controller stops when its goal is reached);
       such a quiet is healthy, and not learned (its length is the state's, not the rhythm's).
       Nor when every publisher has an input that went quiet up to ``input_grace_s`` before the
-      topic did: the quiet is the input's (`_inherited`), not learned either.
+      topic did: the quiet is the input's (`_inherited`), not learned either; nor while every
+      publisher's process is busy beyond its own CPU baseline (`_busy`: its executor held by its
+      own work; the CPU is ``process_resources``' symptom).
       A silence again within ``flap_window_s`` of the last alert is the same episode
       (``episode_hold_s``), counted (``flaps``);
     * drop (warn): ``rate < drop_ratio × baseline`` and ``≥ drop_k`` σ below it for ``confirm``
@@ -144,7 +149,7 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     if not r.departed and _healthy_quiet(ctx, topic, r, transitions):
         r.explained = True
         return None
-    if not r.departed and _inherited(ctx, topic, r, rhythms):
+    if not r.departed and (_inherited(ctx, topic, r, rhythms) or _busy(ctx, topic)):
         r.explained = True
         return None
     if not r.departed:  # a new silence: count it for flapping
@@ -197,6 +202,29 @@ def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhy
         return False
 
     return all(stopped(p) for p in pubs)
+
+
+def _busy(ctx: PluginContext, topic: str) -> bool:
+    """True when the process of every publisher of ``topic`` is busy beyond its own baseline now
+    (CPU risen as ``process_resources`` judges a rise, with its default ``k`` and floor): a node
+    whose executor is held by its own work (a plan computed in a callback) pauses all its topics.
+    The CPU is that process's symptom (``process_resources``, which learns its bursts), not one
+    more silence per topic."""
+    pubs = ctx.publishers(topic)
+    procs = {ctx.process_of(p) for p in pubs}
+    if not pubs or None in procs:
+        return False
+    return all(_cpu_risen(ctx, proc) for proc in procs)
+
+
+def _cpu_risen(ctx: PluginContext, proc: str) -> bool:
+    now = ctx.value(proc, "cpu_percent")
+    _, past = ctx.past(proc, "cpu_percent", last=PROCESS_SETTINGS["window"])
+    past = past[np.isfinite(past)]
+    if now != now or len(past) < PROCESS_SETTINGS["min_samples"]:
+        return False
+    med, sigma, _ = robust(past)
+    return exceeds(now, med, sigma, PROCESS_SETTINGS["k"], PROCESS_SETTINGS["cpu_min_rise"])
 
 
 def latched(qos: Any) -> bool:

@@ -237,6 +237,15 @@ def test_topic_rate_a_goal_ending_by_the_last_message_explains_the_quiet():
     assert silences[:1] == [(22.5, "topic:/img", "error")]
 
 
+def test_topic_rate_a_pause_while_its_process_is_busy_is_the_processs():
+    # /camera's process computes for 4 s from 20 s (its executor held: no message 19.9-24.0).
+    msgs = [i / 10 for i in range(200)] + [24.0 + i / 10 for i in range(100)]
+    busy = [(t, model(cpu=95.0 if 20 <= t < 24 else noisy(5.0, 0.2), **seen(msgs, t)), []) for t in HALF[:34]]
+    assert drive("topic_rate", busy) == []  # the CPU is process_resources' symptom
+    idle = [(t, model(cpu=noisy(5.0, 0.2), **seen(msgs, t)), []) for t in HALF[:34]]
+    assert drive("topic_rate", idle)[:1] == [(21.5, "topic:/img", "error")]
+
+
 def chain_model(img, det, t, latched_img=False):
     """`model` plus /detector -> /det: messages of /img at ``img``, of /det at ``det``."""
     G = latched_model(**seen(img, t)) if latched_img else model(**seen(img, t))
