@@ -272,7 +272,7 @@ class TopicMonitor:
         out: dict[str, TopicStats] = {t: TopicStats(False, why) for t, why in self._failed.items()}
         with self._lock:
             for t, w in self._watches.items():
-                if w.kind in ("event", "status"):  # events, not metrics
+                if w.kind == "event":  # service events: not a topic of the model
                     continue
                 w.window.expire(now - self.window_ns)
                 m = w.window.metrics(now, w.created_ns, self.window_ns, publishers.get(t, 0),
