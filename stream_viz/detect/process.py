@@ -213,7 +213,7 @@ def steady_growth(times: np.ndarray, rss: np.ndarray, now: float,
     Checked over the last ``trend_s``/12, /6, /2 and ``trend_s`` of ``times`` up to ``now``: the
     slope is at least ``growth_mb_per_s``, RSS grew at least ``growth_min_mb`` (the last value
     above the span's minimum) and rose in at least ``growth_steady`` of the steps, over at least
-    ``growth_min_samples`` finite samples.
+    ``growth_min_samples`` finite samples, no one step being half the growth (an allocation).
     """
     s = settings
     for span in (s["trend_s"] / 12, s["trend_s"] / 6, s["trend_s"] / 2, s["trend_s"]):
@@ -224,9 +224,12 @@ def steady_growth(times: np.ndarray, rss: np.ndarray, now: float,
         if len(v) < s["growth_min_samples"]:
             continue
         rate = slope(t, v)
-        steady = np.mean(np.diff(v) > 0.01)
-        if (np.isfinite(rate) and rate >= s["growth_mb_per_s"] and v[-1] - v.min() >= s["growth_min_mb"]
-                and steady >= s["growth_steady"]):
+        steps = np.diff(v)
+        steady = np.mean(steps > 0.01)
+        grown = v[-1] - v.min()
+        # one step of half the growth or more is an allocation, whatever the noise around it does
+        if (np.isfinite(rate) and rate >= s["growth_mb_per_s"] and grown >= s["growth_min_mb"]
+                and steady >= s["growth_steady"] and steps.max() < grown / 2):
             return rate
     return None
 
