@@ -17,6 +17,7 @@ from stream_viz.records import Alert
 
 Baseline = tuple[float, float, int] | None
 TRANSITIONS_KEPT = 8  # per node: enough for the changes around one quiet
+MAIN_CPU = "main_thread_cpu_percent"
 FORGET_S = 600.0  # as long as the monitor keeps a vanished member by default (forget_gone_s)
 
 
@@ -71,11 +72,14 @@ class TopicRate(Plugin):
         "flap_window_s": 30.0,
         "transition_grace_s": 2.0,
         "input_grace_s": 5.0,
+        "withheld_cpu_ratio": 0.25,
+        "withheld_cpu_min": 0.2,
         "judge_latched": False,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         alerting = ctx.state.setdefault("alerting", set())
+        ctx.state["interval"] = ctx.since_last_call()  # what this sample's process metrics cover
         rhythms: dict[str, Rhythm] = ctx.state.setdefault("rhythms", {})
         watched = list(ctx.watched())
         # Every topic's rhythm is followed, so one the RCA starts watching later is judged at once.
@@ -152,6 +156,8 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     if not r.departed and (_inherited(ctx, topic, r, rhythms) or _busy(ctx, topic)):
         r.explained = True
         return None
+    if not r.departed and _withheld(ctx, topic, r, rhythms):
+        return None  # the topic's own rhythm: learned when it ends, judged again every sample
     if not r.departed:  # a new silence: count it for flapping
         r.departed = True
         flaps = ctx.state.setdefault("flaps", {}).setdefault(topic, [])
@@ -202,6 +208,63 @@ def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhy
         return False
 
     return all(stopped(p) for p in pubs)
+
+
+def _withheld(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm]) -> bool:
+    """True when every publisher of ``topic`` keeps receiving its input and keeps working, and
+    publishes nothing on ``topic``: it withholds it (a detector with nothing in view, a filter
+    that passes nothing). A hung node stops working; a node waiting on a server it calls is
+    a client's stall (the server's symptom), never taken for this.
+
+    Working is seen in another topic only it publishes having published since ``topic`` stopped
+    (and not quiet by its own base limit), or, for a node alone in its process, in the process's
+    main thread (where ``rclpy.spin`` runs the executor) going on at ``withheld_cpu_ratio`` of its
+    median before the quiet (at least ``withheld_cpu_min`` % of a core): a blocked executor uses
+    none (the ratio scaled by the share of the sample its inputs were arriving). Once seen
+    withheld, the quiet stays so while no input arrives (their quiet, judged on them).
+    """
+    pubs = ctx.publishers(topic)
+    if not pubs or r.newest is None:
+        return False
+    s, last = ctx.settings, r.newest
+    quiets = ctx.state.setdefault("withheld", {})
+    if quiets.get(topic, {}).get("since") != last:  # a new quiet
+        quiets[topic] = {"since": last, "refs": {}, "withheld": False}
+    q = quiets[topic]
+
+    def going(name: str) -> bool:  # published since the topic stopped, not quiet now
+        i = rhythms.get(name)
+        return (name != topic and i is not None and i.newest is not None and i.newest > last
+                and ctx.t - i.newest < _base_limit(s, _ref_hz(i, None)))
+
+    def working(node: str, fed: float) -> bool:
+        if any(going(o) and ctx.publishers(o) == [node] for o in ctx.published_topics(node)):
+            return True
+        proc = ctx.process_of(node)
+        if proc is None or ctx.nodes_of(proc) != [node]:
+            return False
+        if proc not in q["refs"]:  # the main thread's usual CPU before the quiet, kept for the quiet
+            times, past = ctx.past(proc, MAIN_CPU, last=PROCESS_SETTINGS["window"])
+            before = past[(times < last) & np.isfinite(past)]
+            enough = len(before) >= PROCESS_SETTINGS["min_samples"]
+            q["refs"][proc] = float(np.median(before)) if enough else math.nan
+        now, ref = ctx.value(proc, MAIN_CPU), q["refs"][proc]
+        # It works on what it gets: an input that stopped early in the sample asks for less.
+        return ref >= s["withheld_cpu_min"] and now >= s["withheld_cpu_ratio"] * ref * fed
+
+    interval = min(ctx.state.get("interval", math.inf), ctx.t - last)
+    for node in pubs:
+        if ctx.called_servers(node):
+            return False
+        inputs = [rhythms[i].newest for i in ctx.subscribed_topics(node) if going(i)]
+        # The share of this sample's interval the inputs were arriving (0: none came in it).
+        fed = min(1.0, max(0.0, (max(inputs) - (ctx.t - interval)) / interval)) if inputs else 0.0
+        if fed > 0 and working(node, fed):
+            continue
+        if not (fed == 0 and q["withheld"]):  # not working, or never seen withheld this quiet
+            return False
+    q["withheld"] = True
+    return True
 
 
 def _busy(ctx: PluginContext, topic: str) -> bool:

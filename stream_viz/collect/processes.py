@@ -3,9 +3,11 @@
 psutil finds a process and its identity (name, command line, user, start time). The metrics of
 a tracked process are read every sample: on Linux straight from ``/proc/<pid>/{stat,status,io,fd}``
 (psutil's own sources, with the same formulas, at a fraction of its CPU: bench/bench_collect_parts.py,
-figures in docs/collector.md), elsewhere through psutil. A process we may not fully read keeps
-what could be read (the rest NaN, listed in ``unreadable``); one that exits mid-read is reported
-as gone, never raised.
+figures in docs/collector.md), elsewhere through psutil. On Linux the CPU time of the main thread
+(where ``rclpy.spin`` runs the executor) is read too, from its ``schedstat`` (nanoseconds; its
+``stat`` in clock ticks where the kernel keeps no schedstat): a blocked executor shows as none.
+A process we may not fully read keeps what could be read (the rest NaN, listed in
+``unreadable``); one that exits mid-read is reported as gone, never raised.
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ class Counters(NamedTuple):
     ctx: int  # voluntary + involuntary context switches
     fds: int | None  # None: we may not read them
     io: tuple[int, int] | None  # (read_bytes, write_bytes); None: we may not read them
+    main_s: float | None = None  # CPU time of the main thread, s; None: not read
 
 
 def parse_stat(text: bytes) -> ProcStat:
@@ -96,6 +99,7 @@ class _Tracked:
     io: tuple[int, int] | None = None
     start: int | None = None  # /proc start ticks (PROCFS only)
     cpu_s: float | None = None  # process CPU time at `t`
+    main_s: float | None = None  # its main thread's CPU time at `t`
 
 
 @dataclass
@@ -226,6 +230,8 @@ class ProcessSampler:
         if tr.cpu_s is not None and dt > 0:  # the first reading only sets the reference point
             m["cpu_percent"] = 100.0 * (c.cpu_s - tr.cpu_s) / dt
             m["ctx_switches_per_s"] = (c.ctx - tr.ctx) / dt
+            if c.main_s is not None and tr.main_s is not None:
+                m["main_thread_cpu_percent"] = 100.0 * (c.main_s - tr.main_s) / dt
         if c.fds is None:
             denied.append("open_files")
         else:
@@ -235,7 +241,7 @@ class ProcessSampler:
         elif tr.io is not None and dt > 0:
             m["io_read_kBps"] = (c.io[0] - tr.io[0]) / dt / 1000.0
             m["io_write_kBps"] = (c.io[1] - tr.io[1]) / dt / 1000.0
-        tr.cpu_s, tr.ctx, tr.io, tr.t = c.cpu_s, c.ctx, c.io or tr.io, now
+        tr.cpu_s, tr.ctx, tr.io, tr.t, tr.main_s = c.cpu_s, c.ctx, c.io or tr.io, now, c.main_s
         tr.info.ppid = c.ppid
         tr.info.metrics, tr.info.unreadable = m, denied
         return tr.info
@@ -252,7 +258,21 @@ def _procfs_counters(pid: int, st: ProcStat) -> Counters:
         io: tuple[int, int] | None = parse_fields(_read_bytes(f"/proc/{pid}/io"), IO_FIELDS)
     except (PermissionError, KeyError):
         io = None
-    return Counters(st.ppid or None, st.cpu_s, st.rss_bytes, st.threads, ctx, fds, io)
+    return Counters(st.ppid or None, st.cpu_s, st.rss_bytes, st.threads, ctx, fds, io, main_thread_cpu_s(pid))
+
+
+def main_thread_cpu_s(pid: int) -> float | None:
+    """CPU time (s) of the main thread of ``pid``: the first field of its ``schedstat`` (ns), else
+    user + system of its ``stat`` (clock ticks); None when neither can be read (it exited)."""
+    task = f"/proc/{pid}/task/{pid}"
+    try:
+        return int(_read_bytes(f"{task}/schedstat").split()[0]) / 1e9
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return parse_stat(_read_bytes(f"{task}/stat")).cpu_s
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 def _psutil_counters(p: psutil.Process) -> Counters:
@@ -266,9 +286,13 @@ def _psutil_counters(p: psutil.Process) -> Counters:
         io: tuple[int, int] | None = (i.read_bytes, i.write_bytes)
     except (psutil.AccessDenied, AttributeError):
         io = None
+    try:  # the main thread's id is the pid on Linux; elsewhere it is not found (None)
+        main = next((th.user_time + th.system_time for th in p.threads() if th.id == p.pid), None)
+    except (psutil.AccessDenied, AttributeError):
+        main = None
     t, c = p.cpu_times(), p.num_ctx_switches()
     return Counters(p.ppid() or None, t.user + t.system, p.memory_info().rss, p.num_threads(),
-                    c.voluntary + c.involuntary, fds, io)
+                    c.voluntary + c.involuntary, fds, io, main)
 
 
 def _running(p: psutil.Process) -> bool:

@@ -175,6 +175,10 @@ class PluginContext:
         """Return the client nodes of ``service`` (or of the action ``service``), sorted."""
         return queries.clients(self.graph, service)
 
+    def called_servers(self, node: str) -> list[str]:
+        """Return the nodes whose services or actions ``node`` calls, sorted."""
+        return queries.called_servers(self.graph, node)
+
     def flow_edge(self, source: str, target: str) -> dict[str, Any]:
         """Return the attributes of the data-flow edge ``source → target`` (``kind``, ``qos``, ...);
         empty when there is none."""

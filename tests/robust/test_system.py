@@ -287,7 +287,9 @@ def test_procfs_reads_what_psutil_reads(children):
     a, b = fast.sample([p.pid]).processes[p.pid], slow.sample([p.pid]).processes[p.pid]
     assert a.metrics.keys() == b.metrics.keys() == {
         "cpu_percent", "rss_mb", "threads", "ctx_switches_per_s", "open_files", "io_read_kBps",
-        "io_write_kBps"}
+        "io_write_kBps", "main_thread_cpu_percent"}
+    # The main thread sleeps while two others burn: its CPU is not the process's.
+    assert a.metrics["main_thread_cpu_percent"] < 10 and b.metrics["main_thread_cpu_percent"] < 10
     assert a.metrics["threads"] == b.metrics["threads"] == 3
     assert a.metrics["open_files"] == b.metrics["open_files"]
     assert abs(a.metrics["rss_mb"] - b.metrics["rss_mb"]) < 2 and a.metrics["rss_mb"] > 50

@@ -6,7 +6,9 @@ a lifecycle node that deactivates and activates again, a job that ends with exit
 parameter changed every few seconds, a console that joins late) raises no alert; then the bursty
 topic's publisher hangs for longer than its own gaps, and that is a silence. A relay of a
 deactivated lifecycle publisher stops with its input (the input's quiet, no alert); the relay's
-own hang is a silence. A node started four times under one name is one symptom of that node.
+own hang is a silence. A detector that publishes only while its target is in view is quiet while
+it goes on working (no alert); its deadlock is a silence. A node started four times under one
+name is one symptom of that node.
 """
 
 from __future__ import annotations
@@ -302,6 +304,84 @@ def test_a_controller_stopping_when_its_goal_ends_is_no_silence_and_its_hang_is(
         # The controller hangs in the middle of a goal: no goal ends, /cmd is silent.
         found = _silences_while_stopped(mon, controller, None, 10.0)
         assert [a.member for a in found] == ["topic:/cmd"], mon.store.alerts()
+    finally:
+        mon.close()
+
+
+CAMERA = HEAD + """
+n = Node("camera")
+pub = n.create_publisher(String, "/image", 10)
+n.create_timer(0.1, lambda: pub.publish(String(data="frame")))
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+# Detectors of /image that publish only while their target is in view: 14 s in view (longer than
+# warmup_s: the first window makes them look continuous), then 8 s out of it, again and again.
+# /a_detector has a process of its own (single-threaded) and hangs in its callback once the file
+# argv[1] exists; /b_detector shares a multi-threaded process with a tracker of its detections and
+# publishes its status at 2 Hz besides.
+DETECTORS = HEAD + """
+import threading
+from rclpy.executors import MultiThreadedExecutor
+t0 = time.monotonic()
+def in_view():
+    return (time.monotonic() - t0) % 22.0 < 14.0
+def detector(name, hang=None):
+    n = Node(name)
+    pub = n.create_publisher(String, "/" + name + "/detections", 10)
+    def frame(msg):
+        if hang and os.path.exists(hang):
+            threading.Event().wait()  # blocked for good, as a deadlock
+        if in_view():
+            pub.publish(String(data="pallet"))
+    n.create_subscription(String, "/image", frame, 10)
+    return n
+if sys.argv[1] == "alone":
+    n = detector("a_detector", hang=sys.argv[2])
+    print("ready", flush=True)
+    rclpy.spin(n)
+else:
+    det, tracker = detector("b_detector"), Node("b_tracker")
+    status = det.create_publisher(String, "/b_detector/status", 10)
+    det.create_timer(0.5, lambda: status.publish(String(data="ok")))
+    tracks = tracker.create_publisher(String, "/b_tracker/tracks", 10)
+    tracker.create_subscription(String, "/b_detector/detections", tracks.publish, 10)
+    ex = MultiThreadedExecutor()
+    ex.add_node(det)
+    ex.add_node(tracker)
+    print("ready", flush=True)
+    ex.spin()
+"""
+
+
+def test_a_detector_with_nothing_in_view_is_no_silence_and_its_hang_is(children, tmp_path):
+    hang = tmp_path / "hang"
+    children.python(CAMERA, name="camera")
+    mon = _monitor(children, tmp_path)
+    try:
+        wait_for(lambda: (mon.step(), "node:/camera" in mon.seen)[1], timeout=20, period=1.0)
+        children.python(DETECTORS, "alone", str(hang), name="a")
+        children.python(DETECTORS, "shared", name="b")
+        wait_for(lambda: (mon.step(), {"node:/a_detector", "node:/b_detector"} <= set(mon.seen))[1],
+                 timeout=20, period=1.0)
+        _observe(mon, 48.0)  # two windows out of view
+        _no_alerts(mon, "detectors with nothing in view")
+        rhythms = _plugin(mon, "topic_rate").state["rhythms"]
+        for topic in ("topic:/a_detector/detections", "topic:/b_detector/detections"):
+            gaps = rhythms[topic].gaps  # learned as their own rhythm
+            assert rhythms[topic].settled and gaps and all(7.0 <= g <= 10.0 for g in gaps), (topic, gaps)
+
+        # /a_detector deadlocks: its executor stops, and that is a silence of its detections
+        # (judged on their learned rhythm: within twice the longest gap).
+        hang.touch()
+        limit = 2 * max(rhythms["topic:/a_detector/detections"].gaps)
+        found = []
+        deadline = time.monotonic() + limit + 12.0
+        while not found and time.monotonic() < deadline:
+            _observe(mon, 1.0)
+            found = [a for a in mon.store.alerts() if a.data.get("symptom") == "silence"]
+        assert [a.member for a in found] == ["topic:/a_detector/detections"], mon.store.alerts()
     finally:
         mon.close()
 

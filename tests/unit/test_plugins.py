@@ -275,6 +275,67 @@ def test_topic_rate_a_quiet_that_follows_its_inputs_is_the_inputs():
     assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/det", "error")]
 
 
+def withholding_model(det, t, main=None, img_until=40.0, status=None, client=False):
+    """`chain_model` with /img at 10 Hz until ``img_until``; the detector's process's main thread
+    at ``main(t)`` % (None: not measured), its own /det_status at ``status`` and a call to a
+    server (``client``)."""
+    img = [i / 10 for i in range(int(img_until * 10))]
+    G = chain_model(img, det, t)
+    if main is not None:
+        G.nodes["process:200"]["theta"] = make_theta("process", {
+            "cpu_percent": 3.0, "rss_mb": 60.0, "threads": 4, "main_thread_cpu_percent": main(t)})
+    if status is not None:
+        st = seen(status, t)
+        add_member(G, "topic:/det_status", theta=make_theta("topic", {
+            "rate_hz": st["rate"], "publishers": 1, **({"age_s": st["age"]} if "age" in st else {})}))
+        add_flow_edge(G, "node:/detector", "topic:/det_status", "pub")
+    if client:
+        add_flow_edge(G, "node:/detector", "node:/camera", "send")
+    return G
+
+
+def test_topic_rate_an_output_withheld_by_a_working_node_is_its_rhythm():
+    # The detector finds something in 0-20 s and 30-40 s, nothing in 20-30 s, while /img goes on.
+    det = [m + 0.05 for m in [i / 10 for i in range(200)] + [30 + i / 10 for i in range(100)]]
+    going = lambda t: noisy(3.0, 0.3)  # noqa: E731  its executor processes every image
+    hung = lambda t: noisy(3.0, 0.3) if t < 20 else 0.0  # noqa: E731  blocked from 20 s
+    frames = [(t, withholding_model(det, t, main=going), []) for t in HALF[:40]]
+    assert drive("topic_rate", frames) == []
+    # Its executor stopped (a hang): /det is silent, as without the main thread measured.
+    assert drive("topic_rate", [(t, withholding_model(det[:200], t, main=hung), []) for t in HALF[:40]])[:1] \
+        == [(21.5, "topic:/det", "error")]
+    assert drive("topic_rate", [(t, withholding_model(det, t), []) for t in HALF[:40]])[:1] \
+        == [(21.5, "topic:/det", "error")]
+    # Its own other output going on shows it working (no main thread needed) ...
+    status = [float(k) for k in range(40)]
+    assert drive("topic_rate", [(t, withholding_model(det, t, status=status), []) for t in HALF[:40]]) == []
+    # ... unless that stopped with it.
+    frames = [(t, withholding_model(det, t, status=status[:20]), []) for t in HALF[:40]]
+    assert ("topic:/det", "error") in {(m, s) for _, m, s in drive("topic_rate", frames)}
+    # A node that calls a server may be waiting on it: its stall is a symptom, never withheld.
+    frames = [(t, withholding_model(det, t, main=going, client=True), []) for t in HALF[:40]]
+    assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/det", "error")]
+    # Withheld, then its input stops too (at 24.9 s; the executor idles): still no silence of /det
+    # (the quiet is /img's).
+    idles = lambda t: noisy(3.0, 0.3) if t < 25 else 1.2 if t < 26 else 0.0  # noqa: E731
+    frames = [(t, withholding_model(det, t, main=idles, img_until=25), []) for t in HALF[:40]]
+    assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img"}
+
+
+def test_topic_rate_learns_a_withheld_quiet_as_a_healthy_gap():
+    det = [m + 0.05 for m in [i / 10 for i in range(200)] + [30 + i / 10 for i in range(100)]]
+    ps = PluginSet.load(enable=["topic_rate"], cwd_plugins=False, settings={}, isolate=False)
+    hist, prev = History(), new_graph()
+    for t in HALF[:40]:
+        G = withholding_model(det, t, main=lambda t: 3.0)
+        record_history(hist, G, t)
+        ps.run(t, G, G.nodes, hist, [], diff(prev, G), None)
+        prev = G
+    (plugin,) = ps.plugins
+    r = plugin.state["rhythms"]["topic:/det"]
+    assert r.settled and [round(g, 2) for g in r.gaps] == [10.5]  # 19.95 -> 30.45 (the newest at the sample)
+
+
 def test_topic_rate_a_topic_whose_publisher_left_is_not_silent():
     def gone(**kw):
         G = model(**kw)
