@@ -217,8 +217,10 @@ def _withheld(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhyt
     a client's stall (the server's symptom), never taken for this.
 
     Working is seen in another topic only it publishes having published since ``topic`` stopped
-    (and not quiet by its own base limit), or, for a node alone in its process, in the process's
-    main thread (where ``rclpy.spin`` runs the executor) going on at ``withheld_cpu_ratio`` of its
+    (and not quiet by its own base limit), or, for a node alone in its process or in a process
+    whose only running thread is the main one (a single-threaded executor: a blocked callback
+    there stops every node of it), in the process's main thread (where ``rclpy.spin`` runs the
+    executor) going on at ``withheld_cpu_ratio`` of its
     median before the quiet (at least ``withheld_cpu_min`` % of a core): a blocked executor uses
     none (the ratio scaled by the share of the sample its inputs were arriving). Once seen
     withheld, the quiet stays so while no input arrives (their quiet, judged on them).
@@ -240,8 +242,8 @@ def _withheld(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhyt
     def working(node: str, fed: float) -> bool:
         if any(going(o) and ctx.publishers(o) == [node] for o in ctx.published_topics(node)):
             return True
-        proc = ctx.process_of(node)
-        if proc is None or ctx.nodes_of(proc) != [node]:
+        proc = ctx.process_of(node)  # its executor's main thread: its alone, or its container's
+        if proc is None or (ctx.nodes_of(proc) != [node] and ctx.value(proc, "running_threads") != 1):
             return False
         if proc not in q["refs"]:  # the main thread's usual CPU before the quiet, kept for the quiet
             times, past = ctx.past(proc, MAIN_CPU, last=PROCESS_SETTINGS["window"])

@@ -6,6 +6,9 @@ a tracked process are read every sample: on Linux straight from ``/proc/<pid>/{s
 figures in docs/collector.md), elsewhere through psutil. On Linux the CPU time of the main thread
 (where ``rclpy.spin`` runs the executor) is read too, from its ``schedstat`` (nanoseconds; its
 ``stat`` in clock ticks where the kernel keeps no schedstat): a blocked executor shows as none.
+Every ``probe_every`` samples each process's threads are counted that ran in between, the
+middleware's own aside (`MIDDLEWARE_THREADS`): 1 is a single-threaded executor, whose blocked
+callback stops the main thread.
 A process we may not fully read keeps what could be read (the rest NaN, listed in
 ``unreadable``); one that exits mid-read is reported as gone, never raised.
 """
@@ -50,6 +53,13 @@ class Counters(NamedTuple):
     fds: int | None  # None: we may not read them
     io: tuple[int, int] | None  # (read_bytes, write_bytes); None: we may not read them
     main_s: float | None = None  # CPU time of the main thread, s; None: not read
+
+
+# Thread names of the DDS implementations' own threads (Fast DDS ``dds.*``; Cyclone DDS receive,
+# timed-event, delivery, transmit and lease threads): they run whether the executor does or not.
+MIDDLEWARE_THREADS = ("dds.", "recv", "tev", "dq.", "xmit", "lease", "gc")
+RAN_NS = 1e6  # a thread that ran less than this between two probes is idle
+PROBE_MIN_S = 0.5  # probes closer than this say nothing (the sampler is called between samples too)
 
 
 def parse_stat(text: bytes) -> ProcStat:
@@ -100,6 +110,9 @@ class _Tracked:
     start: int | None = None  # /proc start ticks (PROCFS only)
     cpu_s: float | None = None  # process CPU time at `t`
     main_s: float | None = None  # its main thread's CPU time at `t`
+    thread_ns: dict[int, int] | None = None  # its threads' CPU time (ns) at the last probe
+    probe_t: float = -1e9  # when (monotonic)
+    running: float = float("nan")  # threads that ran between the last two probes
 
 
 @dataclass
@@ -120,9 +133,9 @@ class ProcessSampler:
     flatten their baselines). They are half the processes of a typical robot and seldom the fault.
     """
 
-    def __init__(self, ancestors_every: int = 5, procfs: bool = PROCFS) -> None:
+    def __init__(self, ancestors_every: int = 5, procfs: bool = PROCFS, probe_every: int = 30) -> None:
         self._tracked: dict[int, _Tracked] = {}
-        self.ancestors_every, self.procfs = ancestors_every, procfs
+        self.ancestors_every, self.procfs, self.probe_every = ancestors_every, procfs, probe_every
         self._calls = 0
 
     def sample(self, pids: Iterable[int]) -> ProcSample:
@@ -186,6 +199,11 @@ class ProcessSampler:
                 tr = self._track(psutil.Process(pid))
                 tr.start = st.start
             r = self._measure(tr, _procfs_counters(pid, st))
+            due = tr.running != tr.running or self._calls % self.probe_every == 0  # known after two
+            if due and time.monotonic() - tr.probe_t >= PROBE_MIN_S:
+                _probe_threads(pid, tr)
+            if tr.running == tr.running:
+                r.metrics["running_threads"] = tr.running
         except (FileNotFoundError, ProcessLookupError, psutil.NoSuchProcess):
             if tr is None:
                 out.errors[pid] = "process is not running"
@@ -259,6 +277,22 @@ def _procfs_counters(pid: int, st: ProcStat) -> Counters:
     except (PermissionError, KeyError):
         io = None
     return Counters(st.ppid or None, st.cpu_s, st.rss_bytes, st.threads, ctx, fds, io, main_thread_cpu_s(pid))
+
+
+def _probe_threads(pid: int, tr: _Tracked) -> None:
+    """Count the threads of ``pid`` (the middleware's aside) that ran since the last probe."""
+    now: dict[int, int] = {}
+    for name in os.listdir(f"/proc/{pid}/task"):
+        task = f"/proc/{pid}/task/{name}"
+        try:
+            if _read_bytes(f"{task}/comm").decode(errors="replace").startswith(MIDDLEWARE_THREADS):
+                continue
+            now[int(name)] = int(_read_bytes(f"{task}/schedstat").split()[0])
+        except (OSError, ValueError, IndexError):
+            continue  # a thread that ended, or no schedstat: not counted
+    if tr.thread_ns is not None:
+        tr.running = float(sum(ns - tr.thread_ns.get(tid, 0) >= RAN_NS for tid, ns in now.items()))
+    tr.thread_ns, tr.probe_t = now, time.monotonic()
 
 
 def main_thread_cpu_s(pid: int) -> float | None:

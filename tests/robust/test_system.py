@@ -285,9 +285,10 @@ def test_procfs_reads_what_psutil_reads(children):
         s.sample([p.pid])
     time.sleep(1.0)
     a, b = fast.sample([p.pid]).processes[p.pid], slow.sample([p.pid]).processes[p.pid]
-    assert a.metrics.keys() == b.metrics.keys() == {
+    assert a.metrics.keys() - {"running_threads"} == b.metrics.keys() == {
         "cpu_percent", "rss_mb", "threads", "ctx_switches_per_s", "open_files", "io_read_kBps",
         "io_write_kBps", "main_thread_cpu_percent"}
+    assert a.metrics["running_threads"] == 2  # the two burners; the main thread sleeps (/proc only)
     # The main thread sleeps while two others burn: its CPU is not the process's.
     assert a.metrics["main_thread_cpu_percent"] < 10 and b.metrics["main_thread_cpu_percent"] < 10
     assert a.metrics["threads"] == b.metrics["threads"] == 3

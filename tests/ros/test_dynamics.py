@@ -20,6 +20,7 @@ import time
 import pytest
 
 from stream_viz.config import load_config
+from stream_viz.model.queries import process_of_node
 from stream_viz.model.theta import SCHEMAS
 from stream_viz.monitor import Monitor
 from stream_viz.progress import Progress
@@ -320,10 +321,10 @@ rclpy.spin(n)
 # warmup_s: the first window makes them look continuous), then 8 s out of it, again and again.
 # /a_detector has a process of its own (single-threaded) and hangs in its callback once the file
 # argv[1] exists; /b_detector shares a multi-threaded process with a tracker of its detections and
-# publishes its status at 2 Hz besides.
+# publishes its status at 2 Hz besides; /c_detector shares a single-threaded process with a filter.
 DETECTORS = HEAD + """
 import threading
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 t0 = time.monotonic()
 def in_view():
     return (time.monotonic() - t0) % 22.0 < 14.0
@@ -341,6 +342,15 @@ if sys.argv[1] == "alone":
     n = detector("a_detector", hang=sys.argv[2])
     print("ready", flush=True)
     rclpy.spin(n)
+elif sys.argv[1] == "single":
+    det, filt = detector("c_detector"), Node("c_filter")
+    out = filt.create_publisher(String, "/c_filter/image", 10)
+    filt.create_subscription(String, "/image", out.publish, 10)
+    ex = SingleThreadedExecutor()
+    ex.add_node(det)
+    ex.add_node(filt)
+    print("ready", flush=True)
+    ex.spin()
 else:
     det, tracker = detector("b_detector"), Node("b_tracker")
     status = det.create_publisher(String, "/b_detector/status", 10)
@@ -363,12 +373,18 @@ def test_a_detector_with_nothing_in_view_is_no_silence_and_its_hang_is(children,
         wait_for(lambda: (mon.step(), "node:/camera" in mon.seen)[1], timeout=20, period=1.0)
         children.python(DETECTORS, "alone", str(hang), name="a")
         children.python(DETECTORS, "shared", name="b")
-        wait_for(lambda: (mon.step(), {"node:/a_detector", "node:/b_detector"} <= set(mon.seen))[1],
-                 timeout=20, period=1.0)
+        children.python(DETECTORS, "single", name="c")
+        names = {"node:/a_detector", "node:/b_detector", "node:/c_detector"}
+        wait_for(lambda: (mon.step(), names <= set(mon.seen))[1], timeout=20, period=1.0)
         _observe(mon, 48.0)  # two windows out of view
         _no_alerts(mon, "detectors with nothing in view")
+        # Only the main thread runs callbacks in a single-threaded process, more do in a multi-threaded one.
+        index, G = SCHEMAS["process"].index("running_threads"), mon.seen
+        running = {n: G.nodes[process_of_node(G, f"node:/{n}_detector")]["theta"][index] for n in "abc"}
+        assert running["a"] == running["c"] == 1 and running["b"] >= 2, running
         rhythms = _plugin(mon, "topic_rate").state["rhythms"]
-        for topic in ("topic:/a_detector/detections", "topic:/b_detector/detections"):
+        for topic in ("topic:/a_detector/detections", "topic:/b_detector/detections",
+                      "topic:/c_detector/detections"):
             gaps = rhythms[topic].gaps  # learned as their own rhythm
             assert rhythms[topic].settled and gaps and all(7.0 <= g <= 10.0 for g in gaps), (topic, gaps)
 
