@@ -33,9 +33,11 @@ def _msg(type_key: str) -> Any:
     return load_type(T[type_key])()
 
 
-def _bursts(seed: int, gap: tuple[float, float], length: tuple[float, float], horizon: float = 7200.0):
-    """Seeded ``[(start, end)]`` in s from now: quiet ``gap`` s, then active ``length`` s, repeated."""
-    rng, t, out = random.Random(seed), 0.0, []
+def _bursts(seed: int, gap: tuple[float, float], length: tuple[float, float], horizon: float = 7200.0,
+            first: float = 0.0):
+    """Seeded ``[(start, end)]`` in s from now: active for the ``first`` s, then quiet ``gap`` s and
+    active ``length`` s, repeated."""
+    rng, t, out = random.Random(seed), first, [(0.0, first)] if first > 0 else []
     while t < horizon:
         t += rng.uniform(*gap)
         d = rng.uniform(*length)
@@ -152,10 +154,12 @@ class ImageRectifier(Behaviour):
 
 
 class PalletDetector(Behaviour):
-    """Publishes detections only while a pallet is in view: bursts of 3-8 s, gaps of 15-40 s."""
+    """Publishes detections only while a pallet is in view: 3-30 s (the robot passing a rack or
+    approaching a pallet: often longer than a monitor's warm-up), then none for 15-40 s. The robot
+    starts at its pickup station, a pallet in view for the first 20 s."""
 
     def setup(self) -> None:
-        self.view = _Schedule(_bursts(7, gap=(15.0, 40.0), length=(3.0, 8.0)))
+        self.view = _Schedule(_bursts(7, gap=(15.0, 40.0), length=(3.0, 30.0), first=20.0))
         self.publisher(n("pallet_detections"), "poses")
         self.subscribe(n("camera/image_rect"), "image", self.on_image)
 

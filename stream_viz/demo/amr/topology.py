@@ -121,7 +121,7 @@ AMR_GROUPS = (
     GroupSpec("perception", (
         NodeSpec(n("image_rectifier"), subs=(SubSpec(n("camera/image_raw"), T["image"]),),
                  pubs=(PubSpec(n("camera/image_rect"), T["image"], 10.0, trigger=n("camera/image_raw")),)),
-        # publishes only while a pallet is in view: bursts of a few seconds, gaps of 15-40 s
+        # publishes only while a pallet is in view: 3-30 s at a time, then none for 15-40 s
         NodeSpec(n("pallet_detector"), subs=(SubSpec(n("camera/image_rect"), T["image"]),),
                  pubs=(PubSpec(n("pallet_detections"), T["poses"], 10.0, trigger=n("camera/image_rect")),)),
     )),
