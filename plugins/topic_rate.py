@@ -17,7 +17,7 @@ from stream_viz.records import Alert
 
 Baseline = tuple[float, float, int] | None
 TRANSITIONS_KEPT = 8  # per node: enough for the changes around one quiet
-MAIN_CPU = "main_thread_cpu_percent"
+EXECUTOR_CPU = "executor_cpu_percent"
 FORGET_S = 600.0  # as long as the monitor keeps a vanished member by default (forget_gone_s)
 
 
@@ -217,13 +217,14 @@ def _withheld(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhyt
     a client's stall (the server's symptom), never taken for this.
 
     Working is seen in another topic only it publishes having published since ``topic`` stopped
-    (and not quiet by its own base limit), or, for a node alone in its process or in a process
-    whose only running thread is the main one (a single-threaded executor: a blocked callback
-    there stops every node of it), in the process's main thread (where ``rclpy.spin`` runs the
-    executor) going on at ``withheld_cpu_ratio`` of its
-    median before the quiet (at least ``withheld_cpu_min`` % of a core): a blocked executor uses
-    none (the ratio scaled by the share of the sample its inputs were arriving). Once seen
-    withheld, the quiet stays so while no input arrives (their quiet, judged on them).
+    (and not quiet by its own base limit), or, in a process whose executor is single-threaded
+    (one thread running besides the middleware's: ``running_threads``; a blocked callback there
+    stops every node of it), in that thread's CPU (``executor_cpu_percent``) going on at
+    ``withheld_cpu_ratio`` of its median before the quiet (at least ``withheld_cpu_min`` % of a
+    core), scaled by the share of the sample its inputs were arriving: a blocked executor uses
+    none. Once seen withheld, the quiet stays so while no input arrives (their quiet, judged on
+    them). A multi-threaded process's busy threads say nothing of one node: there only another
+    output of the node does.
     """
     pubs = ctx.publishers(topic)
     if not pubs or r.newest is None:
@@ -242,15 +243,15 @@ def _withheld(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhyt
     def working(node: str, fed: float) -> bool:
         if any(going(o) and ctx.publishers(o) == [node] for o in ctx.published_topics(node)):
             return True
-        proc = ctx.process_of(node)  # its executor's main thread: its alone, or its container's
-        if proc is None or (ctx.nodes_of(proc) != [node] and ctx.value(proc, "running_threads") != 1):
+        proc = ctx.process_of(node)  # a single-threaded executor's thread vouches for all its nodes
+        if proc is None or ctx.value(proc, "running_threads") != 1:
             return False
-        if proc not in q["refs"]:  # the main thread's usual CPU before the quiet, kept for the quiet
-            times, past = ctx.past(proc, MAIN_CPU, last=PROCESS_SETTINGS["window"])
+        if proc not in q["refs"]:  # the executor's usual CPU before the quiet, kept for the quiet
+            times, past = ctx.past(proc, EXECUTOR_CPU, last=PROCESS_SETTINGS["window"])
             before = past[(times < last) & np.isfinite(past)]
             enough = len(before) >= PROCESS_SETTINGS["min_samples"]
             q["refs"][proc] = float(np.median(before)) if enough else math.nan
-        now, ref = ctx.value(proc, MAIN_CPU), q["refs"][proc]
+        now, ref = ctx.value(proc, EXECUTOR_CPU), q["refs"][proc]
         # It works on what it gets: an input that stopped early in the sample asks for less.
         return ref >= s["withheld_cpu_min"] and now >= s["withheld_cpu_ratio"] * ref * fed
 

@@ -3,12 +3,12 @@
 psutil finds a process and its identity (name, command line, user, start time). The metrics of
 a tracked process are read every sample: on Linux straight from ``/proc/<pid>/{stat,status,io,fd}``
 (psutil's own sources, with the same formulas, at a fraction of its CPU: bench/bench_collect_parts.py,
-figures in docs/collector.md), elsewhere through psutil. On Linux the CPU time of the main thread
-(where ``rclpy.spin`` runs the executor) is read too, from its ``schedstat`` (nanoseconds; its
-``stat`` in clock ticks where the kernel keeps no schedstat): a blocked executor shows as none.
-Every ``probe_every`` samples each process's threads are counted that ran in between, the
-middleware's own aside (`MIDDLEWARE_THREADS`): 1 is a single-threaded executor, whose blocked
-callback stops the main thread.
+figures in docs/collector.md), elsewhere through psutil. On Linux, every ``probe_every`` samples
+(and at a process's first two), its threads that ran in between are counted, the middleware's own
+aside (`MIDDLEWARE_THREADS`): ``running_threads``; every sample for its first few, as its
+start-up ends. When one runs, it is a single-threaded
+executor's (wherever ``rclpy.spin`` is called), and its CPU is read every sample from its
+``schedstat`` (ns): ``executor_cpu_percent``. A blocked callback stops it: it then uses none.
 A process we may not fully read keeps what could be read (the rest NaN, listed in
 ``unreadable``); one that exits mid-read is reported as gone, never raised.
 """
@@ -52,13 +52,13 @@ class Counters(NamedTuple):
     ctx: int  # voluntary + involuntary context switches
     fds: int | None  # None: we may not read them
     io: tuple[int, int] | None  # (read_bytes, write_bytes); None: we may not read them
-    main_s: float | None = None  # CPU time of the main thread, s; None: not read
 
 
 # Thread names of the DDS implementations' own threads (Fast DDS ``dds.*``; Cyclone DDS receive,
 # timed-event, delivery, transmit and lease threads): they run whether the executor does or not.
 MIDDLEWARE_THREADS = ("dds.", "recv", "tev", "dq.", "xmit", "lease", "gc")
-RAN_NS = 1e6  # a thread that ran less than this between two probes is idle
+RAN_SHARE = 1e-3  # a thread that ran less than this share of a core between two probes is idle
+FIRST_PROBES = 4
 PROBE_MIN_S = 0.5  # probes closer than this say nothing (the sampler is called between samples too)
 
 
@@ -109,10 +109,11 @@ class _Tracked:
     io: tuple[int, int] | None = None
     start: int | None = None  # /proc start ticks (PROCFS only)
     cpu_s: float | None = None  # process CPU time at `t`
-    main_s: float | None = None  # its main thread's CPU time at `t`
     thread_ns: dict[int, int] | None = None  # its threads' CPU time (ns) at the last probe
     probe_t: float = -1e9  # when (monotonic)
     running: float = float("nan")  # threads that ran between the last two probes
+    probes: int = 0
+    worker: tuple[int, float, float] | None = None  # the one that ran: (tid, when, its CPU time s)
 
 
 @dataclass
@@ -199,11 +200,14 @@ class ProcessSampler:
                 tr = self._track(psutil.Process(pid))
                 tr.start = st.start
             r = self._measure(tr, _procfs_counters(pid, st))
-            due = tr.running != tr.running or self._calls % self.probe_every == 0  # known after two
+            # Its first probes every sample: its start-up (the interpreter, imports) ends soon.
+            due = tr.probes < FIRST_PROBES or self._calls % self.probe_every == 0
             if due and time.monotonic() - tr.probe_t >= PROBE_MIN_S:
                 _probe_threads(pid, tr)
             if tr.running == tr.running:
                 r.metrics["running_threads"] = tr.running
+            if tr.worker is not None:
+                _measure_worker(pid, tr, r.metrics)
         except (FileNotFoundError, ProcessLookupError, psutil.NoSuchProcess):
             if tr is None:
                 out.errors[pid] = "process is not running"
@@ -248,8 +252,6 @@ class ProcessSampler:
         if tr.cpu_s is not None and dt > 0:  # the first reading only sets the reference point
             m["cpu_percent"] = 100.0 * (c.cpu_s - tr.cpu_s) / dt
             m["ctx_switches_per_s"] = (c.ctx - tr.ctx) / dt
-            if c.main_s is not None and tr.main_s is not None:
-                m["main_thread_cpu_percent"] = 100.0 * (c.main_s - tr.main_s) / dt
         if c.fds is None:
             denied.append("open_files")
         else:
@@ -259,7 +261,7 @@ class ProcessSampler:
         elif tr.io is not None and dt > 0:
             m["io_read_kBps"] = (c.io[0] - tr.io[0]) / dt / 1000.0
             m["io_write_kBps"] = (c.io[1] - tr.io[1]) / dt / 1000.0
-        tr.cpu_s, tr.ctx, tr.io, tr.t, tr.main_s = c.cpu_s, c.ctx, c.io or tr.io, now, c.main_s
+        tr.cpu_s, tr.ctx, tr.io, tr.t = c.cpu_s, c.ctx, c.io or tr.io, now
         tr.info.ppid = c.ppid
         tr.info.metrics, tr.info.unreadable = m, denied
         return tr.info
@@ -276,37 +278,49 @@ def _procfs_counters(pid: int, st: ProcStat) -> Counters:
         io: tuple[int, int] | None = parse_fields(_read_bytes(f"/proc/{pid}/io"), IO_FIELDS)
     except (PermissionError, KeyError):
         io = None
-    return Counters(st.ppid or None, st.cpu_s, st.rss_bytes, st.threads, ctx, fds, io, main_thread_cpu_s(pid))
+    return Counters(st.ppid or None, st.cpu_s, st.rss_bytes, st.threads, ctx, fds, io)
 
 
 def _probe_threads(pid: int, tr: _Tracked) -> None:
-    """Count the threads of ``pid`` (the middleware's aside) that ran since the last probe."""
+    """Count the threads of ``pid`` (the middleware's aside) that ran since the last probe; keep the
+    one when one did."""
     now: dict[int, int] = {}
     for name in os.listdir(f"/proc/{pid}/task"):
-        task = f"/proc/{pid}/task/{name}"
         try:
-            if _read_bytes(f"{task}/comm").decode(errors="replace").startswith(MIDDLEWARE_THREADS):
+            comm = _read_bytes(f"/proc/{pid}/task/{name}/comm").decode(errors="replace")
+            if comm.startswith(MIDDLEWARE_THREADS):
                 continue
-            now[int(name)] = int(_read_bytes(f"{task}/schedstat").split()[0])
+            now[int(name)] = _thread_ns(pid, int(name))
         except (OSError, ValueError, IndexError):
             continue  # a thread that ended, or no schedstat: not counted
+    t = time.monotonic()
     if tr.thread_ns is not None:
-        tr.running = float(sum(ns - tr.thread_ns.get(tid, 0) >= RAN_NS for tid, ns in now.items()))
-    tr.thread_ns, tr.probe_t = now, time.monotonic()
+        least = RAN_SHARE * 1e9 * (t - tr.probe_t)
+        ran = [tid for tid, ns in now.items() if ns - tr.thread_ns.get(tid, 0) >= least]
+        tr.running = float(len(ran))
+        if len(ran) != 1:
+            tr.worker = None
+        elif tr.worker is None or tr.worker[0] != ran[0]:
+            tr.worker = (ran[0], t, now[ran[0]] / 1e9)
+    tr.thread_ns, tr.probe_t, tr.probes = now, t, tr.probes + 1
 
 
-def main_thread_cpu_s(pid: int) -> float | None:
-    """CPU time (s) of the main thread of ``pid``: the first field of its ``schedstat`` (ns), else
-    user + system of its ``stat`` (clock ticks); None when neither can be read (it exited)."""
-    task = f"/proc/{pid}/task/{pid}"
+def _thread_ns(pid: int, tid: int) -> int:
+    """CPU time (ns) of thread ``tid`` of ``pid``: the first field of its ``schedstat``."""
+    return int(_read_bytes(f"/proc/{pid}/task/{tid}/schedstat").split()[0])
+
+
+def _measure_worker(pid: int, tr: _Tracked, m: dict[str, float]) -> None:
+    """``executor_cpu_percent``: the CPU of the process's one running thread since the last sample."""
+    tid, t0, s0 = tr.worker
     try:
-        return int(_read_bytes(f"{task}/schedstat").split()[0]) / 1e9
+        s1, t1 = _thread_ns(pid, tid) / 1e9, time.monotonic()
     except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return parse_stat(_read_bytes(f"{task}/stat")).cpu_s
-    except (OSError, ValueError, IndexError):
-        return None
+        tr.worker = None  # it ended
+        return
+    if t1 > t0 and s0 <= s1:
+        m["executor_cpu_percent"] = 100.0 * (s1 - s0) / (t1 - t0)
+    tr.worker = (tid, t1, s1)
 
 
 def _psutil_counters(p: psutil.Process) -> Counters:
@@ -320,13 +334,9 @@ def _psutil_counters(p: psutil.Process) -> Counters:
         io: tuple[int, int] | None = (i.read_bytes, i.write_bytes)
     except (psutil.AccessDenied, AttributeError):
         io = None
-    try:  # the main thread's id is the pid on Linux; elsewhere it is not found (None)
-        main = next((th.user_time + th.system_time for th in p.threads() if th.id == p.pid), None)
-    except (psutil.AccessDenied, AttributeError):
-        main = None
     t, c = p.cpu_times(), p.num_ctx_switches()
     return Counters(p.ppid() or None, t.user + t.system, p.memory_info().rss, p.num_threads(),
-                    c.voluntary + c.involuntary, fds, io, main)
+                    c.voluntary + c.involuntary, fds, io)
 
 
 def _running(p: psutil.Process) -> bool:

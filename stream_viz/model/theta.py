@@ -12,8 +12,8 @@ from stream_viz.errors import ModelError
 SCHEMAS: dict[str, tuple[str, ...]] = {
     "process": (
         "cpu_percent", "rss_mb", "threads", "ctx_switches_per_s", "open_files",
-        "io_read_kBps", "io_write_kBps", "main_thread_cpu_percent",
-        "running_threads",
+        "io_read_kBps", "io_write_kBps", "running_threads",
+        "executor_cpu_percent",
     ),
     "topic": (
         "rate_hz", "jitter_ms", "latency_ms", "bandwidth_kBps", "drops_per_s",

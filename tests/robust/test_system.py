@@ -287,13 +287,35 @@ def test_procfs_reads_what_psutil_reads(children):
     a, b = fast.sample([p.pid]).processes[p.pid], slow.sample([p.pid]).processes[p.pid]
     assert a.metrics.keys() - {"running_threads"} == b.metrics.keys() == {
         "cpu_percent", "rss_mb", "threads", "ctx_switches_per_s", "open_files", "io_read_kBps",
-        "io_write_kBps", "main_thread_cpu_percent"}
+        "io_write_kBps"}
     assert a.metrics["running_threads"] == 2  # the two burners; the main thread sleeps (/proc only)
-    # The main thread sleeps while two others burn: its CPU is not the process's.
-    assert a.metrics["main_thread_cpu_percent"] < 10 and b.metrics["main_thread_cpu_percent"] < 10
     assert a.metrics["threads"] == b.metrics["threads"] == 3
     assert a.metrics["open_files"] == b.metrics["open_files"]
     assert abs(a.metrics["rss_mb"] - b.metrics["rss_mb"]) < 2 and a.metrics["rss_mb"] > 50
     assert 50 < a.metrics["cpu_percent"] < 210
     assert abs(a.metrics["cpu_percent"] - b.metrics["cpu_percent"]) < 30
     assert (a.ppid, a.name, a.create_time) == (b.ppid, b.name, b.create_time)
+
+
+def test_the_one_running_thread_is_measured_as_the_executor(children):
+    """A process whose only working thread is not its main one (an executor spun in a thread): the
+    sampler finds it and follows its CPU; a blocked thread uses none."""
+    code = ("import threading, time\n"
+            "stop = threading.Event()\n"
+            "def work():\n"
+            "    while not stop.is_set():\n"
+            "        end = time.monotonic() + 0.02\n"
+            "        while time.monotonic() < end: pass\n"
+            "        time.sleep(0.03)\n"
+            "    threading.Event().wait()\n"  # blocked for good, as a deadlocked callback
+            "threading.Thread(target=work, name='spin', daemon=True).start()\n"
+            "time.sleep(5); stop.set(); time.sleep(60)\n")
+    p = children.run([sys.executable, "-c", code], name="spinner")
+    sampler = ProcessSampler(procfs=True)
+    seen = []
+    for _ in range(8):
+        seen.append(sampler.sample([p.pid]).processes[p.pid].metrics)
+        time.sleep(1.0)
+    assert [m.get("running_threads") for m in seen[3:6]] == [1.0, 1.0, 1.0], seen
+    assert 15 < seen[4]["executor_cpu_percent"] < 70, seen  # ~40 % asked for
+    assert seen[-1]["executor_cpu_percent"] < 1.0, seen  # blocked

@@ -275,17 +275,17 @@ def test_topic_rate_a_quiet_that_follows_its_inputs_is_the_inputs():
     assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/det", "error")]
 
 
-def withholding_model(det, t, main=None, img_until=40.0, status=None, client=False, running=None):
-    """`chain_model` with /img at 10 Hz until ``img_until``; the detector's process's main thread
-    at ``main(t)`` % (None: not measured), its own /det_status at ``status`` and a call to a
-    server (``client``); ``running``: a sibling node in the process, and its running threads."""
+def withholding_model(det, t, main=None, img_until=40.0, status=None, client=False, running=1, sibling=False):
+    """`chain_model` with /img at 10 Hz until ``img_until``; the detector's process's executor (one
+    thread running, or ``running``) at ``main(t)`` % (None: not measured), its own /det_status at
+    ``status``, a call to a server (``client``); ``sibling``: another node in its process."""
     img = [i / 10 for i in range(int(img_until * 10))]
     G = chain_model(img, det, t)
     if main is not None:
         G.nodes["process:200"]["theta"] = make_theta("process", {
-            "cpu_percent": 3.0, "rss_mb": 60.0, "threads": 4, "main_thread_cpu_percent": main(t),
-            **({} if running is None else {"running_threads": running})})
-    if running is not None:
+            "cpu_percent": 3.0, "rss_mb": 60.0, "threads": 4, "executor_cpu_percent": main(t),
+            "running_threads": running})
+    if sibling:
         add_member(G, "node:/tracker", pid=200, alive=True)
         add_tree_edge(G, "process:200", "node:/tracker")
     if status is not None:
@@ -310,8 +310,9 @@ def test_topic_rate_an_output_withheld_by_a_working_node_is_its_rhythm():
         == [(21.5, "topic:/det", "error")]
     assert drive("topic_rate", [(t, withholding_model(det, t), []) for t in HALF[:40]])[:1] \
         == [(21.5, "topic:/det", "error")]
-    # In a container, the main thread says so only of a single-threaded executor (1 thread running).
-    frames = [(t, withholding_model(det, t, main=going, running=1), []) for t in HALF[:40]]
+    # A single-threaded executor vouches for every node it runs; busy threads of a multi-threaded
+    # process say nothing of one node.
+    frames = [(t, withholding_model(det, t, main=going, sibling=True), []) for t in HALF[:40]]
     assert drive("topic_rate", frames) == []
     frames = [(t, withholding_model(det, t, main=going, running=3), []) for t in HALF[:40]]
     assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/det", "error")]
