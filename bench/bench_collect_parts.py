@@ -1,8 +1,11 @@
 """Two parts of a collector sample, each side by side with what it replaced, in one run.
 
 1. Reading a tracked process: the sampler's /proc path vs its psutil path, on real processes
-   (Python children with threads and open files, like rclpy nodes), in alternation. The metrics
-   are the same (``tests/robust/test_system.py``).
+   (Python children with threads and open files, like rclpy nodes, one thread working at 10 Hz
+   as an executor does), in alternation. The metrics are the same (``tests/robust/test_system.py``)
+   but for the /proc path's own: the running threads, counted by a probe of every thread every
+   30th sample, and the one running thread's CPU read every sample. Also its cost with a probe at
+   every sample, and the mean (the median misses the 30th samples).
 2. Topic metrics of one sample: `TopicWindow` running sums (adds of one second of messages plus
    expire and metrics) vs `window_metrics`, the numpy computation over the window's records
    that every sample ran before (now the definition the sums are tested against), on
@@ -28,6 +31,10 @@ from stream_viz.collect.window import TopicWindow, window_metrics
 CHILD = ("import threading, time, tempfile\n"
          "files = [tempfile.TemporaryFile() for _ in range(20)]\n"
          "for _ in range(4): threading.Thread(target=time.sleep, args=(600,), daemon=True).start()\n"
+         "def spin():\n"
+         "    while True:\n"
+         "        sum(range(20000)); time.sleep(0.1)\n"
+         "threading.Thread(target=spin, daemon=True).start()\n"
          "time.sleep(600)\n")
 DEMO_RATES = (50, 20, 20, 15, 10, 10, 10, 10, 1, 1, 1)
 WINDOW_NS = 3_000_000_000
@@ -40,6 +47,7 @@ def processes(n_children: int, rounds: int) -> None:
         pids = [k.pid for k in kids]
         # Ancestors read every time, so both read the same processes every round.
         samplers = {"procfs": ProcessSampler(ancestors_every=1, procfs=True),
+                    "probe1": ProcessSampler(ancestors_every=1, procfs=True, probe_every=1),
                     "psutil": ProcessSampler(ancestors_every=1, procfs=False)}
         cost: dict[str, list[float]] = {k: [] for k in samplers}
         n = 0
@@ -49,10 +57,14 @@ def processes(n_children: int, rounds: int) -> None:
                 n = len(s.sample(pids).processes)
                 cost[name].append(time.thread_time() - t0)
         us = {k: 1e6 * statistics.median(v) / n for k, v in cost.items()}
-        print(f"1. {n_children} children + their ancestors = {n} processes, {rounds} rounds")
-        for k, v in us.items():
-            print(f"   {k:7s} {v:6.1f} µs per process per sample")
-        print(f"   procfs / psutil = {us['procfs'] / us['psutil']:.2f}")
+        mean = {k: 1e6 * statistics.fmean(v) / n for k, v in cost.items()}
+        print(f"1. {n_children} children + their ancestors = {n} processes, {rounds} rounds"
+              " (probe1: the /proc path probing every thread at every sample)")
+        for k in us:
+            print(f"   {k:7s} {us[k]:6.1f} µs per process per sample (median), {mean[k]:6.1f} (mean)")
+        print(f"   procfs / psutil = {us['procfs'] / us['psutil']:.2f} (median), "
+              f"{mean['procfs'] / mean['psutil']:.2f} (mean); "
+              f"probe1 / psutil = {us['probe1'] / us['psutil']:.2f}")
     finally:
         for k in kids:
             k.kill()

@@ -74,6 +74,7 @@ class TopicRate(Plugin):
         "input_grace_s": 5.0,
         "withheld_cpu_ratio": 0.25,
         "withheld_cpu_min": 0.2,
+        "stalled_cpu_ratio": 0.05,
         "judge_latched": False,
     }
 
@@ -148,9 +149,14 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     if quiet is None or not r.settled or r.explained:
         return None
     limit = quiet_limit(r, _base_limit(s, ref), s["gap_margin"])
-    if quiet < limit:
-        return None
-    if not r.departed and _healthy_quiet(ctx, topic, r, transitions):
+    stalled = False
+    if quiet < limit:  # within its rhythm, unless its executor stopped under its inputs (then for good)
+        base_limit = _base_limit(s, ref)
+        if not r.departed and (quiet < base_limit or _healthy_quiet(ctx, topic, r, transitions)
+                               or not _stalled(ctx, topic, r, rhythms)):
+            return None
+        stalled, limit = True, base_limit
+    if not r.departed and not stalled and _healthy_quiet(ctx, topic, r, transitions):
         r.explained = True
         return None
     if not r.departed and (_inherited(ctx, topic, r, rhythms) or _busy(ctx, topic)):
@@ -165,6 +171,8 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     flaps = len(ctx.state["flaps"][topic])
     usual = f"was {ref:.3g} Hz" if not r.gaps else f"its longest healthy gap {max(r.gaps):.1f} s"
     again = f"; silent {flaps} times in {s['flap_window_s']:.0f} s" if flaps > 1 else ""
+    if stalled:
+        again += "; its executor stopped while its input arrives"
     return ctx.alert(topic, "error", f"silent for {quiet:.1f} s ({usual}){again}", symptom="silence",
                      silent_s=quiet, baseline_hz=ref, limit_s=limit, flaps=flaps,
                      episode_hold_s=s["flap_window_s"])
@@ -217,57 +225,93 @@ def _withheld(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhyt
     a client's stall (the server's symptom), never taken for this.
 
     Working is seen in another topic only it publishes having published since ``topic`` stopped
-    (and not quiet by its own base limit), or, in a process whose executor is single-threaded
-    (one thread running besides the middleware's: ``running_threads``; a blocked callback there
-    stops every node of it), in that thread's CPU (``executor_cpu_percent``) going on at
-    ``withheld_cpu_ratio`` of its median before the quiet (at least ``withheld_cpu_min`` % of a
-    core), scaled by the share of the sample its inputs were arriving: a blocked executor uses
-    none. Once seen withheld, the quiet stays so while no input arrives (their quiet, judged on
-    them). A multi-threaded process's busy threads say nothing of one node: there only another
-    output of the node does.
+    (and not quiet by its own base limit), or, in a process whose executor is single-threaded,
+    in that thread's CPU going on at ``withheld_cpu_ratio`` of its usual (`_executor_ratio`),
+    scaled by the share of the sample its inputs were arriving. Once seen withheld, the quiet
+    stays so while no input arrives (their quiet, judged on them). A multi-threaded process's busy
+    threads say nothing of one node: there only another output of the node does.
     """
     pubs = ctx.publishers(topic)
     if not pubs or r.newest is None:
         return False
-    s, last = ctx.settings, r.newest
-    quiets = ctx.state.setdefault("withheld", {})
-    if quiets.get(topic, {}).get("since") != last:  # a new quiet
-        quiets[topic] = {"since": last, "refs": {}, "withheld": False}
-    q = quiets[topic]
-
-    def going(name: str) -> bool:  # published since the topic stopped, not quiet now
-        i = rhythms.get(name)
-        return (name != topic and i is not None and i.newest is not None and i.newest > last
-                and ctx.t - i.newest < _base_limit(s, _ref_hz(i, None)))
-
-    def working(node: str, fed: float) -> bool:
-        if any(going(o) and ctx.publishers(o) == [node] for o in ctx.published_topics(node)):
-            return True
-        proc = ctx.process_of(node)  # a single-threaded executor's thread vouches for all its nodes
-        if proc is None or ctx.value(proc, "running_threads") != 1:
-            return False
-        if proc not in q["refs"]:  # the executor's usual CPU before the quiet, kept for the quiet
-            times, past = ctx.past(proc, EXECUTOR_CPU, last=PROCESS_SETTINGS["window"])
-            before = past[(times < last) & np.isfinite(past)]
-            enough = len(before) >= PROCESS_SETTINGS["min_samples"]
-            q["refs"][proc] = float(np.median(before)) if enough else math.nan
-        now, ref = ctx.value(proc, EXECUTOR_CPU), q["refs"][proc]
-        # It works on what it gets: an input that stopped early in the sample asks for less.
-        return ref >= s["withheld_cpu_min"] and now >= s["withheld_cpu_ratio"] * ref * fed
-
-    interval = min(ctx.state.get("interval", math.inf), ctx.t - last)
+    q = _this_quiet(ctx, topic, r)
     for node in pubs:
         if ctx.called_servers(node):
             return False
-        inputs = [rhythms[i].newest for i in ctx.subscribed_topics(node) if going(i)]
-        # The share of this sample's interval the inputs were arriving (0: none came in it).
-        fed = min(1.0, max(0.0, (max(inputs) - (ctx.t - interval)) / interval)) if inputs else 0.0
-        if fed > 0 and working(node, fed):
+        fed = _fed(ctx, topic, node, r.newest, rhythms)
+        if fed > 0 and (_other_output(ctx, topic, node, r.newest, rhythms)
+                        or _executor_ratio(ctx, node, q) >= ctx.settings["withheld_cpu_ratio"] * fed):
             continue
         if not (fed == 0 and q["withheld"]):  # not working, or never seen withheld this quiet
             return False
     q["withheld"] = True
     return True
+
+
+def _stalled(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm]) -> bool:
+    """True when a publisher's single-threaded executor has stopped while the node's inputs arrive
+    (at least half of the sample): its thread used under ``stalled_cpu_ratio`` of its usual CPU
+    (`_executor_ratio`). A callback blocked for good: the topic's quiet is a silence at its base
+    limit, without waiting for twice its longest healthy gap."""
+    q = _this_quiet(ctx, topic, r)
+    return any(_fed(ctx, topic, node, r.newest, rhythms) >= 0.5
+               and _executor_ratio(ctx, node, q) < ctx.settings["stalled_cpu_ratio"]
+               for node in ctx.publishers(topic))
+
+
+def _this_quiet(ctx: PluginContext, topic: str, r: Rhythm) -> dict[str, Any]:
+    """What is kept for the current quiet of ``topic`` (begun after its newest message)."""
+    quiets = ctx.state.setdefault("quiets", {})
+    if quiets.get(topic, {}).get("since") != r.newest:  # a new quiet
+        quiets[topic] = {"since": r.newest, "refs": {}, "withheld": False}
+    return quiets[topic]
+
+
+def _arriving(ctx: PluginContext, name: str, since: float, rhythms: dict[str, Rhythm]) -> Rhythm | None:
+    """The rhythm of topic ``name`` when it published after ``since`` and is not quiet by its
+    own base limit now; else None."""
+    i = rhythms.get(name)
+    if i is None or i.newest is None or i.newest <= since:
+        return None
+    return i if ctx.t - i.newest < _base_limit(ctx.settings, _ref_hz(i, None)) else None
+
+
+def _fed(ctx: PluginContext, topic: str, node: str, since: float, rhythms: dict[str, Rhythm]) -> float:
+    """The share of this sample's interval that inputs of ``node`` were arriving (0: none came in
+    it; an input arriving is one that published after ``since``, the topic's last message)."""
+    arriving = [i.newest for name in ctx.subscribed_topics(node) if name != topic
+                and (i := _arriving(ctx, name, since, rhythms)) is not None]
+    if not arriving:
+        return 0.0
+    interval = min(ctx.state.get("interval", math.inf), ctx.t - since)
+    return min(1.0, max(0.0, (max(arriving) - (ctx.t - interval)) / interval))
+
+
+def _other_output(ctx: PluginContext, topic: str, node: str, since: float,
+                  rhythms: dict[str, Rhythm]) -> bool:
+    """True when another topic only ``node`` publishes is arriving (`_arriving`)."""
+    return any(o != topic and _arriving(ctx, o, since, rhythms) is not None
+               and ctx.publishers(o) == [node] for o in ctx.published_topics(node))
+
+
+def _executor_ratio(ctx: PluginContext, node: str, q: dict[str, Any]) -> float:
+    """The CPU of the single-threaded executor running ``node`` now over its median before the
+    quiet (kept for the quiet); NaN when the process's executor is not single-threaded (its
+    ``running_threads`` is not 1), unmeasured, or used under ``withheld_cpu_min`` % of a core
+    before (too little to tell a pause from a stop). A blocked callback stops that thread and
+    every node it runs: 0."""
+    proc = ctx.process_of(node)
+    if proc is None or ctx.value(proc, "running_threads") != 1:
+        return math.nan
+    if proc not in q["refs"]:
+        times, past = ctx.past(proc, EXECUTOR_CPU, last=PROCESS_SETTINGS["window"])
+        before = past[(times < q["since"]) & np.isfinite(past)]
+        enough = len(before) >= PROCESS_SETTINGS["min_samples"]
+        q["refs"][proc] = float(np.median(before)) if enough else math.nan
+    ref = q["refs"][proc]
+    if not ref >= ctx.settings["withheld_cpu_min"]:
+        return math.nan
+    return ctx.value(proc, EXECUTOR_CPU) / ref
 
 
 def _busy(ctx: PluginContext, topic: str) -> bool:

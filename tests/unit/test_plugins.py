@@ -346,6 +346,26 @@ def test_topic_rate_learns_a_withheld_quiet_as_a_healthy_gap():
     assert r.settled and [round(g, 2) for g in r.gaps] == [10.5]  # 19.95 -> 30.45 (the newest at the sample)
 
 
+def test_topic_rate_a_stopped_executor_under_arriving_inputs_is_a_silence_within_the_rhythm():
+    # The detector's gap of 20-30 s is learned (limit 21 s); in view again from 30 s, it deadlocks
+    # at 45 s while /img goes on: its executor stops, a silence at the base limit (1.5 s).
+    in_view = [i / 10 for i in range(200)] + [30 + i / 10 for i in range(150)]
+    det = [m + 0.05 for m in in_view]
+    hung = lambda t: noisy(3.0, 0.3) if t < 45.5 else 0.0  # noqa: E731
+    frames = [(t, withholding_model(det, t, main=hung, img_until=60), []) for t in HALF[:60]]
+    alerts = drive("topic_rate", frames, full=True)
+    assert [(a.t, a.member) for a in alerts][:1] == [(46.5, "topic:/det")]
+    assert "executor stopped" in alerts[0].message and alerts[0].data["limit_s"] == 1.5
+    assert {(a.member, a.data["limit_s"]) for a in alerts} == {("topic:/det", 1.5)}
+    assert alerts[-1].t == 59.5  # for as long as it lasts
+    # Its executor going on (nothing in view from 45 s): no alert; unmeasured: at its rhythm's limit.
+    going = lambda t: noisy(3.0, 0.3)  # noqa: E731
+    frames = [(t, withholding_model(det, t, main=going, img_until=60), []) for t in HALF[:60]]
+    assert drive("topic_rate", frames) == []
+    frames = [(t, withholding_model(det, t, img_until=60), []) for t in HALF[:60]]
+    assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/det", "error")]  # its first quiet, unlearned
+
+
 def test_topic_rate_a_topic_whose_publisher_left_is_not_silent():
     def gone(**kw):
         G = model(**kw)
