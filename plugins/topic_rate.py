@@ -75,6 +75,7 @@ class TopicRate(Plugin):
         "withheld_cpu_ratio": 0.25,
         "withheld_cpu_min": 0.2,
         "stalled_cpu_ratio": 0.05,
+        "reconfigure_s": 10.0,
         "judge_latched": False,
     }
 
@@ -92,14 +93,16 @@ class TopicRate(Plugin):
         if ctx.diff.removed_members:
             _forget(ctx, rhythms)
         transitions = _transitions(ctx)
+        relearn = ctx.state.setdefault("relearn", {})  # topic -> learned anew from (a reconfiguration)
         followed = []  # every rhythm is followed before any is judged: a quiet is judged with its inputs'
         for topic in watched:
             rate = ctx.value(topic, "rate_hz")
             if math.isnan(rate):
                 continue  # not measured
-            base = cached_baseline(ctx, topic, "rate_hz", frozen=topic in alerting)
+            base = cached_baseline(ctx, topic, "rate_hz", frozen=topic in alerting, since=relearn.get(topic))
             r = rhythms.setdefault(topic, Rhythm())
             followed.append((topic, r, rate, base, _follow(ctx, r, topic, rate, base)))
+        followed = _reconfigured(ctx, followed, rhythms)
         for topic, r, rate, base, quiet in followed:
             alert = (_silence(ctx, topic, r, quiet, base, transitions, rhythms)
                      or _drop(ctx, topic, r, quiet, rate, base))
@@ -110,6 +113,81 @@ class TopicRate(Plugin):
                 yield alert
             else:
                 alerting.discard(topic)
+
+
+def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, Rhythm]) -> list[tuple]:
+    """Topics whose publisher was reconfigured follow a new normal (parameters changed at run time:
+    a camera's frame rate, a controller's frequency); return ``followed`` with their rhythms and
+    baselines learned anew.
+
+    A *cause* is a ``param`` event of a publisher, or an input of a publisher that follows one
+    (data computed from a reconfigured input changes with it), up to ``reconfigure_s`` ago. After
+    a cause, a topic whose recent rate departs from its baseline (below ``drop_ratio`` × it, or
+    above it / ``drop_ratio``) while messages arrive has its rhythm and rate baseline learned
+    anew from the cause: no drop, no silence against its old rate. A quiet that began after the
+    cause is not judged (nor learned) until ``reconfigure_s`` after it: a slower rate shows its
+    next message by then and is learned; a topic still quiet then (a hang that came with the
+    change, a publisher switched off) is judged against its old rhythm.
+    """
+    s = ctx.settings
+    window, ratio = s["reconfigure_s"], s["drop_ratio"]
+    changed: dict[str, float] = ctx.state.setdefault("reconfigured", {})  # node -> its newest param event
+    for e in ctx.events:
+        if e.kind == "param":
+            changed[e.member] = max(e.t, changed.get(e.member, e.t))
+    causes: dict[str, float] = ctx.state.setdefault("reconfig_causes", {})  # topic -> the cause it follows
+    # topic -> (judged again at, the last message before its quiet)
+    deferred: dict[str, tuple[float, float]] = ctx.state.setdefault("reconfig_deferred", {})
+    relearn: dict[str, float] = ctx.state["relearn"]
+    for table, keep in ((changed, window), (causes, window), (relearn, FORGET_S)):
+        for k in [k for k, x in table.items() if ctx.t - x > keep]:
+            del table[k]
+    if not changed and not deferred:
+        return followed
+
+    def cause(topic: str) -> float | None:
+        pubs = ctx.publishers(topic)
+        times = [changed[p] for p in pubs if p in changed]
+        times += [causes[i] for p in pubs for i in ctx.subscribed_topics(p) if i != topic and i in causes]
+        recent = [x for x in times if 0.0 <= ctx.t - x <= window]
+        return max(recent) if recent else None
+
+    out = list(followed)
+    for _ in range(len(out)):  # until no input's change is left to pass downstream
+        moved = False
+        for k, (topic, r, rate, base, quiet) in enumerate(out):
+            at = cause(topic)
+            until, since = deferred.get(topic, (math.inf, r.newest))
+            if at is None or ctx.t >= until or r.newest != since:
+                if deferred.pop(topic, None) and r.newest == since:  # still quiet when the change
+                    r.explained = False  # had time to show: judge it
+            if at is None:
+                continue
+            limit = _base_limit(s, _ref_hz(r, base))
+            if quiet is not None and quiet >= limit and r.newest is not None \
+                    and r.newest >= at - s["transition_grace_s"] and not (r.departed or r.explained):
+                if topic not in deferred and ctx.t < at + window:
+                    deferred[topic], r.explained = (at + window, r.newest), True
+                    moved |= causes.get(topic) != at
+                    causes[topic] = at
+                continue
+            recent = ctx.value(topic, "rate_recent_hz")
+            now = recent if recent == recent else rate
+            if base is None or relearn.get(topic, -math.inf) >= at or not now > 0 \
+                    or not (r.newest or -math.inf) > at:  # a new rate shows in messages after the change
+                continue
+            if now < ratio * base[0] or now > base[0] / ratio:
+                fresh = Rhythm()
+                rhythms[topic], relearn[topic], causes[topic] = fresh, at, at
+                deferred.pop(topic, None)
+                ctx.state.get("_baselines", {}).pop((topic, "rate_hz"), None)
+                for table in ("_streaks", "_held"):
+                    ctx.state.setdefault(table, {}).pop((topic, "drop"), None)
+                out[k] = (topic, fresh, rate, None, _follow(ctx, fresh, topic, rate, None))
+                moved = True
+        if not moved:
+            break
+    return out
 
 
 def _forget(ctx: PluginContext, rhythms: dict[str, Rhythm]) -> None:

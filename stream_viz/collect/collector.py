@@ -23,6 +23,7 @@ from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.goals import GoalTracker
 from stream_viz.collect.hosts import HostReports
 from stream_viz.collect.naming import NodeNames
+from stream_viz.collect.params import param_event
 from stream_viz.collect.pidmap import PidResolver
 from stream_viz.collect.processes import ProcessSampler
 from stream_viz.collect.readings import GraphReading, PidInfo, ProcessReading
@@ -249,6 +250,9 @@ class Collector:
                         out.append(ev)
                 elif topic == "/parameter_events":
                     self.diagnostics.hardware.add(msg)
+                    ev = param_event(msg, recv / 1e9)
+                    if ev is not None:
+                        out.append(ev)
                 elif topic in DIAGNOSTICS:
                     publisher = self._publisher(reading, topic, gid)
                     out += self.diagnostics.events(topic, msg, recv / 1e9, publisher, index)

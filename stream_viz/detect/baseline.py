@@ -53,8 +53,8 @@ def slope(times: np.ndarray, values: np.ndarray) -> float:
 
 
 @reads_settings(*BASELINE_SETTINGS)
-def cached_baseline(ctx: Any, member: str, attr: str, *,
-                    frozen: bool = False) -> tuple[float, float, int] | None:
+def cached_baseline(ctx: Any, member: str, attr: str, *, frozen: bool = False,
+                    since: float | None = None) -> tuple[float, float, int] | None:
     """Return ``(median, sigma, n)`` of ``member``'s own past ``attr``, or None while warming up.
 
     Parameters
@@ -68,6 +68,9 @@ def cached_baseline(ctx: Any, member: str, attr: str, *,
         The member and θ attribute.
     frozen : bool
         Keep the cached value (the member is alerting: do not learn the fault).
+    since : float, optional
+        Learn only from samples at or after this time (the member's normal changed then: a
+        reconfiguration); warming up again until ``warmup_s`` after it.
     """
     cache = ctx.state.setdefault("_baselines", {})
     key = (member, attr)
@@ -77,6 +80,9 @@ def cached_baseline(ctx: Any, member: str, attr: str, *,
     s = ctx.settings
     warmup_s, min_samples, refresh_s, window = s["warmup_s"], s["min_samples"], s["refresh_s"], s["window"]
     times, values = ctx.past(member, attr, last=window)
+    if since is not None:
+        keep = times >= since
+        times, values = times[keep], values[keep]
     if len(times) == 0 or ctx.t - times[0] < warmup_s:
         # Warming up: look again when the warm-up can be over, not on every call.
         ready = times[0] + warmup_s if len(times) else ctx.t

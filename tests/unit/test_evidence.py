@@ -35,6 +35,7 @@ from stream_viz.collect.cdr import (
 )
 from stream_viz.collect.diagnostics import DiagnosticsReader, aggregator_groups, map_status
 from stream_viz.collect.naming import NodeNames, named_in_text
+from stream_viz.collect.params import param_event
 from stream_viz.collect.rosgraph import INFINITE_NS, qos_dict
 from stream_viz.collect.services import ServiceCalls, party
 from stream_viz.collect.topics import log_event
@@ -571,3 +572,24 @@ def test_the_longest_gap_since_the_last_look_counts_what_both_clocks_agree_on():
     for k in range(3):
         w.add(5 * S + 2 * S // 10 + k, 3 * S + (k + 2) * S // 10, 1, 7 + k)
     assert w.take_gap() == pytest.approx(0.1)
+
+
+def test_a_parameter_event_that_changes_or_deletes_is_one_param_event_of_its_node():
+    def p(name, **value):
+        return Parameter(name=name, value=ParameterValue(**value))
+
+    declared = ParameterEvent(node="/amr1/camera", new_parameters=[p("rate_hz", type=3, double_value=10.0)])
+    assert param_event(declared, 5.0) is None  # a node declaring its parameters as it starts
+    ev = param_event(ParameterEvent(node="/amr1/camera",
+                                    changed_parameters=[p("rate_hz", type=3, double_value=4.0),
+                                                        p("frame_id", type=4, string_value="cam"),
+                                                        p("roi", type=7, integer_array_value=[1, 2])],
+                                    deleted_parameters=[p("gain")]), 12.5)
+    assert (ev.t, ev.kind, ev.member, ev.level) == (12.5, "param", "node:/amr1/camera", "info")
+    assert ev.data == {"changed": {"rate_hz": "4.0", "frame_id": "'cam'", "roi": "[1, 2]"},
+                       "deleted": ["gain"]}
+    assert ev.text == ("parameters of /amr1/camera: rate_hz = 4.0, frame_id = 'cam', roi = [1, 2], "
+                       "gain deleted")
+    long = param_event(ParameterEvent(node="/n", changed_parameters=[p("s", type=4, string_value="x" * 100)]),
+                       1.0)
+    assert len(long.data["changed"]["s"]) == 60 and long.data["changed"]["s"].endswith("…")

@@ -390,6 +390,50 @@ def test_topic_rate_forgets_the_rhythm_of_a_topic_gone_for_long():
     assert sorted(rhythms) == ["topic:/img", "topic:/recent"]  # in the graph, or gone lately
 
 
+def param(t, node="node:/camera", **changed):
+    return Event(t, "param", node, "info", "parameters changed", {"changed": changed, "deleted": []})
+
+
+def test_topic_rate_a_reconfigured_rate_is_the_new_normal_a_drop_without_a_change_is_not():
+    # 10 Hz, then 4 Hz from 30.0 (/camera's rate_hz set at 30.0): learned anew, no drop, no silence.
+    msgs = [i / 10 for i in range(300)] + [30 + i / 4 for i in range(240)]
+    set_rate = param(30.2, rate_hz="4.0")
+    frames = [(t, model(**seen(msgs, t)), [set_rate] if t == 30.5 else []) for t in HALF[:90]]
+    assert drive("topic_rate", frames) == []
+    # The same drop without a parameter change is a rate drop (no new normal), and so is one whose
+    # change came longer than reconfigure_s before it, or at another node.
+    for events in ([], [param(19.0, rate_hz="4.0")], [param(30.2, node="node:/detector", k="1")]):
+        frames = [(t, model(**seen(msgs, t)), events if t == 30.5 else []) for t in HALF[:90]]
+        assert drive("topic_rate", frames)[:1] == [(32.5, "topic:/img", "warn")], events
+    # After the new normal is learned, a drop from it alerts: 4 Hz -> 1 Hz at 60 s.
+    slowed = msgs[:300 + 120] + [60 + i for i in range(30)]
+    frames = [(t, model(**seen(slowed, t)), [set_rate] if t == 30.5 else []) for t in HALF[:90]]
+    assert drive("topic_rate", frames)[:1] == [(63.5, "topic:/img", "warn")]
+
+
+def test_topic_rate_a_quiet_after_a_reconfiguration_waits_for_its_new_rhythm():
+    # 10 Hz, then 0.5 Hz from 32.0 (set at 30.0): no silence while the next messages come slower.
+    msgs = [i / 10 for i in range(300)] + [32 + 2 * i for i in range(30)]
+    set_rate = param(30.0, rate_hz="0.5")
+    frames = [(t, model(**seen(msgs, t)), [set_rate] if t == 30.5 else []) for t in HALF[:90]]
+    assert drive("topic_rate", frames) == []
+    # Nothing after 29.9 (a hang that came with the change): judged reconfigure_s after the change.
+    hung = msgs[:300]
+    frames = [(t, model(**seen(hung, t)), [set_rate] if t == 30.5 else []) for t in HALF[:60]]
+    assert drive("topic_rate", frames)[:1] == [(40.5, "topic:/img", "error")]
+
+
+def test_topic_rate_a_reconfigured_input_passes_its_new_normal_downstream():
+    # /det follows every /img message; /camera's rate_hz set from 10 to 4 Hz at 30.0.
+    img = [i / 10 for i in range(300)] + [30 + i / 4 for i in range(240)]
+    det = [m + 0.05 for m in img]
+    set_rate = param(30.0, rate_hz="4.0")
+    frames = [(t, chain_model(img, det, t), [set_rate] if t == 30.5 else []) for t in HALF[:90]]
+    assert drive("topic_rate", frames) == []
+    frames = [(t, chain_model(img, det, t), []) for t in HALF[:90]]
+    assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img", "topic:/det"}
+
+
 def test_topic_rate_no_drop_on_a_bursty_topic_but_on_a_continuous_one():
     # Bursts of 20 Hz for 4 s every 6 s: the window's rate swings 0..20 Hz, the recent rate falls
     # at each burst's end; a rate baseline of such a topic is no basis for a drop.
