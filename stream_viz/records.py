@@ -20,8 +20,9 @@ class Event:
     """Something the collector saw happen between two samples.
 
     ``kind`` is one of ``log`` (a /rosout line), ``diag`` (one /diagnostics status),
-    ``exit`` (a process ended), ``restart`` (a node's process changed pid), ``observe_error``
-    (something could not be read). ``member`` is the member it concerns (``node:/x`` …);
+    ``exit`` (a process ended), ``restart`` (a node's process changed pid), ``goal`` (an action
+    goal ended), ``param`` (a node's parameters changed), ``observe_error`` (something could not
+    be read). ``member`` is the member it concerns (``node:/x`` …);
     ``level`` is one of `SEVERITIES`; ``data`` holds the rest (logger name, status name …).
     """
 
