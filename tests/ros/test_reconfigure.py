@@ -94,7 +94,7 @@ def test_a_node_reconfigured_to_a_slower_rate_is_its_new_normal_and_a_degrade_is
         # exposure changes nothing observable; rate_hz 10 -> 4 -> 0.5 -> 10 Hz
         tuner = children.python(TUNER, "exposure=0.02@5", "rate_hz=4.0@16", "rate_hz=0.5@36",
                                 "rate_hz=10.0@60", name="tuner")
-        _observe(mon, 84.0)
+        _observe(mon, 90.0)
         log = (tmp_path / f"tuner_{children.procs.index(tuner)}.log").read_text()
         assert "set rate_hz 10.0" in log, log
         _no_alerts(mon, "a camera reconfigured from 10 Hz to 4 Hz, 0.5 Hz and back")
