@@ -104,7 +104,7 @@ def build_blueprint(
             rrb.TextDocumentView(origin=paths.RCA_REPORT, name="Root causes"),
             rrb.GraphView(origin=paths.PROCESS_TREE, name="Process tree"),
         ),
-        rrb.TextLogView(origin=paths.ALERTS, name="Alerts"),
+        rrb.TextLogView(origin="/", contents=[paths.ALERTS, paths.CHANGES], name="Alerts"),
         column_shares=[3, 2, 2] if diagnosis else [2, 2, 2],  # a diagnosis: plots side by side
     )
     return rrb.Blueprint(

@@ -70,6 +70,8 @@ class LiveView:
         self.rec.set_time(t)
         if alerts:
             self.rec.alerts(alerts)  # before the graph, so alerted members are coloured now
+        if sample.events:
+            self.rec.changes(sample.events)
         self.rec.system(seen, t)
         self._batch.add(t, sample.graph)
         every = metrics_batch_s(len(self._batch), self.metrics_every, self.max_chunks_per_s)

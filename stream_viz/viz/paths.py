@@ -14,6 +14,7 @@ SYSTEM = "/system"  # G_0: GraphNodes + directed GraphEdges in one entity
 PROCESS_TREE = "/process_tree"  # T_1 with the virtual root
 METRICS = "/metrics"  # /metrics/<kind>/<member name>/theta: Scalars, one series per θ attribute
 ALERTS = "/alerts"  # TextLog
+CHANGES = "/changes"  # TextLog: changes of the system's configuration seen (parameters set at run time)
 HEALTH = "/health"  # /health/<kind>/<member name>: StateChange lane (ok, a severity, gone)
 RCA = "/rca"
 RCA_SUBGRAPH = "/rca/subgraph"  # G_j and W_j, drawn over /system at the same positions

@@ -24,9 +24,10 @@ import rerun.blueprint as rrb
 
 from stream_viz.errors import ConfigError, OutputError, StreamVizError
 from stream_viz.output import check_writable
-from stream_viz.records import SEVERITY_RANK, Alert
+from stream_viz.records import SEVERITY_RANK, Alert, Event
 from stream_viz.viz import paths, style
 from stream_viz.viz.alerts import log_alerts
+from stream_viz.viz.changes import log_changes
 from stream_viz.viz.focus import diagnosis_members
 from stream_viz.viz.health import HealthLanes, log_health
 from stream_viz.viz.layout import Layout, settle
@@ -347,6 +348,10 @@ class Recorder:
                 self.status[a.member] = a.severity
         log_health(self.rec, self.health.alerts(alerts))
         return log_alerts(self.rec, alerts)
+
+    def changes(self, events: Sequence[Event]) -> int:
+        """Log the changes of configuration among ``events`` (``/changes``)."""
+        return log_changes(self.rec, events)
 
     def rca(self, G: nx.MultiDiGraph, iteration: Mapping[str, Any],
             root_causes: Sequence[Mapping[str, Any]] = (), gone: Collection[str] = (),

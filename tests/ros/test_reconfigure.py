@@ -15,8 +15,13 @@ import time
 
 import pytest
 
+from stream_viz.config import load_config
+from stream_viz.monitor import Monitor
+from stream_viz.progress import Progress
 from stream_viz.testing import wait_for
-from tests.ros.test_dynamics import HEAD, _monitor, _no_alerts, _observe, _plugin
+from stream_viz.viz import paths
+from tests.ros.test_dynamics import CONFIG, HEAD, _no_alerts, _observe, _plugin
+from tests.viz.rrd import rows
 
 pytestmark = pytest.mark.ros
 
@@ -87,7 +92,10 @@ rclpy.spin(n)
 def test_a_node_reconfigured_to_a_slower_rate_is_its_new_normal_and_a_degrade_is_not(children, tmp_path):
     camera = children.python(CAMERA, name="camera")
     children.python(RELAY, name="relay")
-    mon = _monitor(children, tmp_path)
+    cfg = tmp_path / "stream-viz.toml"
+    cfg.write_text(CONFIG)
+    mon = Monitor(load_config(cfg), db=tmp_path / "alerts.sqlite", viewer="none", save=tmp_path / "run.rrd",
+                  domain_id=int(children.env["ROS_DOMAIN_ID"]), progress=Progress(open(os.devnull, "w")))
     try:
         wait_for(lambda: (mon.step(), {"node:/camera", "node:/relay"} <= set(mon.seen))[1],
                  timeout=20, period=1.0)
@@ -112,3 +120,8 @@ def test_a_node_reconfigured_to_a_slower_rate_is_its_new_normal_and_a_degrade_is
         assert "topic:/image" in {a.member for a in drops}, mon.store.alerts()
     finally:
         mon.close()
+    # The recording shows each change on the timeline, in the alerts' log panel.
+    changes = [row["TextLog:text"][0] for row in rows(tmp_path / "run.rrd")[paths.CHANGES]]
+    assert [c for c in changes if "rate_hz" in c] == [
+        f"[param] node:/camera: parameter of /camera: rate_hz = {v}" for v in ("4.0", "0.5", "10.0")]
+    assert "[param] node:/camera: parameter of /camera: exposure = 0.02" in changes

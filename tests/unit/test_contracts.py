@@ -24,7 +24,8 @@ def subcommands() -> dict[str, argparse.ArgumentParser]:
 
 
 def test_every_entity_path_and_timeline_is_named():
-    for value in (paths.SYSTEM, paths.PROCESS_TREE, paths.ALERTS, paths.RCA_SUBGRAPH, paths.RCA_TRAJECTORY,
+    for value in (paths.SYSTEM, paths.PROCESS_TREE, paths.ALERTS, paths.CHANGES, paths.RCA_SUBGRAPH,
+                  paths.RCA_TRAJECTORY,
                   paths.RCA_REPORT, paths.TIME, paths.RCA_ITERATION):
         assert f"`{value}`" in CONTRACTS, value
     assert f"`{paths.HEALTH}/<kind>/<name>`" in CONTRACTS

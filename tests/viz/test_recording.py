@@ -11,7 +11,7 @@ from stream_viz.errors import ConfigError, OutputError
 from stream_viz.model import add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.model.ids import ROOT
 from stream_viz.model.theta import make_theta
-from stream_viz.records import Alert
+from stream_viz.records import Alert, Event
 from stream_viz.viz import paths
 from stream_viz.viz.recorder import Recorder
 from tests.viz.rrd import rows, strings
@@ -49,6 +49,9 @@ def test_graph_metrics_alerts_and_blueprint_in_file(tmp_path):
         r.metrics([(T0 + i, robot(rate=float(i))) for i in range(5)])
         r.alerts([Alert("topic:/image", "topic_rate", T0 + 3, "error", "rate fell to 3 Hz", {"value": 3.0}),
                   Alert("node:/planner", "rosout", T0 + 4, "fatal", "planner died")])
+        r.changes([Event(T0 + 2.5, "param", "node:/camera", "info", "parameter of /camera: fps = 5.0",
+                         {"changed": {"fps": "5.0"}, "deleted": []}),
+                   Event(T0 + 2.6, "log", "node:/camera", "warn", "slow")])  # not a change
         G2 = robot()
         add_member(G2, "node:/camera", gone=True)
         assert r.system(G2, t=T0 + 5)  # status and gone changed
@@ -87,6 +90,10 @@ def test_graph_metrics_alerts_and_blueprint_in_file(tmp_path):
     assert [row["TextLog:text"][0] for row in log] == ["[topic_rate] topic:/image: rate fell to 3 Hz",
                                                     "[rosout] node:/planner: planner died"]
     assert [row["TextLog:level"][0] for row in log] == ["ERROR", "CRITICAL"]
+    # Changes: the parameter set, at its time, in the same log panel as the alerts.
+    changes = data[paths.CHANGES]
+    assert [(row["TextLog:text"][0], row["time"]) for row in changes] == [
+        ("[param] node:/camera: parameter of /camera: fps = 5.0", int((T0 + 2.5) * 1e9))]
     markers = [row for row in data["/metrics/topic/image/alerts"] if "Scalars:scalars" in row]
     assert [row["Scalars:scalars"] for row in markers] == [[3.0]]
     # The default blueprint travels in the file.
