@@ -18,6 +18,7 @@ from stream_viz.records import Alert
 Baseline = tuple[float, float, int] | None
 TRANSITIONS_KEPT = 8  # per node: enough for the changes around one quiet
 EXECUTOR_CPU = "executor_cpu_percent"
+PROMPT_INTERVALS = 6  # a reconfigured rate shows in the collector's recent rate within this many intervals
 FORGET_S = 600.0  # as long as the monitor keeps a vanished member by default (forget_gone_s)
 
 
@@ -123,11 +124,13 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
     A *cause* is a ``param`` event of a publisher, or an input of a publisher that follows one
     (data computed from a reconfigured input changes with it), up to ``reconfigure_s`` ago. After
     a cause, a topic whose recent rate departs from its baseline (below ``drop_ratio`` × it, or
-    above it / ``drop_ratio``) while messages arrive has its rhythm and rate baseline learned
-    anew from the cause: no drop, no silence against its old rate. A quiet that began after the
-    cause is not judged (nor learned) until ``reconfigure_s`` after it: a slower rate shows its
-    next message by then and is learned; a topic still quiet then (a hang that came with the
-    change, a publisher switched off) is judged against its old rhythm.
+    above it / ``drop_ratio``) in messages sent after it, promptly (within ``PROMPT_INTERVALS``
+    of its new intervals, or ``transition_grace_s``), has its rhythm and rate baseline learned
+    anew from the cause: no drop, no silence against its old rate. A quiet whose last message
+    came within ``transition_grace_s`` of the cause is not judged (nor learned) until
+    ``reconfigure_s`` after it: a slower rate shows its next message by then and is learned; a
+    topic still quiet then (a hang that came with the change, a publisher switched off) is judged
+    against its old rhythm. A departure that begins later is no reconfiguration's.
     """
     s = ctx.settings
     window, ratio = s["reconfigure_s"], s["drop_ratio"]
@@ -164,8 +167,9 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
             if at is None:
                 continue
             limit = _base_limit(s, _ref_hz(r, base))
+            grace = s["transition_grace_s"]
             if quiet is not None and quiet >= limit and r.newest is not None \
-                    and r.newest >= at - s["transition_grace_s"] and not (r.departed or r.explained):
+                    and abs(r.newest - at) <= grace and not (r.departed or r.explained):
                 if topic not in deferred and ctx.t < at + window:
                     deferred[topic], r.explained = (at + window, r.newest), True
                     moved |= causes.get(topic) != at
@@ -176,7 +180,10 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
             if base is None or relearn.get(topic, -math.inf) >= at or not now > 0 \
                     or not (r.newest or -math.inf) > at:  # a new rate shows in messages after the change
                 continue
-            if now < ratio * base[0] or now > base[0] / ratio:
+            # A new rate shows within a few of its intervals (the window's rate: once the window
+            # turned over); a change that comes later is not this one.
+            prompt = max(grace, PROMPT_INTERVALS / now) + (0.0 if recent == recent else s["rate_window_s"])
+            if ctx.t - at <= prompt and (now < ratio * base[0] or now > base[0] / ratio):
                 fresh = Rhythm()
                 rhythms[topic], relearn[topic], causes[topic] = fresh, at, at
                 deferred.pop(topic, None)

@@ -405,6 +405,11 @@ def test_topic_rate_a_reconfigured_rate_is_the_new_normal_a_drop_without_a_chang
     for events in ([], [param(19.0, rate_hz="4.0")], [param(30.2, node="node:/detector", k="1")]):
         frames = [(t, model(**seen(msgs, t)), events if t == 30.5 else []) for t in HALF[:90]]
         assert drive("topic_rate", frames)[:1] == [(32.5, "topic:/img", "warn")], events
+    # A parameter set 4 s before a drop (an exposure tuned, then the camera degrades): not the
+    # change's doing; a rate drop as without it.
+    earlier = param(26.0, exposure="0.02")
+    frames = [(t, model(**seen(msgs, t)), [earlier] if t == 26.5 else []) for t in HALF[:90]]
+    assert drive("topic_rate", frames)[:1] == [(32.5, "topic:/img", "warn")]
     # After the new normal is learned, a drop from it alerts: 4 Hz -> 1 Hz at 60 s.
     slowed = msgs[:300 + 120] + [60 + i for i in range(30)]
     frames = [(t, model(**seen(slowed, t)), [set_rate] if t == 30.5 else []) for t in HALF[:90]]
@@ -417,6 +422,10 @@ def test_topic_rate_a_quiet_after_a_reconfiguration_waits_for_its_new_rhythm():
     set_rate = param(30.0, rate_hz="0.5")
     frames = [(t, model(**seen(msgs, t)), [set_rate] if t == 30.5 else []) for t in HALF[:90]]
     assert drive("topic_rate", frames) == []
+    # A topic that stops 5 s after a parameter change is no slower rate: silent at its base limit.
+    stops = [i / 10 for i in range(350)]
+    frames = [(t, model(**seen(stops, t)), [set_rate] if t == 30.5 else []) for t in HALF[:60]]
+    assert drive("topic_rate", frames)[:1] == [(36.5, "topic:/img", "error")]
     # Nothing after 29.9 (a hang that came with the change): judged reconfigure_s after the change.
     hung = msgs[:300]
     frames = [(t, model(**seen(hung, t)), [set_rate] if t == 30.5 else []) for t in HALF[:60]]
