@@ -20,7 +20,9 @@ class MemberGone(Plugin):
       changed process between two samples, or its last process crashed): warn. A node that keeps
       reappearing is one symptom, ``restarted N times in M s`` over ``loop_window_s``: warn from
       2, error from ``loop_min``, fatal from ``loop_fatal`` restarts; all its alerts hold one
-      episode for ``loop_window_s`` (``episode_hold_s``);
+      episode for ``loop_window_s`` (``episode_hold_s``). A node that lived ``cycle_life_s`` in
+      its process, left it cleanly and was away ``cycle_away_s`` before it came back ran its
+      course (a tool an operator closes and opens again, a job run again): no restart;
     * not alive (error, every sample while it lasts): DDS lists the node, its process is gone;
     * left (``left_severity``): the node left the graph and its process cannot be seen (no
       pid): clean or not cannot be told. A node of a known process that leaves deregistered
@@ -35,6 +37,7 @@ class MemberGone(Plugin):
     settings: ClassVar[dict[str, Any]] = {
         "left_severity": "warn", "watched_only": False,
         "loop_window_s": 60.0, "loop_min": 3, "loop_fatal": 6,
+        "cycle_life_s": 30.0, "cycle_away_s": 5.0,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -98,7 +101,7 @@ def _restarts(ctx: PluginContext, crashed: dict[str, float]) -> list[tuple[str, 
     process between two samples, or its last process crashed.
     """
     window = ctx.settings["loop_window_s"]
-    seen = ctx.state.setdefault("seen", {})  # node -> (pid, instances, last seen)
+    seen = ctx.state.setdefault("seen", {})  # node -> (pid, instances, last seen, seen with that pid since)
     pending = ctx.state.setdefault("pending", {})  # node -> times of rises whose pid is not seen yet
     times = ctx.state.setdefault("restarts", {})  # node -> restart times
     moved = {e.member for e in ctx.events if e.kind == "restart"}
@@ -107,11 +110,14 @@ def _restarts(ctx: PluginContext, crashed: dict[str, float]) -> list[tuple[str, 
         pid, inst = ctx.attr(m, "pid"), ctx.attr(m, "instances", 1)
         inst = inst if isinstance(inst, int) else 1
         old = seen.get(m)
-        seen[m] = (pid if pid is not None or old is None else old[0], inst, ctx.t)
+        keep = pid if pid is not None or old is None else old[0]
+        seen[m] = (keep, inst, ctx.t, old[3] if old is not None and keep == old[0] else ctx.t)
         if old is None:
             continue
         waiting = [x for x in pending.get(m, ()) if ctx.t - x <= window]
         new_pid = m in moved or (pid is not None and old[0] is not None and pid != old[0])
+        if new_pid and _ran_its_course(ctx, old, crashed.get(m)):
+            continue
         rises = 0 if m in ctx.diff.added_members else max(0, inst - old[1])
         if rises:
             waiting += [ctx.t] * (rises - new_pid)
@@ -126,11 +132,21 @@ def _restarts(ctx: PluginContext, crashed: dict[str, float]) -> list[tuple[str, 
             recent = [x for x in times.get(m, ()) if ctx.t - x <= window] + [ctx.t] * new
             times[m] = recent
             out.append((m, recent, m in moved or ctx.t - crashed.get(m, -window) <= window))
-    for m in [m for m, (_, _, last) in seen.items() if ctx.t - last > window]:
+    for m in [m for m, (_, _, last, _) in seen.items() if ctx.t - last > window]:
         del seen[m]  # gone longer than a loop lasts: forget it
         times.pop(m, None)
         pending.pop(m, None)
     return out
+
+
+def _ran_its_course(ctx: PluginContext, old: tuple, crashed_at: float | None) -> bool:
+    """True when a node's last process held it for ``cycle_life_s`` until it left cleanly (no
+    crash seen since) and the node was away for ``cycle_away_s`` before this new process: a
+    clean end, not a loop (a crash loop's lives are short or end uncleanly)."""
+    s = ctx.settings
+    _, _, last, since = old
+    clean = crashed_at is None or crashed_at < since
+    return clean and last - since >= s["cycle_life_s"] and ctx.t - last >= s["cycle_away_s"]
 
 
 def _restart_severity(s: dict[str, Any], n: int, respawn: bool) -> str | None:
