@@ -20,6 +20,7 @@ TRANSITIONS_KEPT = 8  # per node: enough for the changes around one quiet
 EXECUTOR_CPU = "executor_cpu_percent"
 PROMPT_INTERVALS = 6  # a reconfigured rate shows in the collector's recent rate within this many intervals
 FORGET_S = 600.0  # as long as the monitor keeps a vanished member by default (forget_gone_s)
+SINGLE_RUN_S = 0.5  # a run of messages this short is one answer (a few messages at most)
 
 
 class TopicRate(Plugin):
@@ -249,6 +250,8 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
         return None
     if not r.departed and _withheld(ctx, topic, r, rhythms):
         return None  # the topic's own rhythm: learned when it ends, judged again every sample
+    if not r.departed and _on_request(ctx, topic, r):
+        return None  # its quiet is its clients' (learned when it ends)
     if not r.departed:  # a new silence: count it for flapping
         r.departed = True
         flaps = ctx.state.setdefault("flaps", {}).setdefault(topic, [])
@@ -331,6 +334,21 @@ def _withheld(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhyt
             return False
     q["withheld"] = True
     return True
+
+
+def _on_request(ctx: PluginContext, topic: str, r: Rhythm) -> bool:
+    """True when ``topic`` is published on request: it comes one message at a time (every run
+    between its healthy gaps under ``SINGLE_RUN_S``) from nodes that each serve a service or an
+    action someone calls. A detector that publishes what it found when asked, a planner its
+    plan: its quiet is its clients' not asking, which nothing observed without introspection
+    tells from a hang. The server's own failure shows at its clients (the ``services`` plugin:
+    their timeouts and errors name it), not in this topic's silence."""
+    pubs = ctx.publishers(topic)
+    if not pubs or not r.gaps or not r.runs or max(r.runs) > SINGLE_RUN_S:
+        return False
+    served = ctx.structural(lambda: {n for kind in ("service", "action") for m in ctx.members(kind)
+                                     if ctx.clients(m) for n in ctx.servers(m)}, key="served")
+    return all(p in served for p in pubs)
 
 
 def _stalled(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm]) -> bool:

@@ -443,6 +443,32 @@ def test_topic_rate_a_reconfigured_input_passes_its_new_normal_downstream():
     assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img", "topic:/det"}
 
 
+def served_model(served=True, called=True, **kw):
+    """`model` whose /camera serves /detect (called by /planner when ``called``)."""
+    G = model(**kw)
+    if served:
+        add_member(G, "node:/planner")
+        add_member(G, "service:/detect", servers=["/camera"], clients=["/planner"] if called else [],
+                   theta=make_theta("service", {"servers": 1, "clients": int(called)}))
+    return G
+
+
+def test_topic_rate_a_topic_published_on_request_is_not_silent_when_nobody_asks():
+    # One message per request, every 10-12 s, then nobody asks for 40 s, then again.
+    msgs = [5.0 + 11.0 * k + (k % 3) * 0.5 for k in range(6)] + [101.0 + 11.0 * k for k in range(3)]
+    frames = [(t, served_model(**seen(msgs, t)), []) for t in HALF[:125]]
+    assert drive("topic_rate", frames) == []
+    # The same single messages from a node that serves nobody (or nobody calls): a silence.
+    for served, called in ((False, False), (True, False)):
+        frames = [(t, served_model(served, called, **seen(msgs, t)), []) for t in HALF[:125]]
+        silences = [a for a in drive("topic_rate", frames) if a[2] == "error"]
+        assert silences[:1] == [(84.5, "topic:/img", "error")], (served, called)
+    # A burst topic of a server (10 Hz for 2 s) is not on request: its hang is a silence.
+    burst = bursts(range(0, 50, 8))
+    frames = [(t, served_model(**seen(burst, t)), []) for t in HALF[:90]]
+    assert [a for a in drive("topic_rate", frames) if a[2] == "error"][:1] != []
+
+
 def test_topic_rate_no_drop_on_a_bursty_topic_but_on_a_continuous_one():
     # Bursts of 20 Hz for 4 s every 6 s: the window's rate swings 0..20 Hz, the recent rate falls
     # at each burst's end; a rate baseline of such a topic is no basis for a drop.
