@@ -221,7 +221,7 @@ class TopicMonitor:
         rcl = self.rcl
         if rcl is not None and rcl.available and w.kind != "log":
             age = self.clock.aging() if w.stamped else None
-            n = rcl.drain(handle, w.window.add, age, w.sink, payload=w.kind == "diag")
+            n = rcl.drain(handle, w.window.add, age, w.sink, payload=w.kind in ("diag", "status"))
             if rcl.available:
                 return n
         raw, take, msg_type, n = w.kind != "log", handle.take_message, w.sub.msg_type, 0

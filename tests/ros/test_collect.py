@@ -208,3 +208,58 @@ def test_a_node_restarted_under_its_name_is_found_in_its_new_process(children, r
         took = time.monotonic() - t0
         assert took < 4.0, f"found in the new process after {took:.1f} s (the periodic read is 5 s)"
         assert s.graph.nodes["node:/phoenix"]["pid_status"] == "confirmed"
+
+
+# An action server whose goals take 0.3 s, and a client that sends one after the other: the
+# server's status array lists every goal it remembers, so it grows past the first bytes the
+# collector copies of most messages.
+GOALS = """
+import time, rclpy
+from rclpy.action import ActionClient, ActionServer
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from test_msgs.action import Fibonacci
+rclpy.init()
+server, client = Node("mover"), Node("mission")
+def execute(goal):
+    time.sleep(0.3)
+    goal.succeed()
+    return Fibonacci.Result()
+ActionServer(server, Fibonacci, "/move", execute)
+ac = ActionClient(client, Fibonacci, "/move")
+ex = MultiThreadedExecutor()
+ex.add_node(server)
+ex.add_node(client)
+import threading
+threading.Thread(target=ex.spin, daemon=True).start()
+ac.wait_for_server()
+time.sleep(3.0)  # the monitor follows the status topic before the first goal
+for k in range(6):
+    sent = ac.send_goal_async(Fibonacci.Goal(order=k))
+    while not sent.done():
+        time.sleep(0.01)
+    done = sent.result().get_result_async()
+    while not done.done():
+        time.sleep(0.01)
+    print("goal done", k, flush=True)
+    time.sleep(0.7)
+time.sleep(60)
+"""
+
+
+@pytest.mark.skipif(not HAVE_ACTIONS, reason="test_msgs (ros-jazzy-test-msgs) is not installed")
+def test_every_goal_that_ends_is_a_goal_event_of_its_server(children, ros_domain):
+    proc = children.python(GOALS, name="goals")
+    events = []
+    with Collector(ros_domain) as col:
+        end = time.monotonic() + 40.0
+        while time.monotonic() < end and len([e for e in events if e.kind == "goal"]) < 6:
+            events += col.sample().events
+            time.sleep(0.5)
+    goals = [e for e in events if e.kind == "goal"]
+    errors = [e.text for e in events if e.kind == "observe_error"]
+    log = (children.workdir / f"goals_{children.procs.index(proc)}.log").read_text()
+    assert "goal done 5" in log, log
+    assert [(e.member, e.data["action"], e.data["status"]) for e in goals] == [
+        ("node:/mover", "/move", "succeeded")] * 6, (goals, errors)
+    assert errors == []
