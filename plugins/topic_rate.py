@@ -21,6 +21,7 @@ EXECUTOR_CPU = "executor_cpu_percent"
 PROMPT_INTERVALS = 6  # a reconfigured rate shows in the collector's recent rate within this many intervals
 FORGET_S = 600.0  # as long as the monitor keeps a vanished member by default (forget_gone_s)
 SINGLE_RUN_S = 0.5  # a run of messages this short is one answer (a few messages at most)
+ANSWERS_HZ = 1.0  # a server's topic at most this fast while publishing can be its answers
 
 
 class TopicRate(Plugin):
@@ -337,14 +338,16 @@ def _withheld(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhyt
 
 
 def _on_request(ctx: PluginContext, topic: str, r: Rhythm) -> bool:
-    """True when ``topic`` is published on request: it comes one message at a time (every run
-    between its healthy gaps under ``SINGLE_RUN_S``) from nodes that each serve a service or an
-    action someone calls. A detector that publishes what it found when asked, a planner its
-    plan: its quiet is its clients' not asking, which nothing observed without introspection
-    tells from a hang. The server's own failure shows at its clients (the ``services`` plugin:
-    their timeouts and errors name it), not in this topic's silence."""
+    """True when ``topic`` is published on request: it comes one message at a time — every run
+    between its healthy gaps under ``SINGLE_RUN_S``, or, without gaps, at most ``ANSWERS_HZ``
+    while publishing — from nodes that each serve a service or an action someone calls. A
+    detector that publishes what it found when asked, a planner its plan: its quiet is its
+    clients' not asking, which nothing observed without introspection tells from a hang. The
+    server's own failure shows at its clients (the ``services`` plugin: their timeouts and
+    errors name it), not in this topic's silence."""
     pubs = ctx.publishers(topic)
-    if not pubs or not r.gaps or not r.runs or max(r.runs) > SINGLE_RUN_S:
+    answers = max(r.runs) <= SINGLE_RUN_S if r.gaps and r.runs else not r.gaps and 0 < r.rate <= ANSWERS_HZ
+    if not pubs or not answers:
         return False
     served = ctx.structural(lambda: {n for kind in ("service", "action") for m in ctx.members(kind)
                                      if ctx.clients(m) for n in ctx.servers(m)}, key="served")

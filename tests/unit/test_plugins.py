@@ -463,6 +463,12 @@ def test_topic_rate_a_topic_published_on_request_is_not_silent_when_nobody_asks(
         frames = [(t, served_model(served, called, **seen(msgs, t)), []) for t in HALF[:125]]
         silences = [a for a in drive("topic_rate", frames) if a[2] == "error"]
         assert silences[:1] == [(84.5, "topic:/img", "error")], (served, called)
+    # Asked every 3-4 s (no notable gap: it settles as continuous at ~0.3 Hz), then not for 30 s.
+    often = [5.0 + 3.5 * k for k in range(12)] + [73.5 + 3.5 * k for k in range(8)]
+    frames = [(t, served_model(**seen(often, t)), []) for t in HALF[:100]]
+    assert drive("topic_rate", frames) == []
+    frames = [(t, served_model(False, False, **seen(often, t)), []) for t in HALF[:100]]
+    assert [a for a in drive("topic_rate", frames) if a[2] == "error"][:1] == [(52.5, "topic:/img", "error")]
     # A burst topic of a server (10 Hz for 2 s) is not on request: its hang is a silence.
     burst = bursts(range(0, 50, 8))
     frames = [(t, served_model(**seen(burst, t)), []) for t in HALF[:90]]
