@@ -714,24 +714,17 @@ def test_member_gone_a_node_that_comes_back_cleanly_now_and_then_is_healthy():
         frames += [(t, camera_in(pid), []), (t + 10.0, camera_in(None), exit_of(t + 10.0, pid, [], []))]
         pid += 1
     assert drive("member_gone", frames) == []
-    # An operator's tool: open 45 s, closed cleanly, opened again 10 s later, four times: each
-    # life ran its course.
-    frames, pid = [], 100
-    for k in range(4):
-        t = 55.0 * k
-        frames += [(t + dt, camera_in(pid), []) for dt in range(0, 46, 5)]
-        frames += [(t + 46.0, camera_in(None), exit_of(t + 46.0, pid, [], []))]
-        pid += 1
-    assert drive("member_gone", frames) == []
+    def lives(every: float) -> list:
+        """Four lives of 46 s (sampled every 5 s), each ended cleanly, the next ``every`` s on."""
+        return [f for k in range(4) for f in
+                [(every * k + dt, camera_in(100 + k), []) for dt in range(0, 46, 5)]
+                + [(every * k + 46.0, camera_in(None), exit_of(every * k + 46.0, 100 + k, [], []))]]
+
+    # An operator's tool: open 45 s, closed cleanly, opened again 10 s later: each life ran its course.
+    assert drive("member_gone", lives(55.0)) == []
     # The same lives ended by a respawn at once (a node dying of an exception says goodbye to DDS
     # too): a restart each time, a loop from the second within loop_window_s.
-    frames, pid = [], 100
-    for k in range(4):
-        t = 47.0 * k
-        frames += [(t + dt, camera_in(pid), []) for dt in range(0, 46, 5)]
-        frames += [(t + 46.0, camera_in(None), exit_of(t + 46.0, pid, [], []))]
-        pid += 1
-    assert [a[2] for a in drive("member_gone", frames)] == ["warn", "warn"]
+    assert [a[2] for a in drive("member_gone", lives(47.0))] == ["warn", "warn"]
     # Restarted cleanly but often (every 10 s): a loop all the same.
     frames, pid = [], 100
     for k in range(4):
