@@ -132,7 +132,8 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
     came within ``transition_grace_s`` of the cause is not judged (nor learned) until
     ``reconfigure_s`` after it: a slower rate shows its next message by then and is learned; a
     topic still quiet then (a hang that came with the change, a publisher switched off) is judged
-    against its old rhythm. A departure that begins later is no reconfiguration's.
+    against its old rhythm. A departure that begins later, or a drop under way before the
+    change, is no reconfiguration's.
     """
     s = ctx.settings
     window, ratio = s["reconfigure_s"], s["drop_ratio"]
@@ -182,6 +183,9 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
             if base is None or relearn.get(topic, -math.inf) >= at or not now > 0 \
                     or not (r.newest or -math.inf) > at:  # a new rate shows in messages after the change
                 continue
+            began = ctx.state.get("_held", {}).get((topic, "drop"))
+            if began is not None and began < at - grace:
+                continue  # a drop under way before the change is not the change's
             # A new rate shows within a few of its intervals (the window's rate: once the window
             # turned over); a change that comes later is not this one.
             prompt = max(grace, PROMPT_INTERVALS / now) + (0.0 if recent == recent else s["rate_window_s"])

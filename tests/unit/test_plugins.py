@@ -410,6 +410,11 @@ def test_topic_rate_a_reconfigured_rate_is_the_new_normal_a_drop_without_a_chang
     earlier = param(26.0, exposure="0.02")
     frames = [(t, model(**seen(msgs, t)), [earlier] if t == 26.5 else []) for t in HALF[:90]]
     assert drive("topic_rate", frames)[:1] == [(32.5, "topic:/img", "warn")]
+    # The camera degrades at 30.0 (low from 31.5) and its rate is set at 34.0 (an executive slowing
+    # it while idle): the drop was under way before the change, so it is not the change's.
+    late = param(34.0, rate_hz="5.0")
+    frames = [(t, model(**seen(msgs, t)), [late] if t == 34.5 else []) for t in HALF[:90]]
+    assert drive("topic_rate", frames, settings={"confirm": 5})[:1] == [(35.5, "topic:/img", "warn")]
     # After the new normal is learned, a drop from it alerts: 4 Hz -> 1 Hz at 60 s.
     slowed = msgs[:300 + 120] + [60 + i for i in range(30)]
     frames = [(t, model(**seen(slowed, t)), [set_rate] if t == 30.5 else []) for t in HALF[:90]]
