@@ -178,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--healthy", type=float, default=600.0, help="s of the healthy run (0: none)")
     ap.add_argument("--warmup", type=float, default=30.0,
-                    help="s from the start to the injection (30: the executive is at work, its first long idle ~50 s)")
+                    help="s from the start to the injection (30: the executive at work, idle from ~50 s)")
     ap.add_argument("--post", type=float, default=30.0, help="s monitored after the injection")
     ap.add_argument("--faults", default=",".join(FAULTS), help="comma list (none: no fault runs)")
     ap.add_argument("--out", type=Path, default=Path("bench/out/station"))
