@@ -5,7 +5,7 @@
 Each run starts the station's processes (`bench.station.robot`) on a ROS_DOMAIN_ID of its own,
 the in-process monitor with the default configuration, and, for a fault, injects it ``--warmup``
 s after every process is ready (the monitor is not told) and monitors ``--post`` s more. The HMI
-joins 30 s after the start, exits cleanly (code 0) 45 s later and its launcher starts it again
+joins 15 s after the start, exits cleanly (code 0) 45 s later and its launcher starts it again
 10 s after that. Writes ``OUT/runs.jsonl`` (per run: the fault, its truth, every alert, the live
 ranking with its scores, strict = the node, process = any node of its process) and
 ``OUT/summary.json`` (AC@1/AC@3 strict and process level, as in `bench.eval.metrics`; alerts in
@@ -51,7 +51,7 @@ FAULTS = {
     "cpu_planning": ("cpu", "/arm/motion_planner", "planning"),
     "hang_aggregator": ("file:hang", "/station/diagnostic_aggregator", "monitoring"),
 }
-HMI_JOIN, HMI_RUN, HMI_AGAIN = 30.0, 45.0, 10.0
+HMI_JOIN, HMI_RUN, HMI_AGAIN = 15.0, 45.0, 10.0  # joins before a fault at 30 s
 
 
 class Station:
