@@ -10,6 +10,7 @@ import numpy as np
 
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, held, streak
+from stream_viz.model.qos import qos_policy
 from stream_viz.records import Alert
 
 
@@ -119,15 +120,25 @@ def _above_usual(ctx: PluginContext, topic: str, attr: str, floor: float,
 
 
 def _drops(ctx: PluginContext, topic: str, rate: float, fresh: bool) -> list[Alert]:
-    """``drops_per_s ≥ max(drops_min_per_s, drops_ratio × rate)`` for ``confirm`` fresh samples."""
+    """``drops_per_s ≥ max(drops_min_per_s, drops_ratio × rate)`` for ``confirm`` fresh samples,
+    on a topic some publisher sends reliably: a best-effort publisher's messages are lost by
+    design on a busy link or reader, the monitor's own first (sequence gaps are counted where
+    the monitor receives)."""
     s = ctx.settings
     drops = ctx.value(topic, "drops_per_s")
-    if math.isnan(drops):
+    if math.isnan(drops) or best_effort(ctx.attr(topic, "qos")):
         return []
     limit = max(s["drops_min_per_s"], s["drops_ratio"] * (0.0 if math.isnan(rate) else rate))
     if streak(ctx.state, (topic, "drops"), drops >= limit, fresh) < s["confirm"]:
         return []
     return [ctx.alert(topic, "warn", f"{drops:.3g} messages/s dropped", symptom="drops", drops_per_s=drops)]
+
+
+def best_effort(qos: Any) -> bool:
+    """True when every publisher endpoint in the topic attribute ``qos`` (and at least one) is
+    best effort."""
+    pubs = [q for q in qos or () if isinstance(q, dict) and q.get("role") == "pub"]
+    return bool(pubs) and all(qos_policy(q, "reliability") == "best_effort" for q in pubs)
 
 
 def common_mode(seen: list[tuple[str, str, tuple[float, float, bool] | None, bool]], least: int,

@@ -505,6 +505,13 @@ def test_topic_latency_quiet_then_rise_and_drops():
     assert drive("topic_latency", bursty) == [(34.0, "topic:/img", "warn"), (35.0, "topic:/img", "warn")]
     drops = [(float(t), model(drops=0.2 if t < 3 else 4.0), []) for t in range(7)]
     assert drive("topic_latency", drops) == [(5.0, "topic:/img", "warn"), (6.0, "topic:/img", "warn")]
+    # The same losses of a best-effort publisher's messages (a camera's frames): by design.
+    for reliability, want in (("best_effort", []), ("reliable", [5.0, 6.0])):
+        frames = []
+        for t, G, ev in drops:
+            G.nodes["topic:/img"]["qos"] = [{"role": "pub", "node": "/camera", "reliability": reliability}]
+            frames.append((t, G, ev))
+        assert [a[0] for a in drive("topic_latency", frames)] == want, reliability
 
 
 def test_topic_latency_jitter_a_bursty_topic_often_shows_is_no_rise():
