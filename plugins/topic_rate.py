@@ -162,14 +162,16 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
     for _ in range(len(out)):  # until no input's change is left to pass downstream
         moved = False
         for k, (topic, r, rate, base, quiet) in enumerate(out):
-            at = cause(topic)
+            # A continuous topic, or one re-learned after an earlier change (its new rate may have
+            # gaps): a bursty topic's rate and quiets come and go with its rhythm, not a change.
+            at = cause(topic) if (r.settled and not r.gaps) or topic in relearn else None
             until, since = deferred.get(topic, (math.inf, r.newest))
             if at is None or ctx.t >= until or r.newest != since:
                 if deferred.pop(topic, None) and r.newest == since:  # still quiet when the change
                     r.explained = False  # had time to show: judge it
             if at is None:
                 continue
-            limit = _base_limit(s, _ref_hz(r, base))
+            limit = quiet_limit(r, _base_limit(s, _ref_hz(r, base)), s["gap_margin"])
             grace = s["transition_grace_s"]
             if quiet is not None and quiet >= limit and r.newest is not None \
                     and abs(r.newest - at) <= grace and not (r.departed or r.explained):

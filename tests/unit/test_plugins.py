@@ -421,6 +421,17 @@ def test_topic_rate_a_reconfigured_rate_is_the_new_normal_a_drop_without_a_chang
     assert drive("topic_rate", frames)[:1] == [(63.5, "topic:/img", "warn")]
 
 
+def test_topic_rate_a_bursty_topic_keeps_its_rhythm_through_parameter_changes():
+    # 10 Hz for 2 s every 8 s; its node's threshold set every 4 s: its gaps are learned as ever,
+    # and its hang (nothing after 98 s) is a silence at twice its longest gap.
+    healthy = bursts(range(0, 100, 8))
+    tuned = {t: [param(t - 0.3, threshold="0.6")] for t in HALF if int(t) % 4 == 0}
+    frames = [(t, model(**seen(healthy, t)), tuned.get(t, [])) for t in HALF[:120]]
+    alerts = drive("topic_rate", frames, full=True)
+    assert [(a.t, a.member) for a in alerts][:1] == [(111.5, "topic:/img")]
+    assert 12.0 <= alerts[0].data["limit_s"] <= 14.0, alerts[0].data
+
+
 def test_topic_rate_a_quiet_after_a_reconfiguration_waits_for_its_new_rhythm():
     # 10 Hz, then 0.5 Hz from 32.0 (set at 30.0): no silence while the next messages come slower.
     msgs = [i / 10 for i in range(300)] + [32 + 2 * i for i in range(30)]
