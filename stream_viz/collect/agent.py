@@ -23,7 +23,7 @@ from stream_viz.collect.diagcdr import diagnostic_array
 from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.hostreport import AGENT_TOPIC, HostReport, encode
 from stream_viz.collect.pidmap import PidResolver
-from stream_viz.collect.processes import ProcessSampler
+from stream_viz.collect.processes import MachineSampler, ProcessSampler
 from stream_viz.collect.readings import ProcessReading
 from stream_viz.collect.rosgraph import UNKNOWN_NODE
 from stream_viz.errors import CollectError
@@ -62,6 +62,7 @@ class Agent:
         self.host = host or socket.gethostname()
         self.name = f"_stream_viz_agent_{os.getpid()}"
         self.sampler = ProcessSampler()
+        self.machine = MachineSampler()
         self._count, self._read_at, self._unsure = -1, 0.0, True
         self._gids: dict[str, bytes] = {}
         self._mine: dict[str, int] = {}
@@ -113,7 +114,8 @@ class Agent:
             r.alive = False
             processes[pid] = r
         self.seq += 1
-        return HostReport(self.host, self.host_id, self.seq, self.period_s, mine, processes)
+        return HostReport(self.host, self.host_id, self.seq, self.period_s, mine, processes,
+                          self.machine.sample())
 
     def _participants(self) -> dict[str, int]:
         """GUID prefix → pid of this host's participants. The /rosout endpoints are read again

@@ -2,7 +2,9 @@
 
 One report per sample: a ``diagnostic_msgs/DiagnosticArray`` whose first status describes the
 host (``name`` = `HOST_STATUS`, ``hardware_id`` = the host name, key-values ``schema``,
-``host_id``, ``seq``, ``period_s``) and whose other statuses are one per process (``name`` =
+``host_id``, ``seq``, ``period_s``, ``machine``: the whole computer's CPU and memory in use as
+``machine_cpu_percent=97 machine_mem_percent=41``) and whose other statuses are one per process
+(``name`` =
 ``process <pid>``, level OK when alive, ERROR once it ended, ``message`` = the process name,
 key-values ``ppid``, ``participants`` (its GUID prefixes), ``metrics`` (its θ as
 ``cpu_percent=12.5 rss_mb=40 …``: one string, not one key-value each, keeps the report small and
@@ -54,6 +56,7 @@ class HostReport:
     period_s: float = 1.0
     participants: dict[str, int] = field(default_factory=dict)
     processes: dict[int, ProcessReading] = field(default_factory=dict)
+    machine: dict[str, float] = field(default_factory=dict)  # the host's own θ (`MachineSampler`)
 
 
 def encode(report: HostReport, known: set[int] | frozenset[int] = frozenset()) -> list[StatusRow]:
@@ -61,6 +64,8 @@ def encode(report: HostReport, known: set[int] | frozenset[int] = frozenset()) -
     identity of the processes in ``known`` is left out."""
     head = [("schema", SCHEMA), ("host_id", str(report.host_id)), ("seq", str(report.seq)),
             ("period_s", f"{report.period_s:g}")]
+    if report.machine:
+        head.append(("machine", _metrics_text(report.machine)))
     rows = [StatusRow(OK, HOST_STATUS, f"{len(report.processes)} processes", report.host, head)]
     by_pid: dict[int, list[str]] = {}
     for prefix, pid in sorted(report.participants.items()):
@@ -78,7 +83,7 @@ def encode(report: HostReport, known: set[int] | frozenset[int] = frozenset()) -
                 kv.append(("username", p.username))
         if p.unreadable:
             kv.append(("unreadable", ",".join(p.unreadable)))
-        metrics = " ".join(f"{k}={v:.4g}" for k, v in sorted(p.metrics.items()) if math.isfinite(v))
+        metrics = _metrics_text(p.metrics)
         if metrics:
             kv.append(("metrics", metrics))
         rows.append(StatusRow(OK if p.alive else ERROR, f"process {pid}", p.name, report.host, kv))
@@ -95,6 +100,7 @@ def decode(rows: list[StatusRow], before: HostReport | None = None) -> HostRepor
         return None
     report = HostReport(rows[0].hardware_id, int(head["host_id"]), int(head.get("seq", 0)),
                         float(head.get("period_s", 1.0)))
+    report.machine = _metrics(head.get("machine", ""), set(SCHEMAS["host"]))
     names = set(SCHEMAS["process"])
     for row in rows[1:]:
         kv = dict(row.values)
@@ -114,6 +120,11 @@ def decode(rows: list[StatusRow], before: HostReport | None = None) -> HostRepor
             if prefix:
                 report.participants[prefix] = pid
     return report
+
+
+def _metrics_text(values: dict[str, float]) -> str:
+    """Named values as one ``name=value …`` string (unknown ones left out)."""
+    return " ".join(f"{k}={v:.4g}" for k, v in sorted(values.items()) if math.isfinite(v))
 
 
 def _metrics(text: str, names: set[str]) -> dict[str, float]:

@@ -18,13 +18,15 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import networkx as nx
 
 from stream_viz.collect.hostreport import AGENT_TOPIC, HostReport, StatusRow, decode, host_of_prefix
-from stream_viz.collect.readings import PidInfo
+from stream_viz.collect.processes import MachineSampler
+from stream_viz.collect.readings import PidInfo, ProcessReading
 from stream_viz.model.graph import PROCESS_TREE, add_member, add_tree_edge
 from stream_viz.model.ids import ROOT, make_id
 from stream_viz.model.queries import predecessors
@@ -64,7 +66,8 @@ def remote_id(host: str, pid: int) -> str:
 
 def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, str],
                 received: dict[int, Received], now: float, names: dict[int, str] | None = None,
-                first_seen: dict[int, float] | None = None) -> dict[str, str]:
+                first_seen: dict[int, float] | None = None,
+                machine: Mapping[str, float] | None = None) -> dict[str, str]:
     """Add the host level and the remote processes to the model ``G`` of one sample.
 
     Parameters
@@ -84,6 +87,8 @@ def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, st
     first_seen : dict, optional
         Host id → when its first node was seen; a host without report younger than
         `AGENT_GRACE_S` is left out for now (default: all are old enough).
+    machine : mapping, optional
+        This computer's own host θ (`MachineSampler`); another host's comes in its agent's report.
 
     Returns
     -------
@@ -97,7 +102,7 @@ def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, st
     remote = {h for h in node_host.values() if h != own_id} | {h for h in received if h != own_id}
     if not remote:
         return {}  # one computer: the model stays as it always was
-    _host_member(G, own_name, own_id, "local")
+    _host_member(G, own_name, own_id, "local", machine or {})
     tops = [m for m, k in G.nodes(data="kind") if k == "process"
             and not predecessors(G, m, layer=PROCESS_TREE)]
     for m, k in list(G.nodes(data="kind")):
@@ -127,7 +132,12 @@ def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, st
             why = f"process unknown: the agent on host {name} has been silent for {now - got.t:.0f} s"
         else:
             why = ""
-        _host_member(G, name, h, "none" if got is None else ("silent" if why else "reporting"))
+        if got is None:
+            _host_member(G, name, h, "none", {})
+        elif why:  # a silent agent: the computer's θ unknown, how long it has been silent said
+            _host_member(G, name, h, "silent", {}, silent_s=round(now - got.t, 1))
+        else:
+            _host_member(G, name, h, "reporting", got.report.machine)
         add_tree_edge(G, ROOT, make_id("host", name))
         if got is not None:
             unknown.update(_add_processes(G, name, got.report, why))
@@ -136,9 +146,11 @@ def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, st
     return unknown
 
 
-def _host_member(G: nx.MultiDiGraph, name: str, host_id: int, agent: str) -> None:
-    add_member(G, make_id("host", name), theta=make_theta("host", {}), host_id=f"{host_id:04x}",
-               agent=agent)
+def _host_member(G: nx.MultiDiGraph, name: str, host_id: int, agent: str,
+                 machine: Mapping[str, float], **attrs: Any) -> None:
+    values = {k: v for k, v in machine.items() if k in SCHEMAS["host"]}
+    add_member(G, make_id("host", name), theta=make_theta("host", values), host_id=f"{host_id:04x}",
+               agent=agent, **attrs)
 
 
 def _add_processes(G: nx.MultiDiGraph, host: str, report: HostReport, why: str) -> dict[str, str]:
@@ -186,8 +198,10 @@ def _place_node(G: nx.MultiDiGraph, fqn: str, prefix: str, host: str, got: Recei
 
 def remote_exits(t: float, host: str, before: HostReport, now: HostReport,
                  node_prefix: dict[str, str]) -> list[Event]:
-    """The ``exit`` events of processes alive in the agent's previous report and ended (or gone)
-    in this one; as the collector's: nodes DDS still lists make it an error (no clean shutdown).
+    """The ``exit`` events of processes alive in the agent's previous report and ended in this one,
+    or left out of it once DDS no longer lists their nodes; as the collector's: nodes DDS still
+    lists make it an error (no clean shutdown). The agent keeps a process that ended in its
+    reports while DDS lists its nodes, so one left out while they are listed has not ended.
 
     ``node_prefix`` maps the node fqns listed now to their participant's GUID prefix.
     """
@@ -195,12 +209,14 @@ def remote_exits(t: float, host: str, before: HostReport, now: HostReport,
     out = []
     for pid, p in sorted(before.processes.items()):
         after = now.processes.get(pid)
-        if not p.alive or (after is not None and after.alive and after.create_time == p.create_time):
+        if not p.alive or (after is not None and after.alive and _same_start(p, after)):
             continue
         prefixes = {pre for pre, q in before.participants.items() if q == pid}
         had = sorted(n for n, pre in node_prefix.items() if pre in prefixes)
         listed = [n for n in had if node_prefix[n] in listed_prefixes]
         still = bool(prefixes & listed_prefixes)
+        if after is None and still and not set(now.participants) & prefixes:
+            continue  # left out while the agent maps its participants again: not said to have ended
         level = "error" if still else ("warn" if prefixes else "info")
         nodes = [make_id("node", n) for n in had]
         proc = remote_id(host, pid)
@@ -211,6 +227,12 @@ def remote_exits(t: float, host: str, before: HostReport, now: HostReport,
         for m in [*nodes, proc]:
             out.append(Event(t, "exit", m, level, text, data))
     return out
+
+
+def _same_start(p: ProcessReading, q: ProcessReading) -> bool:
+    """Not a new process under the same pid. A start time only one of them knows says nothing:
+    the monitor may have missed the report that carried it (sent when new and every tenth)."""
+    return p.create_time is None or q.create_time is None or p.create_time == q.create_time
 
 
 def remote_pids(G: nx.MultiDiGraph, own_name: str) -> dict[str, tuple[str, int]]:
@@ -254,6 +276,7 @@ class HostReports:
         self.received: dict[int, Received] = {}
         self.names: dict[int, str] = {}
         self.first_seen: dict[int, float] = {}
+        self.machine = MachineSampler()  # this computer's host θ, once several hosts are seen
         self._pids: dict[str, tuple[str, int]] = {}  # remote node -> (host, pid) last sample
         self._type = DiagnosticArray
         self._sub = node.create_subscription(DiagnosticArray, AGENT_TOPIC, lambda m: None, QOS)
@@ -296,7 +319,7 @@ class HostReports:
         if self.own[0] is None:
             return events, {}
         unknown = merge_hosts(G, pids, (self.own[0], self.own[1]), self.received, t, self.names,
-                              self.first_seen)
+                              self.first_seen, self.machine.sample())
         now = remote_pids(G, self.own[1])
         events += remote_restarts(t, self._pids, now)
         self._pids = now

@@ -125,6 +125,22 @@ class ProcSample:
     errors: dict[int, str] = field(default_factory=dict)  # pid -> why it could not be read at all
 
 
+class MachineSampler:
+    """The whole computer: CPU in use (% of all its cores) and memory in use (%), a host's θ.
+
+    What a process's own metrics cannot say: a computer saturated by something outside the robot
+    (or by all its processes together) slows every node on it.
+    """
+
+    def __init__(self) -> None:
+        psutil.cpu_percent(None)  # the first call only starts the interval
+
+    def sample(self) -> dict[str, float]:
+        """CPU since the last call and memory now, under the host θ names."""
+        return {"machine_cpu_percent": psutil.cpu_percent(None),
+                "machine_mem_percent": psutil.virtual_memory().percent}
+
+
 class ProcessSampler:
     """Samples the given pids and their ancestors up to the top of the process tree.
 

@@ -5,9 +5,10 @@ else, the fault of now. Ranked together, a loud old symptom can take the first p
 fault a user is looking at. So symptom episodes (`stream_viz.rca.episodes`) are grouped first:
 two episodes belong to one incident when their members are at most ``incident_hops`` hops apart
 (data flow in either direction, service calls, a node and its process, an alert and the node it
-names, a service and its servers and clients) and the episodes are at most ``episode_gap``
-apart in time (single linkage: a chain of such pairs is one incident). Each incident is ranked
-on its own alerts; the diagnosis is the ranking of the *current* incident.
+names, a service and its servers and clients, a host with a symptom and its nodes) and the
+episodes are at most ``episode_gap`` apart in time (single linkage: a chain of such pairs is one
+incident). Each incident is ranked on its own alerts; the diagnosis is the ranking of the
+*current* incident.
 
 The current incident is one with a candidate at all (not, say, the metric evidence of a process
 that hosts no node); among those an ongoing one (its last episode ended less than
@@ -275,6 +276,8 @@ def diagnose(
     pairs = [(m, n) for m, name in s.named for n in pointed_nodes(G, m, [name])]
     pairs += [(m, n) for m in episodes if m.startswith(("service:", "action:"))
               for n in (*servers(G, m), *clients(G, m))]
+    # A host with a symptom of its own and the nodes on it (only then: a host would join everything).
+    pairs += [(m, n) for m in episodes if m.startswith("host:") for n in nodes_of_process(G, m)]
     links: dict[str, set[str]] = {}
     for m, n in pairs:
         links.setdefault(m, set()).add(n)

@@ -43,7 +43,8 @@ class Symptoms:
     strongest severity weight); ``logged`` when a member's own log lines (symptom ``log``) began
     to alert — a node that logs is running, which a starved one is not; ``exited`` when a node's
     process was seen to die (an alert for its process with symptom ``exit``); ``latest`` the latest
-    alert time; ``count`` how many alerts they come from.
+    alert time; ``count`` how many alerts they come from; ``began`` when a member's symptom
+    began by its own alerts' word (data ``since``: a host saturated for a while before it alerts).
     """
 
     times: dict[str, np.ndarray] = field(default_factory=dict)
@@ -58,6 +59,7 @@ class Symptoms:
     named: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict)
     logged: dict[str, float] = field(default_factory=dict)
     exited: dict[str, float] = field(default_factory=dict)
+    began: dict[str, float] = field(default_factory=dict)
     latest: float = -INF
     count: int = 0
 
@@ -107,6 +109,8 @@ def collect_symptoms(
                 s.logged[a.member] = min(s.logged.get(a.member, INF), a.t)
         elif data.get("symptom") == "exit":
             s.exited[a.member] = min(s.exited.get(a.member, INF), a.t)
+        if data and isinstance(data.get("since"), int | float):
+            s.began[a.member] = min(s.began.get(a.member, INF), float(data["since"]), a.t)
         for name in names_in(data) if data else ():
             t0, w0 = s.named.get((a.member, name), (INF, 0.0))
             s.named[(a.member, name)] = (min(t0, a.t), max(w0, w))

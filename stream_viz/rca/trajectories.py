@@ -33,6 +33,7 @@ import numpy as np
 from stream_viz.rca.causal import path_back, trace
 from stream_viz.rca.cooccurrence import cooccurrence
 from stream_viz.rca.episodes import Evidence
+from stream_viz.rca.hosts import lift_hosts
 from stream_viz.rca.settings import RcaSettings
 from stream_viz.rca.symptoms import NodeView, Symptoms, collect_symptoms, gone_members, node_views
 from stream_viz.rca.timelag import LagDistribution
@@ -217,6 +218,7 @@ def rank_trajectory(ctx: Context) -> list[RootCause]:
 def finish(ctx: Context, causes: list[RootCause]) -> list[RootCause]:
     """Sort best first (ties: earlier onset, then id), keep ``top_k``, round scores.
 
+    A host whose own symptom explains its nodes' goes just above the first of them (`lift_hosts`).
     Candidates the evidence cannot tell apart (``indistinguishable``) share the best score among
     them: their trajectories differ only by where each sits in the data flow, which says nothing
     about which of them stalled.
@@ -228,7 +230,7 @@ def finish(ctx: Context, causes: list[RootCause]) -> list[RootCause]:
             rc.score = max([rc.score, *(best[m] for m in v.indistinguishable if m in best)])
     onset = {n: v.onset for n, v in ctx.views.items()}
     ranked = sorted(causes, key=lambda rc: (-rc.score, onset.get(rc.member, np.inf), rc.member))
-    ranked = ranked[: ctx.settings.top_k]
+    ranked = lift_hosts(ctx.G, ranked, ctx.symptoms, ctx.settings.tolerance)[: ctx.settings.top_k]
     for rc in ranked:
         rc.score = round(float(rc.score), 6)
     return ranked

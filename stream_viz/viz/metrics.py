@@ -1,4 +1,4 @@
-"""``/metrics/<kind>/<member>/theta``: θ of processes and topics as time series, sent in batches.
+"""``/metrics/<kind>/<member>/theta``: θ of processes, topics and hosts as time series, sent in batches.
 
 One entity per member holds all its θ series (one column each, named in a static
 ``SeriesLines``): per-row overhead (row id, time) is shared by the whole vector, which keeps a
@@ -19,8 +19,9 @@ from stream_viz.model.ids import kind_of, name_of
 from stream_viz.model.theta import SCHEMAS
 from stream_viz.viz import paths, style
 
-METRIC_KINDS = ("process", "topic")
-VISIBLE = {"topic": ("rate_hz",), "process": ("cpu_percent", "rss_mb")}
+METRIC_KINDS = ("process", "topic", "host")  # a host's θ: only with several computers
+VISIBLE = {"topic": ("rate_hz",), "process": ("cpu_percent", "rss_mb"),
+           "host": ("machine_cpu_percent", "machine_mem_percent")}
 
 
 def _t_graph(sample: Any) -> tuple[float, nx.MultiDiGraph]:

@@ -85,7 +85,7 @@ def report_markdown(
             lines.append(f"| {i} | **`{rc['member']}`** | {float(rc.get('score', 0.0)):.3f} | {traj} |")
         if len(root_causes) > top:
             lines += ["", f"… and {len(root_causes) - top} more."]
-        lines += _alike_notes(root_causes[:top])
+        lines += _alike_notes(root_causes[:top]) + _host_notes(root_causes[:top])
     if len(incidents) > 1:
         lines += ["", "## Incidents (times UTC)", "",
                   "| incident | symptomatic members | from | to | top root cause |", "|---|---|---|---|---|"]
@@ -121,6 +121,18 @@ def _alike_notes(root_causes: Sequence[Mapping[str, Any]]) -> list[str]:
         names = ", ".join(f"`{m}`" for m in group)
         out.append(f"{names} run in `{ev.get('process', '?')}` and changed alike: the symptoms cannot "
                    "tell them apart (the fault is in that process).")
+    return ["", *out] if out else []
+
+
+def _host_notes(root_causes: Sequence[Mapping[str, Any]]) -> list[str]:
+    """One line per host ranked as a cause: whose symptoms it explains."""
+    out = []
+    for rc in root_causes:
+        ev = rc.get("evidence") or {}
+        if ev.get("host"):
+            nodes = ", ".join(f"`{n}`" for n in ev.get("explains_nodes") or [])
+            out.append(f"`{rc['member']}` went wrong ({', '.join(ev.get('plugins') or [])}) before anything "
+                       f"else on it, and none of its processes is to blame: it explains {nodes}.")
     return ["", *out] if out else []
 
 

@@ -19,7 +19,9 @@ import pytest
 
 from stream_viz.testing import EXE, claim_domain
 from stream_viz.testing_hosts import NODE, OBSERVER, Lab, Samples, inner, lab_env, why_not
+from stream_viz.viz import paths
 from tests.cli.test_cli import check_report
+from tests.viz import rrd
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -133,3 +135,42 @@ def test_a_crash_on_another_host_is_ranked_first_with_its_host_and_process(lab, 
     again = json.loads(offline.read_text())
     assert again["root_causes"][0]["member"] == "node:/cam"
     assert {m["id"]: m.get("host") for m in again["members"]}["node:/cam"] == "host:b"
+
+
+def test_a_computer_off_the_network_is_ranked_first_as_that_host(lab, tmp_path):
+    """Host b drops off the network (its link down: everything on it still runs, out of sight):
+    its agent falls silent with its nodes' topics; the diagnosis names the host, not one node."""
+    env = lab_env(claim_domain())
+    a, b = lab.add("a"), lab.add("b")
+    node = _script(tmp_path, "node", NODE)
+    a.run([sys.executable, node, "planner", "cam", "imu"], env, tmp_path / "planner.log")
+    b.run([sys.executable, node, "cam"], env, tmp_path / "cam.log")
+    b.run([sys.executable, node, "imu"], env, tmp_path / "imu.log")
+    b.run([EXE, "agent", "--period", "0.5"], env, tmp_path / "agent.log")
+    cfg = tmp_path / "c.toml"
+    # The lab's hosts share this machine's CPU, loaded by whatever else runs: not the robot's.
+    cfg.write_text("[monitor]\nperiod = 0.5\n[plugins.host_state]\ncpu_percent = 101.0\n")
+    rep = tmp_path / "r.json"
+    monitor = a.run([EXE, "monitor", "--duration", "34", "--viewer", "none", "--config", str(cfg),
+                     "--report", str(rep), "--db", str(tmp_path / "a.sqlite"),
+                     "--save", str(tmp_path / "r.rrd")], env, tmp_path / "monitor.log")
+    time.sleep(22.0)  # discovery, the agent's first reports, the topics' rhythms learnt
+    b.sh("ip link set eth0 down")
+    assert monitor.wait(timeout=60) == 0, (tmp_path / "monitor.log").read_text()
+    report = json.loads(rep.read_text())
+    silent = [x for x in report["alerts"] if x["member"] == "host:b" and x["plugin"] == "host_state"]
+    assert silent and "silent" in silent[0]["message"], report["alerts"]
+    quiet = {x["member"] for x in report["alerts"] if x["plugin"] == "topic_rate"}
+    assert quiet == {"topic:/cam/out", "topic:/imu/out"}, report["alerts"]  # b's topics, seen from a
+    top = report["root_causes"][0]
+    assert top["member"] == "host:b", report["root_causes"][:3]
+    assert {"node:/cam", "node:/imu"} <= set(top["evidence"]["explains_nodes"])
+    assert not [x for x in report["alerts"] if x["t"] < silent[0]["t"] - 2.0]  # nothing before
+    check_report(report)
+    # the viewer: the report names the host; the computers' own CPU and memory are plotted
+    data = rrd.rows(tmp_path / "r.rrd")
+    text = [row["TextDocument:text"][0] for row in data[paths.RCA_REPORT]][-1]
+    assert "**`host:b`**" in text and "it explains `node:/cam`, `node:/imu`" in text, text
+    for h in ("a", "b"):
+        theta = data.get(paths.metrics_path(f"host:{h}", paths.THETA), [])
+        assert [row for row in theta if "Scalars:scalars" in row], sorted(data)

@@ -7,10 +7,14 @@ import math
 from stream_viz.collect.hostreport import HOST_STATUS, HostReport, decode, encode, host_of_prefix
 from stream_viz.collect.hosts import Received, merge_hosts, remote_exits, remote_pids, remote_restarts
 from stream_viz.collect.readings import PidInfo, ProcessReading
-from stream_viz.model.graph import PROCESS_TREE, add_member, add_tree_edge, new_graph
+from stream_viz.model.graph import PROCESS_TREE, add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.model.ids import pid_of
 from stream_viz.model.queries import nodes_of_process, process_of_node, tree
 from stream_viz.model.theta import make_theta, theta_dict
+from stream_viz.rca.engine import analyze
+from stream_viz.rca.settings import RcaSettings
+from stream_viz.records import Alert
+from tests.unit.test_plugins import drive
 
 OWN = 0x1111
 REMOTE = 0x2222
@@ -120,6 +124,17 @@ def test_remote_exit_is_an_error_while_dds_still_lists_the_node():
     del gone.processes[10]
     ev = remote_exits(5.0, "b", _report(), gone, {})  # ended cleanly: DDS no longer lists /cam
     assert [(e.member, e.level) for e in ev] == [("process:b/10", "warn")]
+    lost = _report(seq=2)  # the agent maps its participants again: /cam listed, its process left out
+    del lost.processes[10]
+    lost.participants = {}
+    assert remote_exits(5.0, "b", _report(), lost, {"/cam": PRE_B}) == []
+    # the start time first known from a later report (the one that carried it was missed)
+    unknown_start = _report()
+    unknown_start.processes[10].create_time = None
+    assert remote_exits(5.0, "b", unknown_start, _report(seq=2), {"/cam": PRE_B}) == []
+    reused = _report(seq=2)  # the pid taken by a new process
+    reused.processes[10].create_time = 250.0
+    assert [e.level for e in remote_exits(5.0, "b", _report(), reused, {"/cam": PRE_B})] == ["error"] * 2
 
 
 def test_tree_of_merge_is_a_tree():
@@ -198,3 +213,91 @@ def test_a_remote_node_in_a_new_process_is_a_restart():
     assert [(e.kind, e.member, e.level, e.data["old_pid"], e.data["pid"]) for e in ev] == [
         ("restart", "node:/cam", "warn", 7, 10)]
     assert remote_restarts(51.0, now, now) == []
+
+
+# --------------------------------------------------------------------------- the host as a member
+
+
+def test_the_hosts_own_theta_comes_in_the_report_and_from_this_computer():
+    r = _report()
+    r.machine = {"machine_cpu_percent": 97.0, "machine_mem_percent": 41.5}
+    assert decode(encode(r)).machine == {"machine_cpu_percent": 97.0, "machine_mem_percent": 41.5}
+    G, pids = _local_graph()
+    merge_hosts(G, pids, (OWN, "a"), {REMOTE: Received(50.0, r)}, now=50.5,
+                machine={"machine_cpu_percent": 12.0, "machine_mem_percent": 30.0})
+    assert theta_dict("host", G.nodes["host:b"]["theta"])["machine_cpu_percent"] == 97.0
+    assert theta_dict("host", G.nodes["host:a"]["theta"])["machine_mem_percent"] == 30.0
+    G, pids = _local_graph()  # silent: the computer's θ unknown, how long said
+    merge_hosts(G, pids, (OWN, "a"), {REMOTE: Received(40.0, r)}, now=50.0)
+    assert math.isnan(theta_dict("host", G.nodes["host:b"]["theta"])["machine_cpu_percent"])
+    assert G.nodes["host:b"]["silent_s"] == 10.0
+
+
+def _hosts_model(cpu_b: float = 20.0, agent_b: str = "reporting"):
+    """host a: process:10 → node:/planner (subscribes /cam/out); host b: process:b/7 → node:/cam,
+    process:b/8 → node:/imu (publish /cam/out, /imu/out)."""
+    G = new_graph()
+    add_member(G, "root", theta=make_theta("root", {}))
+    for h, agent, cpu in (("a", "local", 10.0), ("b", agent_b, cpu_b)):
+        add_member(G, f"host:{h}", theta=make_theta("host", {"machine_cpu_percent": cpu}), agent=agent)
+        add_tree_edge(G, "root", f"host:{h}")
+    for proc, node, host in (("process:10", "node:/planner", "a"), ("process:b/7", "node:/cam", "b"),
+                             ("process:b/8", "node:/imu", "b")):
+        add_member(G, proc, theta=make_theta("process", {"cpu_percent": 5.0}), host=host, name="python")
+        add_member(G, node, host=host)
+        add_tree_edge(G, f"host:{host}", proc)
+        add_tree_edge(G, proc, node)
+    for topic, pub in (("topic:/cam/out", "node:/cam"), ("topic:/imu/out", "node:/imu")):
+        add_member(G, topic)
+        add_flow_edge(G, pub, topic, "pub")
+        add_flow_edge(G, topic, "node:/planner", "sub")
+    return G
+
+
+def test_host_state_alerts_on_a_saturated_host_and_on_a_silent_agent():
+    frames = [(float(t), _hosts_model(cpu_b=99.0 if t >= 5 else 20.0), []) for t in range(20)]
+    got = drive("host_state", frames, full=True)
+    assert [(a.t, a.member) for a in got] == [(float(t), "host:b") for t in range(15, 20)]
+    assert got[0].data["since"] == 5.0 and "CPU 99 % in use for 10 s" in got[0].message
+    assert "process:b/7 python 5 %" in got[0].message  # the busiest processes named
+    assert drive("host_state", frames, settings={"saturated_s": 30.0}) == []
+    # full since first seen: its normal; a gap of unknown values ends a run
+    assert drive("host_state", [(float(t), _hosts_model(cpu_b=99.0), []) for t in range(20)]) == []
+    gap = [(float(t), _hosts_model(cpu_b=math.nan if t == 10 else 99.0 if t >= 5 else 20.0), [])
+           for t in range(20)]
+    assert drive("host_state", gap) == []
+    G = _hosts_model(agent_b="silent")
+    G.nodes["host:b"]["silent_s"] = 4.0
+    (a,) = drive("host_state", [(1.0, G, [])], full=True)
+    assert (a.member, a.severity, a.data["symptom"]) == ("host:b", "warn", "agent_silent")
+    assert "silent for 4 s" in a.message
+
+
+def _rank(G, alerts):
+    return [rc.member for rc in analyze(G, alerts, RcaSettings()).root_causes]
+
+
+def test_a_host_out_of_sight_before_its_nodes_went_quiet_is_the_root_cause():
+    G = _hosts_model(agent_b="silent")
+    silent = [Alert("host:b", "host_state", t, "warn", "agent silent", {"symptom": "agent_silent"})
+              for t in (10.0, 11.0, 12.0)]
+    quiet = [Alert(f"topic:/{n}/out", "topic_rate", t, "error", "silent") for n in ("cam", "imu")
+             for t in (10.5, 11.5)]
+    ranked = _rank(G, silent + quiet)
+    assert ranked[0] == "host:b" and set(ranked[1:3]) == {"node:/cam", "node:/imu"}
+    # a topic of the host's quiet long before the agent went silent: not the host's doing
+    early = [Alert("topic:/cam/out", "topic_rate", t, "error", "silent") for t in (2.0, 3.0, 4.0)]
+    assert _rank(G, silent + early + quiet)[0] == "node:/cam"
+
+
+def test_a_saturated_host_explains_its_slow_nodes_unless_one_of_its_processes_is_the_load():
+    G = _hosts_model(cpu_b=99.0)
+    hot = [Alert("host:b", "host_state", t, "warn", "saturated", {"symptom": "host_cpu", "since": 5.0})
+           for t in (15.0, 16.0)]
+    slow = [Alert("topic:/cam/out", "topic_rate", t, "warn", "rate down") for t in (8.0, 9.0, 15.0, 16.0)]
+    assert _rank(G, hot + slow)[:2] == ["host:b", "node:/cam"]  # saturated since 5 s: before 8 s
+    hog = [Alert("node:/imu", "process_resources", t, "warn", "cpu 190 %",
+                 {"process": "process:b/8", "symptoms": ["cpu"]}) for t in (6.0, 7.0, 8.0)]
+    assert "host:b" not in _rank(G, hot + slow + hog)[:1]
+    # on one computer nothing changes: no host member, no lift
+    assert "host:b" not in _rank(G, slow) and _rank(G, slow)[0] == "node:/cam"

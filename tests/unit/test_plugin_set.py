@@ -14,7 +14,7 @@ from stream_viz.model.graph import add_member, new_graph
 from stream_viz.model.history import History
 from stream_viz.records import Alert
 
-BUILTINS = ["diagnostics", "graph_anomalies", "member_gone", "message_age", "process_resources",
+BUILTINS = ["diagnostics", "graph_anomalies", "host_state", "member_gone", "message_age", "process_resources",
             "qos_compat", "rosout", "services", "topic_latency", "topic_rate"]
 
 GOOD = '''
