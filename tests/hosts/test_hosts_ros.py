@@ -102,23 +102,35 @@ def test_one_model_across_three_hosts_remote_crash_and_agent_killed(lab, tmp_pat
     assert all(not k.startswith("process:") or "/" in k for k in s["unreadable"])  # no local one
 
 
-def test_a_crash_on_another_host_is_ranked_first_with_its_host_and_process(lab, tmp_path):
+def _two_hosts(lab, tmp_path, duration, warmup, planner_subs=("cam",), save=False):
+    """Host a: the monitor and /planner; host b: /cam, /imu and an agent. Return b, its node
+    processes and the monitor, once ``warmup`` seconds have passed."""
     env = lab_env(claim_domain())
     a, b = lab.add("a"), lab.add("b")
     node = _script(tmp_path, "node", NODE)
-    a.run([sys.executable, node, "planner", "cam"], env, tmp_path / "planner.log")
-    cam = b.run([sys.executable, node, "cam"], env, tmp_path / "cam.log")
-    b.run([sys.executable, node, "imu"], env, tmp_path / "imu.log")
+    a.run([sys.executable, node, "planner", *planner_subs], env, tmp_path / "planner.log")
+    nodes = {n: b.run([sys.executable, node, n], env, tmp_path / f"{n}.log") for n in ("cam", "imu")}
     b.run([EXE, "agent", "--period", "0.5"], env, tmp_path / "agent.log")
     cfg = tmp_path / "c.toml"
-    cfg.write_text("[monitor]\nperiod = 0.5\n")
-    rep = tmp_path / "r.json"
-    monitor = a.run([EXE, "monitor", "--duration", "22", "--viewer", "none", "--config", str(cfg),
-                     "--report", str(rep), "--db", str(tmp_path / "a.sqlite")], env, tmp_path / "monitor.log")
-    time.sleep(12.0)  # discovery, the agent's first reports, the monitor's warm-up
-    os.kill(inner(cam), signal.SIGKILL)
+    # The lab's hosts share this machine's CPU, loaded by whatever else runs: not the robot's.
+    cfg.write_text("[monitor]\nperiod = 0.5\n[plugins.host_state]\ncpu_percent = 101.0\n")
+    save_to = ["--save", str(tmp_path / "r.rrd")] if save else []
+    monitor = a.run([EXE, "monitor", "--duration", str(duration), "--viewer", "none", "--config", str(cfg),
+                     "--report", str(tmp_path / "r.json"), "--db", str(tmp_path / "a.sqlite"), *save_to],
+                    env, tmp_path / "monitor.log")
+    time.sleep(warmup)
+    return b, nodes, monitor
+
+
+def _report_of(monitor, tmp_path):
     assert monitor.wait(timeout=60) == 0, (tmp_path / "monitor.log").read_text()
-    report = json.loads(rep.read_text())
+    return json.loads((tmp_path / "r.json").read_text())
+
+
+def test_a_crash_on_another_host_is_ranked_first_with_its_host_and_process(lab, tmp_path):
+    _, nodes, monitor = _two_hosts(lab, tmp_path, 22, 12.0)  # discovery, agent reports, warm-up
+    os.kill(inner(nodes["cam"]), signal.SIGKILL)
+    report = _report_of(monitor, tmp_path)
     rows = {m["id"]: m for m in report["members"]}
     cam_row = rows["node:/cam"]
     assert cam_row["host"] == "host:b" and cam_row["process"] == f"process:b/{cam_row['pid']}"
@@ -140,24 +152,9 @@ def test_a_crash_on_another_host_is_ranked_first_with_its_host_and_process(lab, 
 def test_a_computer_off_the_network_is_ranked_first_as_that_host(lab, tmp_path):
     """Host b drops off the network (its link down: everything on it still runs, out of sight):
     its agent falls silent with its nodes' topics; the diagnosis names the host, not one node."""
-    env = lab_env(claim_domain())
-    a, b = lab.add("a"), lab.add("b")
-    node = _script(tmp_path, "node", NODE)
-    a.run([sys.executable, node, "planner", "cam", "imu"], env, tmp_path / "planner.log")
-    b.run([sys.executable, node, "cam"], env, tmp_path / "cam.log")
-    b.run([sys.executable, node, "imu"], env, tmp_path / "imu.log")
-    b.run([EXE, "agent", "--period", "0.5"], env, tmp_path / "agent.log")
-    cfg = tmp_path / "c.toml"
-    # The lab's hosts share this machine's CPU, loaded by whatever else runs: not the robot's.
-    cfg.write_text("[monitor]\nperiod = 0.5\n[plugins.host_state]\ncpu_percent = 101.0\n")
-    rep = tmp_path / "r.json"
-    monitor = a.run([EXE, "monitor", "--duration", "34", "--viewer", "none", "--config", str(cfg),
-                     "--report", str(rep), "--db", str(tmp_path / "a.sqlite"),
-                     "--save", str(tmp_path / "r.rrd")], env, tmp_path / "monitor.log")
-    time.sleep(22.0)  # discovery, the agent's first reports, the topics' rhythms learnt
+    b, _, monitor = _two_hosts(lab, tmp_path, 34, 22.0, ("cam", "imu"), save=True)  # rhythms learnt
     b.sh("ip link set eth0 down")
-    assert monitor.wait(timeout=60) == 0, (tmp_path / "monitor.log").read_text()
-    report = json.loads(rep.read_text())
+    report = _report_of(monitor, tmp_path)
     silent = [x for x in report["alerts"] if x["member"] == "host:b" and x["plugin"] == "host_state"]
     assert silent and "silent" in silent[0]["message"], report["alerts"]
     quiet = {x["member"] for x in report["alerts"] if x["plugin"] == "topic_rate"}
