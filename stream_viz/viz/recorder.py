@@ -36,7 +36,7 @@ from stream_viz.viz.process_tree import log_process_tree
 from stream_viz.viz.rca import log_rca, log_report
 from stream_viz.viz.screenshot import rerun_executable
 from stream_viz.viz.serve import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, WebViewerServer
-from stream_viz.viz.system import drawn_status, log_system_arrays, signatures, system_view, with_gone
+from stream_viz.viz.system import DrawnGraph, drawn_status, signatures, system_view, with_gone
 
 VIEWER_MODES = ("spawn", "serve", "none")
 GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
@@ -193,6 +193,9 @@ class Recorder:
         # The /system arrays last drawn and what they were drawn from: (G, gone, colouring status).
         self._drawn: tuple[nx.MultiDiGraph, frozenset[str], frozenset, dict[str, list]] | None = None
         self._tree_sig: Any = None
+        # What each timeline shows of /system: the next log sends only what changed.
+        self._drawn_time, self._drawn_rca = DrawnGraph(), DrawnGraph()
+        self._rca_j: int | None = None  # the last iteration on the rca_iteration timeline
         self._closed = False
         self.enabled = viewer != "none" or self.save is not None
         self._open(memory_limit, web_port, grpc_port, bind)
@@ -295,6 +298,8 @@ class Recorder:
     def _replay(self, t: float, G: nx.MultiDiGraph | None) -> None:
         """Log again what a new part must show to open on its own: the system, the last diagnosis."""
         style.forget_styled(self.rec)  # static styles are not carried over to a new sink
+        self._drawn_time.forget()  # nor is anything drawn before
+        self._drawn_rca.forget()
         lanes = {m: [(t, s)] for m, s in self.health.state.items()}
         if lanes:
             log_health(self.rec, lanes)
@@ -333,7 +338,7 @@ class Recorder:
             self._drawn = (G, gone_all, colouring, self._drawn[3])
             return False
         self.layout, arrays = system_view(G, layout, gone_all, self.status)
-        log_system_arrays(self.rec, arrays, self.layout)
+        self._drawn_time.log(self.rec, arrays, self.layout)
         self._system_sig, self._drawn = sig, (G, gone_all, colouring, arrays)
         return True
 
@@ -367,8 +372,13 @@ class Recorder:
         drawn = self._drawn
         same = (drawn is not None and drawn[0] is G and drawn[1] == gone_all
                 and drawn[2] == drawn_status(self.status, gone_all))
+        j = int(iteration["j"])
+        if self._rca_j is not None and j <= self._rca_j:
+            self._drawn_rca.forget()  # latest-at before j is not what was logged last: log it all
+        self._rca_j = j
         layout = log_rca(self.rec, G, self.layout, iteration, root_causes, gone=sorted(gone_all),
-                         status=self.status, incidents=incidents, system=drawn[3] if same else None)
+                         status=self.status, incidents=incidents, system=drawn[3] if same else None,
+                         drawn=self._drawn_rca)
         if layout is not self.layout:
             self.layout, self._drawn = layout, None  # the arrays drawn before have other places
         self.focus(G, root_causes)
