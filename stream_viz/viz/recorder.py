@@ -31,7 +31,7 @@ from stream_viz.viz.changes import log_changes
 from stream_viz.viz.focus import diagnosis_members
 from stream_viz.viz.health import HealthLanes, log_health
 from stream_viz.viz.layout import Layout, settle
-from stream_viz.viz.metrics import log_metrics
+from stream_viz.viz.metrics import MetricBatch, log_metrics
 from stream_viz.viz.process_tree import log_process_tree
 from stream_viz.viz.rca import log_rca, log_report
 from stream_viz.viz.screenshot import rerun_executable
@@ -219,6 +219,9 @@ class Recorder:
         # Nothing to send to: no stream at all (a disabled one buffers nothing, but warns on
         # every flush and disconnect at exit: noise on a headless monitor's terminal).
         self.rec = Tee([s for s in (self._live, self._file) if s is not None])
+        # One sink alone, for the metrics (the file takes them in longer batches than the viewer).
+        self._only = {"live": Tee([self._live] if self._live is not None else []),
+                      "file": Tee([self._file] if self._file is not None else [])}
         try:
             if self._live is not None:
                 self.url = self._connect(self._live, memory_limit, web_port, grpc_port, bind)
@@ -298,6 +301,7 @@ class Recorder:
     def _replay(self, t: float, G: nx.MultiDiGraph | None) -> None:
         """Log again what a new part must show to open on its own: the system, the last diagnosis."""
         style.forget_styled(self.rec)  # static styles are not carried over to a new sink
+        style.forget_styled(self._only["file"])
         self._drawn_time.forget()  # nor is anything drawn before
         self._drawn_rca.forget()
         lanes = {m: [(t, s)] for m, s in self.health.state.items()}
@@ -342,9 +346,25 @@ class Recorder:
         self._system_sig, self._drawn = sig, (G, gone_all, colouring, arrays)
         return True
 
-    def metrics(self, batch: Iterable[Any]) -> int:
-        """Send a batch of ``(t, G)`` samples' θ (processes, topics); return the number of values."""
-        return log_metrics(self.rec, batch)
+    @property
+    def has_live(self) -> bool:
+        """True if there is a viewer (not only a file)."""
+        return self._live is not None
+
+    @property
+    def has_file(self) -> bool:
+        """True if the recording is written to a file."""
+        return self._file is not None
+
+    def metrics(self, batch: Iterable[Any] | MetricBatch, to: str = "all") -> int:
+        """Send a batch of ``(t, G)`` samples' θ (processes, topics); return the number of rows.
+
+        ``to``: ``all`` (viewer and file), ``live`` (the viewer only: the batch's rows not sent
+        to it yet) or ``file`` (the file only).
+        """
+        if to == "all":
+            return log_metrics(self.rec, batch)
+        return log_metrics(self._only[to], batch, unsent=to == "live")
 
     def alerts(self, alerts: Sequence[Alert]) -> int:
         """Log alerts (text log + markers); alerted members get their severity's colour in ``/system``."""
