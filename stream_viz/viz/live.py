@@ -26,9 +26,12 @@ class LiveView:
     metrics_every : float
         Seconds of metric samples sent in one ``send_columns`` batch (at least).
     max_chunks_per_s : float
-        Upper bound on metric chunks per second: a batch is one chunk per member, and Rerun keeps
-        an index entry for every chunk written to an ``.rrd`` (its footer) in memory until the file
-        is closed, so a large system batches longer (`metrics_batch_s`).
+        Upper bound on metric chunks per second sent to the viewer: a batch is one chunk per
+        member, so a large system batches longer (`metrics_batch_s`).
+    file_chunks_per_s : float
+        The same for the file, lower: every chunk costs the ``.rrd`` a fixed overhead (its schema,
+        an index entry Rerun keeps in memory until the file is closed), so the file takes longer
+        batches than the viewer and stays small (a batch ends at a part's end, though).
     part_s : float
         Seconds per file part of the recording (0: one file); parts bound that index.
     serve_at : ServeAt, optional
@@ -38,12 +41,13 @@ class LiveView:
     """
 
     def __init__(self, viewer: str = "none", save: Path | None = None, metrics_every: float = 5.0,
-                 max_chunks_per_s: float = 20.0, part_s: float = 0.0,
+                 max_chunks_per_s: float = 20.0, part_s: float = 0.0, file_chunks_per_s: float = 5.0,
                  serve_at: ServeAt | None = None, grouping: str = "namespace") -> None:
         at = serve_at or ServeAt()
         self.rec = Recorder(viewer=viewer, save=save, part_s=part_s, bind=at.bind, web_port=at.web_port,
                             grpc_port=at.grpc_port, grouping=grouping)
         self.metrics_every, self.max_chunks_per_s = metrics_every, max_chunks_per_s
+        self.file_chunks_per_s = file_chunks_per_s
         self._batch = MetricBatch()
         self._iterations = 0
         self._causes: list[Any] = []  # the root causes last logged
@@ -74,9 +78,7 @@ class LiveView:
             self.rec.changes(sample.events)
         self.rec.system(seen, t)
         self._batch.add(t, sample.graph)
-        every = metrics_batch_s(len(self._batch), self.metrics_every, self.max_chunks_per_s)
-        if t - self._batch.first_t >= every:
-            self._flush_metrics()
+        self._send_metrics(t)
         # The report form of the result costs O(iterations × members): build it only on change.
         if len(result.iterations) == self._iterations and result.root_causes == self._causes:
             return
@@ -90,10 +92,32 @@ class LiveView:
             self.rec.report(report_markdown(causes, report["iterations"][-1], incidents=incidents), t)
         self._causes = result.root_causes
 
+    def _send_metrics(self, t: float) -> None:
+        """Send the metrics that are due: to the viewer every `metrics_batch_s` of
+        ``max_chunks_per_s``, to the file every one of ``file_chunks_per_s``."""
+        members = len(self._batch)
+        if not self.rec.has_file:
+            if t - self._batch.first_t >= metrics_batch_s(members, self.metrics_every, self.max_chunks_per_s):
+                self._flush_metrics()
+            return
+        live_due = metrics_batch_s(members, self.metrics_every, self.max_chunks_per_s)
+        if self.rec.has_live and self._batch.unsent_t is not None and t - self._batch.unsent_t >= live_due:
+            self.rec.metrics(self._batch, to="live")
+            self._batch.mark_sent()
+        if t - self._batch.first_t >= metrics_batch_s(members, self.metrics_every, self.file_chunks_per_s):
+            self._flush_metrics()
+
     def _flush_metrics(self) -> None:
-        if self._batch:
+        """Send every pending row (the viewer: those it has not had) and start a new batch."""
+        if not self._batch:
+            return
+        if self.rec.has_live and self.rec.has_file:
+            if self._batch.unsent_t is not None:
+                self.rec.metrics(self._batch, to="live")
+            self.rec.metrics(self._batch, to="file")
+        else:
             self.rec.metrics(self._batch)
-            self._batch.clear()
+        self._batch.clear()
 
     def close(self) -> None:
         """Send what is pending and close the recording (the ``.rrd`` gets its footer)."""

@@ -16,7 +16,7 @@ from stream_viz.model.ids import kind_of
 from stream_viz.viz import paths, style
 from stream_viz.viz.graph_arrays import graph_archetypes
 from stream_viz.viz.layout import Layout
-from stream_viz.viz.system import log_system, log_system_arrays
+from stream_viz.viz.system import DrawnGraph, system_view
 
 
 def _radius(member: str) -> float:
@@ -158,12 +158,14 @@ def log_rca(
     status: Mapping[str, str] | None = None,
     incidents: Sequence[Mapping[str, Any]] = (),
     system: Mapping[str, list] | None = None,
+    drawn: DrawnGraph | None = None,
 ) -> Layout:
     """Log RCA iteration ``j`` on both timelines (``time`` = its ``t``, ``rca_iteration`` = ``j``).
 
-    The system graph is logged again at this iteration (so it shows when stepping on
-    ``rca_iteration``), then the overlays ``/rca/subgraph`` (G_j, W_j) and ``/rca/trajectory`` (top
-    trajectory) at the same positions, and the report. Returns the (possibly extended) layout.
+    The system graph is logged on the ``rca_iteration`` timeline (so it shows when stepping
+    through the iterations; on ``time`` it is `Recorder.system`'s), then the overlays
+    ``/rca/subgraph`` (G_j, W_j) and ``/rca/trajectory`` (top trajectory) at the same positions,
+    and the report. Returns the (possibly extended) layout.
 
     Parameters
     ----------
@@ -176,18 +178,23 @@ def log_rca(
     system : mapping, optional
         The ``/system`` arrays of ``G`` with ``layout``, ``gone`` and ``status`` (`system_view`),
         when the caller has them: not computed again.
+    drawn : DrawnGraph, optional
+        What the ``rca_iteration`` timeline shows of ``/system`` so far (iterations logged in
+        order): only what changed since is logged. Without it the graph is logged in full.
     """
-    rec.set_time(paths.TIME, timestamp=float(iteration["t"]))
     rec.set_time(paths.RCA_ITERATION, sequence=int(iteration["j"]))
     try:
         if system is None or layout is None:
-            layout = log_system(rec, G, layout, gone=gone, status=status)
-        else:
-            log_system_arrays(rec, system, layout)
+            layout, system = system_view(G, layout, gone, status)
+        # On `time` the graph is Recorder.system's: this copy is for stepping through iterations.
+        rec.disable_timeline(paths.TIME)
+        (drawn or DrawnGraph()).log(rec, system, layout)
+        rec.set_time(paths.TIME, timestamp=float(iteration["t"]))
         _log_overlay(rec, paths.RCA_SUBGRAPH, subgraph_arrays(iteration, layout))
         _log_overlay(rec, paths.RCA_TRAJECTORY, trajectory_arrays(root_causes, layout))
         log_report(rec, report_markdown(root_causes, iteration, incidents=incidents))
     finally:
         # Later data (metrics, /system updates) must not inherit this iteration number.
         rec.disable_timeline(paths.RCA_ITERATION)
+        rec.set_time(paths.TIME, timestamp=float(iteration["t"]))
     return layout

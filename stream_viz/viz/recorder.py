@@ -31,12 +31,12 @@ from stream_viz.viz.changes import log_changes
 from stream_viz.viz.focus import diagnosis_members
 from stream_viz.viz.health import HealthLanes, log_health
 from stream_viz.viz.layout import Layout, settle
-from stream_viz.viz.metrics import log_metrics
+from stream_viz.viz.metrics import MetricBatch, log_metrics
 from stream_viz.viz.process_tree import log_process_tree
 from stream_viz.viz.rca import log_rca, log_report
 from stream_viz.viz.screenshot import rerun_executable
 from stream_viz.viz.serve import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, WebViewerServer
-from stream_viz.viz.system import drawn_status, log_system_arrays, signatures, system_view, with_gone
+from stream_viz.viz.system import DrawnGraph, drawn_status, signatures, system_view, with_gone
 
 VIEWER_MODES = ("spawn", "serve", "none")
 GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
@@ -193,6 +193,9 @@ class Recorder:
         # The /system arrays last drawn and what they were drawn from: (G, gone, colouring status).
         self._drawn: tuple[nx.MultiDiGraph, frozenset[str], frozenset, dict[str, list]] | None = None
         self._tree_sig: Any = None
+        # What each timeline shows of /system: the next log sends only what changed.
+        self._drawn_time, self._drawn_rca = DrawnGraph(), DrawnGraph()
+        self._rca_j: int | None = None  # the last iteration on the rca_iteration timeline
         self._closed = False
         self.enabled = viewer != "none" or self.save is not None
         self._open(memory_limit, web_port, grpc_port, bind)
@@ -216,6 +219,9 @@ class Recorder:
         # Nothing to send to: no stream at all (a disabled one buffers nothing, but warns on
         # every flush and disconnect at exit: noise on a headless monitor's terminal).
         self.rec = Tee([s for s in (self._live, self._file) if s is not None])
+        # One sink alone, for the metrics (the file takes them in longer batches than the viewer).
+        self._only = {"live": Tee([self._live] if self._live is not None else []),
+                      "file": Tee([self._file] if self._file is not None else [])}
         try:
             if self._live is not None:
                 self.url = self._connect(self._live, memory_limit, web_port, grpc_port, bind)
@@ -295,6 +301,9 @@ class Recorder:
     def _replay(self, t: float, G: nx.MultiDiGraph | None) -> None:
         """Log again what a new part must show to open on its own: the system, the last diagnosis."""
         style.forget_styled(self.rec)  # static styles are not carried over to a new sink
+        style.forget_styled(self._only["file"])
+        self._drawn_time.forget()  # nor is anything drawn before
+        self._drawn_rca.forget()
         lanes = {m: [(t, s)] for m, s in self.health.state.items()}
         if lanes:
             log_health(self.rec, lanes)
@@ -333,13 +342,29 @@ class Recorder:
             self._drawn = (G, gone_all, colouring, self._drawn[3])
             return False
         self.layout, arrays = system_view(G, layout, gone_all, self.status)
-        log_system_arrays(self.rec, arrays, self.layout)
+        self._drawn_time.log(self.rec, arrays, self.layout)
         self._system_sig, self._drawn = sig, (G, gone_all, colouring, arrays)
         return True
 
-    def metrics(self, batch: Iterable[Any]) -> int:
-        """Send a batch of ``(t, G)`` samples' θ (processes, topics); return the number of values."""
-        return log_metrics(self.rec, batch)
+    @property
+    def has_live(self) -> bool:
+        """True if there is a viewer (not only a file)."""
+        return self._live is not None
+
+    @property
+    def has_file(self) -> bool:
+        """True if the recording is written to a file."""
+        return self._file is not None
+
+    def metrics(self, batch: Iterable[Any] | MetricBatch, to: str = "all") -> int:
+        """Send a batch of ``(t, G)`` samples' θ (processes, topics); return the number of rows.
+
+        ``to``: ``all`` (viewer and file), ``live`` (the viewer only: the batch's rows not sent
+        to it yet) or ``file`` (the file only).
+        """
+        if to == "all":
+            return log_metrics(self.rec, batch)
+        return log_metrics(self._only[to], batch, unsent=to == "live")
 
     def alerts(self, alerts: Sequence[Alert]) -> int:
         """Log alerts (text log + markers); alerted members get their severity's colour in ``/system``."""
@@ -367,8 +392,13 @@ class Recorder:
         drawn = self._drawn
         same = (drawn is not None and drawn[0] is G and drawn[1] == gone_all
                 and drawn[2] == drawn_status(self.status, gone_all))
+        j = int(iteration["j"])
+        if self._rca_j is not None and j <= self._rca_j:
+            self._drawn_rca.forget()  # latest-at before j is not what was logged last: log it all
+        self._rca_j = j
         layout = log_rca(self.rec, G, self.layout, iteration, root_causes, gone=sorted(gone_all),
-                         status=self.status, incidents=incidents, system=drawn[3] if same else None)
+                         status=self.status, incidents=incidents, system=drawn[3] if same else None,
+                         drawn=self._drawn_rca)
         if layout is not self.layout:
             self.layout, self._drawn = layout, None  # the arrays drawn before have other places
         self.focus(G, root_causes)

@@ -7,13 +7,14 @@ from collections.abc import Collection, Mapping
 from typing import Any
 
 import networkx as nx
+import numpy as np
 import rerun as rr
 
 from stream_viz.errors import ModelError
 from stream_viz.model.graph import FLOW, flow_edges
 from stream_viz.model.ids import kind_of, name_of
 from stream_viz.viz import paths, style
-from stream_viz.viz.graph_arrays import graph_archetypes
+from stream_viz.viz.graph_arrays import edge_array, graph_archetypes
 from stream_viz.viz.layout import Layout, Pos, display_members, provisional, settle
 from stream_viz.viz.layout_groups import short_label
 
@@ -131,6 +132,75 @@ def log_system_arrays(rec: rr.RecordingStream, a: Mapping[str, list], layout: La
     """Log arrays ``a`` (`system_view`) at ``/system`` and the layout's group boxes."""
     rec.log(paths.SYSTEM, *graph_archetypes(a, show_labels=True))
     log_groups(rec, layout)
+
+
+GRAPH_FIELDS = ("ids", "labels", "colors", "radii", "positions", "edges")
+
+
+def changed_fields(last: Mapping[str, Any] | None, a: Mapping[str, Any]) -> frozenset[str]:
+    """Return the fields of arrays ``a`` that differ from ``last`` (the arrays a timeline shows);
+    all of them when the members differ (every field is indexed by member, so none can stay)."""
+    present = frozenset(f for f in GRAPH_FIELDS if f in a)
+    if last is a:
+        return frozenset()
+    if last is None or last.get("ids") != a["ids"]:
+        return present
+    return frozenset(f for f in present if last.get(f) is not a[f] and last.get(f) != a[f])
+
+
+def graph_update(a: Mapping[str, Any], fields: Collection[str],
+                 show_labels: bool) -> list[rr.GraphNodes | rr.GraphEdges]:
+    """Return the archetypes that log only ``fields`` of arrays ``a``: the viewer takes every
+    field not logged from the latest row before on the timeline (latest-at)."""
+    if "ids" in fields:
+        nodes, edges = graph_archetypes(a, show_labels)
+        return [nodes, edges] if "edges" in fields else [nodes]
+    n = len(a["ids"])
+    parts: dict[str, Any] = {}
+    if "labels" in fields:
+        parts["labels"] = a["labels"]
+    if "colors" in fields:
+        parts["colors"] = np.asarray(a["colors"], dtype=np.uint8).reshape(n, -1 if n else 3)
+    if "radii" in fields:
+        parts["radii"] = np.asarray(a["radii"], dtype=np.float32)
+    if "positions" in fields:
+        parts["positions"] = np.asarray(a["positions"], dtype=np.float32).reshape(n, 2)
+    out: list[rr.GraphNodes | rr.GraphEdges] = [rr.GraphNodes.from_fields(**parts)] if parts else []
+    if "edges" in fields:
+        out.append(rr.GraphEdges(edge_array(a["edges"]), graph_type=rr.GraphType.Directed))
+    return out
+
+
+class DrawnGraph:
+    """What one timeline shows at ``/system`` and the group boxes, so that the next log sends
+    only what changed: an RCA iteration that recolours three members logs three colours' worth,
+    not the graph (its ids, labels, positions and edges stay by latest-at).
+
+    One per timeline a row is logged on; `forget` when the sink starts empty (a new file part).
+    """
+
+    def __init__(self) -> None:
+        self.arrays: Mapping[str, Any] | None = None
+        self.boxes: dict[str, list[Pos]] = {}
+
+    def forget(self) -> None:
+        self.arrays, self.boxes = None, {}
+
+    def log(self, rec: Any, a: Mapping[str, Any], layout: Layout, show_labels: bool = True) -> frozenset[str]:
+        """Log the fields of ``a`` and the boxes of ``layout`` this timeline does not show yet;
+        return the fields logged."""
+        fields = changed_fields(self.arrays, a)
+        if fields:
+            rec.log(paths.SYSTEM, *graph_update(a, fields, show_labels))
+        boxes = group_boxes(layout)
+        for path in sorted(set(self.boxes) - set(boxes)):
+            rec.log(path, rr.Clear(recursive=False))
+        for path, corners in boxes.items():
+            if self.boxes.get(path) != corners:
+                rec.log(path, rr.GraphNodes(["top_left", "bottom_right"], positions=corners, radii=[0.0, 0.0],
+                                            colors=[(0, 0, 0, 0)] * 2, show_labels=False))
+        self.arrays, self.boxes = a, boxes
+        return fields
 
 
 def log_system(

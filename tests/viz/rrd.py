@@ -47,3 +47,15 @@ def strings(path: str | Path, store) -> set[str]:
         for row in ent:
             walk(row)
     return found
+
+
+def shown(ent_rows: list[dict[str, Any]], timeline: str = "time", at: int | None = None) -> dict[str, Any]:
+    """Return what the viewer shows of an entity on ``timeline`` at ``at`` (default: the end):
+    each column's value from the latest row at or before ``at`` that has it (latest-at), over
+    the rows logged on that timeline (static rows, with no timeline, under everything)."""
+    on = [r for r in ent_rows if r.get(timeline) is not None and (at is None or r[timeline] <= at)]
+    static = [r for r in ent_rows if all(r.get(k) is None for k in ("time", "rca_iteration"))]
+    out: dict[str, Any] = {}
+    for row in [*static, *sorted(on, key=lambda r: r[timeline])]:
+        out.update({k: v for k, v in row.items() if v is not None and ":" in k})
+    return out

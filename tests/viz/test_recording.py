@@ -14,7 +14,7 @@ from stream_viz.model.theta import make_theta
 from stream_viz.records import Alert, Event
 from stream_viz.viz import paths
 from stream_viz.viz.recorder import Recorder
-from tests.viz.rrd import rows, strings
+from tests.viz.rrd import rows, shown, strings
 
 T0 = 1_700_000_000.0
 
@@ -62,7 +62,9 @@ def test_graph_metrics_alerts_and_blueprint_in_file(tmp_path):
     data = rows(rrd)
     sys_rows = data[paths.SYSTEM]
     assert len(sys_rows) == 2
-    first, last = sys_rows
+    first = sys_rows[0]
+    last = shown(sys_rows)  # the second row logs only what changed: the viewer shows the rest
+    assert "GraphNodes:node_ids" not in sys_rows[1] and "GraphNodes:positions" not in sys_rows[1]
     assert set(first["GraphNodes:node_ids"]) == {"node:/camera", "node:/detector", "node:/planner",
                                                 "topic:/image", "topic:/objects"}
     edges = {(e["first"], e["second"]) for e in first["GraphEdges:edges"]}
@@ -131,8 +133,13 @@ def test_rca_overlays_per_iteration(tmp_path):
                        map(tuple, data[paths.SYSTEM][0]["GraphNodes:positions"]), strict=True))
     for m, p in zip(sub[2]["GraphNodes:node_ids"], sub[2]["GraphNodes:positions"], strict=True):
         assert tuple(p) == sys_pos[m]
-    # The system graph is there on the rca_iteration timeline too.
-    assert {row.get("rca_iteration") for row in data[paths.SYSTEM]} == {None, 1, 2}
+    # The system graph is there on the rca_iteration timeline too: logged in full at iteration 1,
+    # not again at 2 (nothing changed), and iteration 2 shows it all by latest-at.
+    assert {row.get("rca_iteration") for row in data[paths.SYSTEM]} == {None, 1}
+    at2 = shown(data[paths.SYSTEM], paths.RCA_ITERATION, 2)
+    assert at2["GraphNodes:node_ids"] == data[paths.SYSTEM][0]["GraphNodes:node_ids"]
+    assert at2["GraphNodes:colors"] == data[paths.SYSTEM][0]["GraphNodes:colors"]
+    assert len(at2["GraphEdges:edges"]) == 4
     traj = [row for row in data[paths.RCA_TRAJECTORY] if row["rca_iteration"] == 2]
     assert traj[0]["GraphNodes:node_ids"] == ["node:/detector", "topic:/objects", "node:/planner"]
     report = {row["rca_iteration"]: row["TextDocument:text"][0] for row in data[paths.RCA_REPORT]}

@@ -146,7 +146,8 @@ def test_a_viewer_that_goes_away_does_not_stop_the_file(tmp_path):
     r.close(timeout=3)
     assert r.url.endswith("/proxy")
     theta = [row for row in rows(rrd)["/metrics/topic/image/theta"] if "Scalars:scalars" in row]
-    assert len(theta) == 6
+    # Both batches are in the file: the same θ each sample, so each batch sends its run's ends.
+    assert [row["time"] // 10**9 - int(T0) for row in theta] == [0, 2, 3, 5]
     assert paths.SYSTEM in RrdReader(str(rrd)).store().schema().entity_paths()  # footer written
 
 
@@ -228,3 +229,38 @@ def test_telemetry_off_by_default_and_opt_in(monkeypatch):
     monkeypatch.delenv(TELEMETRY_ENV)
     Recorder().close()  # Rerun analytics skip processes whose environment has CI set
     assert os.environ.get("CI") == "1" and os.environ.get("TELEMETRY_ENABLED") == "false"
+
+
+def test_rendered_rca_iterations_show_their_own_colours(tmp_path):
+    """Stepping through the iterations: the graph is logged once on rca_iteration, iteration 2
+    logs only the colours an alert changed, and the viewer draws the whole graph at both, each
+    in its own colours (latest-at)."""
+    reason = _renderer_missing()
+    if reason:
+        pytest.skip(f"headless renderer unavailable: {reason}")
+    Image = pytest.importorskip("PIL.Image", reason="Pillow decodes the PNG")
+    rrd = tmp_path / "steps.rrd"
+    G = demo_graph()
+    it = {"subgraph": [], "watchlist": [], "edges": []}  # no overlay: only /system's colours
+    with Recorder(save=rrd, blueprint=build_blueprint(collapse_panels=True)) as r:
+        r.system(G, t=T0)
+        r.rca(G, {**it, "j": 1, "t": T0 + 1})
+        topics = sorted(m for m, k in G.nodes(data="kind") if k == "topic")
+        r.alerts([Alert(m, "topic_rate", T0 + 2, "error", "rate fell", {"value": 2.0}) for m in topics])
+        r.system(G, t=T0 + 2)
+        r.rca(G, {**it, "j": 2, "t": T0 + 2})
+    assert {k for row in rows(rrd)[paths.SYSTEM] if row.get("rca_iteration") == 2
+            for k in row if k.startswith("Graph")} == {"GraphNodes:colors"}
+    seen = {}
+    for j in (1, 2):
+        png = tmp_path / f"j{j}.png"
+        screenshot(rrd, png, timeline=paths.RCA_ITERATION, time_value=j, settle=2)
+        img = np.asarray(Image.open(png).convert("RGB"))
+        graph = img[: int(img.shape[0] * 0.55)]
+        seen[j] = {c: hue_pixels(graph, col) for c, col in
+                   (("node", KIND_COLOR["node"]), ("topic", KIND_COLOR["topic"]),
+                    ("error", SEVERITY_COLOR["error"]))}
+    assert seen[1]["node"] > 50 and seen[2]["node"] > 50, seen  # the graph is drawn at both
+    assert seen[1]["topic"] > 50, seen
+    assert seen[2]["error"] > 50 + 3 * seen[1]["error"], seen  # iteration 2: the topics in alert colour
+    assert seen[2]["topic"] < seen[1]["topic"] / 2, seen
