@@ -48,15 +48,17 @@ def short_name(member: str) -> str:
     return name_of(member).rstrip("/").rsplit("/", 1)[-1] or name_of(member)
 
 
-def metrics_tabs(watched: Iterable[str] = (), diagnosis: Mapping[str, Sequence[str]] | None = None
-                 ) -> rrb.Tabs:
+def metrics_tabs(watched: Iterable[str] = (), diagnosis: Mapping[str, Sequence[str]] | None = None,
+                 hosts: bool = False) -> rrb.Tabs:
     """Return the metrics panel: the diagnosis first (when there is one), every member's health,
-    then the watched members' plots, or one plot per kind (topics, processes)."""
+    then the watched members' plots, or one plot per kind (topics, processes; ``hosts``: the
+    computers' own CPU and memory too)."""
     tabs: list[rrb.View | rrb.Container] = [diagnosis_view(diagnosis)] if diagnosis else []
     tabs.append(rrb.StateTimelineView(origin=paths.HEALTH, name="Health"))
     tabs += metric_views(watched) or [
         rrb.TimeSeriesView(origin=f"{paths.METRICS}/topic", name="Topics"),
         rrb.TimeSeriesView(origin=f"{paths.METRICS}/process", name="Processes"),
+        *([rrb.TimeSeriesView(origin=f"{paths.METRICS}/host", name="Hosts")] if hosts else []),
     ]
     # The eye lands on the first tab: the diagnosis, else the per-kind plots (health is sparse).
     return rrb.Tabs(*tabs, active_tab=0 if diagnosis else 1, name="Metrics")
@@ -68,11 +70,13 @@ def build_blueprint(
     paused: bool | None = None,
     collapse_panels: bool = False,
     diagnosis: Mapping[str, Sequence[str]] | None = None,
+    hosts: Sequence[str] = (),
 ) -> rrb.Blueprint:
     """Return the default layout.
 
     Top, full width: the system graph with the RCA overlays (one GraphView of ``/system``,
-    ``/rca/subgraph`` and ``/rca/trajectory``). Below: metrics (`metrics_tabs`), report / process
+    ``/rca/subgraph`` and ``/rca/trajectory``); with several computers, beside it a tab per host
+    (its part of the graph, ``/hosts/<host>``). Below: metrics (`metrics_tabs`), report / process
     tree, alert log.
 
     Parameters
@@ -88,6 +92,8 @@ def build_blueprint(
         Start paused; default: paused on ``rca_iteration``, following live on ``time``.
     collapse_panels : bool
         Hide the side and time panels (for screenshots).
+    hosts : sequence of str
+        The computers of the model (several): a graph tab and a metrics tab for them.
     """
     if paused is None:
         paused = timeline == paths.RCA_ITERATION
@@ -98,8 +104,11 @@ def build_blueprint(
                   paths.SYSTEM],
         name="System graph + RCA overlays",
     )
+    if hosts:
+        graph = rrb.Tabs(graph, *(rrb.GraphView(origin=paths.host_graph_path(h), name=f"Host {h}")
+                                  for h in hosts), active_tab=0, name="System")
     bottom = rrb.Horizontal(
-        metrics_tabs(watched, diagnosis),
+        metrics_tabs(watched, diagnosis, hosts=bool(hosts)),
         rrb.Tabs(
             rrb.TextDocumentView(origin=paths.RCA_REPORT, name="Root causes"),
             rrb.GraphView(origin=paths.PROCESS_TREE, name="Process tree"),

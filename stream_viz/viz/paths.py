@@ -20,6 +20,7 @@ RCA = "/rca"
 RCA_SUBGRAPH = "/rca/subgraph"  # G_j and W_j, drawn over /system at the same positions
 RCA_TRAJECTORY = "/rca/trajectory"  # top fault trajectory, same positions
 RCA_REPORT = "/rca/report"  # TextDocument (markdown)
+HOSTS = "/hosts"  # /hosts/<host name>: one computer's part of /system (several computers only)
 # Groups of /system drawn as boxes: one entity per group, two invisible corner nodes; the viewer
 # captions each entity's rectangle with its path ("namespace/amr1", "process/navigation").
 GROUP_ROOTS = ("/namespace", "/process", "/host")
@@ -41,6 +42,11 @@ def group_path(grouping: str, group: str) -> str:
     root = {"process": GROUP_ROOTS[1], "host": GROUP_ROOTS[2]}.get(grouping, GROUP_ROOTS[0])
     parts = [rr.escape_entity_path_part(p) for p in group.split("/") if p]
     return "/".join([root, *parts])
+
+
+def host_graph_path(host: str) -> str:
+    """Return ``/hosts/<host name>``: the entity of one computer's part of the system graph."""
+    return f"{HOSTS}/{rr.escape_entity_path_part(host)}"
 
 
 def health_path(member: str) -> str:

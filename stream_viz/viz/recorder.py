@@ -30,6 +30,7 @@ from stream_viz.viz.alerts import log_alerts
 from stream_viz.viz.changes import log_changes
 from stream_viz.viz.focus import diagnosis_members
 from stream_viz.viz.health import HealthLanes, log_health
+from stream_viz.viz.hosts_view import DrawnHosts
 from stream_viz.viz.layout import Layout, settle
 from stream_viz.viz.metrics import MetricBatch, log_metrics
 from stream_viz.viz.process_tree import log_process_tree
@@ -195,6 +196,8 @@ class Recorder:
         self._tree_sig: Any = None
         # What each timeline shows of /system: the next log sends only what changed.
         self._drawn_time, self._drawn_rca = DrawnGraph(), DrawnGraph()
+        self._drawn_hosts = DrawnHosts()  # /hosts/<host>: each computer's part of /system
+        self.hosts: list[str] = []  # the computers the layout has a tab for (several only)
         self._rca_j: int | None = None  # the last iteration on the rca_iteration timeline
         self._closed = False
         self.enabled = viewer != "none" or self.save is not None
@@ -303,6 +306,7 @@ class Recorder:
         style.forget_styled(self.rec)  # static styles are not carried over to a new sink
         style.forget_styled(self._only["file"])
         self._drawn_time.forget()  # nor is anything drawn before
+        self._drawn_hosts.forget()
         self._drawn_rca.forget()
         lanes = {m: [(t, s)] for m, s in self.health.state.items()}
         if lanes:
@@ -343,6 +347,10 @@ class Recorder:
             return False
         self.layout, arrays = system_view(G, layout, gone_all, self.status)
         self._drawn_time.log(self.rec, arrays, self.layout)
+        hosts = self._drawn_hosts.log(self.rec, G, arrays)
+        if hosts != self.hosts:
+            self.hosts = hosts
+            self._send_layout()
         self._system_sig, self._drawn = sig, (G, gone_all, colouring, arrays)
         return True
 
@@ -415,11 +423,20 @@ class Recorder:
         if diagnosis == self.diagnosis:
             return False
         self.diagnosis = diagnosis
-        self.blueprint = self._layout(diagnosis=diagnosis)
+        self._send_layout()
+        return True
+
+    def _send_layout(self) -> None:
+        """Build the layout for the current diagnosis and computers; make it the viewer's and the
+        file's active and default one. A layout function is given ``hosts`` only when there are
+        several computers (one written before hosts existed still works on one)."""
+        if self._layout is None:
+            return
+        hosts = {"hosts": self.hosts} if self.hosts else {}
+        self.blueprint = self._layout(diagnosis=self.diagnosis, **hosts)
         for stream in (self._live, self._file):
             if stream is not None:
                 stream.send_blueprint(self.blueprint, make_active=True, make_default=True)
-        return True
 
     def report(self, markdown: str, t: float | None = None) -> None:
         """Log a markdown report at ``/rca/report``."""

@@ -14,6 +14,7 @@ from stream_viz.model.theta import make_theta, theta_dict
 from stream_viz.rca.engine import analyze
 from stream_viz.rca.settings import RcaSettings
 from stream_viz.records import Alert
+from stream_viz.viz.hosts_view import host_arrays, hosts_of
 from tests.unit.test_plugins import drive
 
 OWN = 0x1111
@@ -301,3 +302,20 @@ def test_a_saturated_host_explains_its_slow_nodes_unless_one_of_its_processes_is
     assert "host:b" not in _rank(G, hot + slow + hog)[:1]
     # on one computer nothing changes: no host member, no lift
     assert "host:b" not in _rank(G, slow) and _rank(G, slow)[0] == "node:/cam"
+
+
+def test_each_host_gets_its_nodes_and_what_they_use_from_the_system_graph():
+    G = _hosts_model()
+    a = {"ids": ["node:/cam", "node:/imu", "node:/planner", "topic:/cam/out", "topic:/imu/out"],
+         "labels": ["cam", "imu", "planner", "cam/out", "imu/out"], "colors": [1, 2, 3, 4, 5],
+         "radii": [1.0] * 5, "positions": [(0, 0), (0, 1), (2, 0), (1, 0), (1, 1)],
+         "edges": [("node:/cam", "topic:/cam/out"), ("node:/imu", "topic:/imu/out"),
+                   ("topic:/cam/out", "node:/planner"), ("topic:/imu/out", "node:/planner")]}
+    b = host_arrays(G, a, "b")
+    assert b["ids"] == ["node:/cam", "node:/imu", "topic:/cam/out", "topic:/imu/out"]
+    assert b["colors"] == [1, 2, 4, 5] and b["positions"] == [(0, 0), (0, 1), (1, 0), (1, 1)]
+    assert b["edges"] == [("node:/cam", "topic:/cam/out"), ("node:/imu", "topic:/imu/out")]
+    a_part = host_arrays(G, a, "a")  # the planner and what it subscribes to; not b's nodes
+    assert a_part["ids"] == ["node:/planner", "topic:/cam/out", "topic:/imu/out"]
+    assert a_part["edges"] == [("topic:/cam/out", "node:/planner"), ("topic:/imu/out", "node:/planner")]
+    assert hosts_of(G) == ["a", "b"]
