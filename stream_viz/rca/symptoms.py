@@ -18,7 +18,7 @@ import numpy as np
 
 from stream_viz.model.queries import called_servers, nodes_of_process, process_of_node
 from stream_viz.rca import siblings
-from stream_viz.rca.causal import causes, is_node, outputs, publishers
+from stream_viz.rca.causal import causes_in, is_node, outputs, publishers
 from stream_viz.rca.charge import charged_nodes, names_in, pointed_nodes, publisher_shares
 from stream_viz.rca.episodes import Episode, Evidence, as_evidence, merge, overlaps
 from stream_viz.rca.settings import RcaSettings
@@ -352,9 +352,10 @@ def _settle(
     # What can excuse at all: the walk upstream stops once it has passed all of them.
     sources = {m for m in s.anomaly if not m.startswith(("process:", "host:")) and m != "root"}
     sources |= set(views) | set(ev_passive)
+    parents: dict[str, list[str]] = {}  # the candidates' walks upstream cross the same members
     for n, v in these.items():
         v.upstream = _upstream(G, n, v, s, views, ev_passive, settings, sources,
-                               (stalled or {}).get(n, set()))
+                               (stalled or {}).get(n, set()), parents)
 
 
 def _imply_servers(
@@ -395,6 +396,7 @@ def _upstream(
     settings: RcaSettings,
     sources: set[str] | None = None,
     fellows: Collection[str] = (),
+    parents: dict[str, list[str]] | None = None,
 ) -> float:
     """How anomalous ``n``'s causes were while ``n``'s symptoms began.
 
@@ -411,8 +413,9 @@ def _upstream(
     stalled with ``n`` in one executor (`siblings.stalls`) — neither they nor the topics only
     they publish excuse it. A node of ``n``'s own process excuses it only with its own changes:
     what they share (the process's CPU, memory, exit) is one symptom of the process, and does
-    not travel along the data flow between them.
+    not travel along the data flow between them. ``parents``: `causal.causes_in`'s memo.
     """
+    parents = {} if parents is None else parents
     home = process_of_node(G, n)
     if v.onset < INF:
         lo, hi = v.onset - settings.episode_gap, v.onset + settings.tolerance
@@ -422,7 +425,7 @@ def _upstream(
     left = None if sources is None else sources - mine - {n}
     worst = 0.0
     seen = {n}
-    frontier: list[tuple[str, float]] = [(p, 1.0) for p in causes(G, n) if p not in mine]
+    frontier: list[tuple[str, float]] = [(p, 1.0) for p in causes_in(G, n, parents) if p not in mine]
     for _ in range(settings.max_trajectory):
         if left is not None and not left:
             break
@@ -431,27 +434,28 @@ def _upstream(
             if p in seen:
                 continue
             seen.add(p)
-            if fellows and _among(G, p, fellows):
+            if fellows and _among(G, p, fellows, parents):
                 continue
             if left is not None:
                 left.discard(p)
-            found = _excuse(G, p, n, s, views, ev_passive, lo, hi, home)
+            found = _excuse(G, p, n, s, views, ev_passive, lo, hi, home, parents)
             worst = max(worst, w * found)
             if found > 0 or w * SILENT_DECAY <= worst:
                 continue  # an alerting member ends its path: the earlier ones are its own causes
             decay = w * SILENT_DECAY if is_node(G, p) else w
-            nxt += [(q, decay) for q in causes(G, p) if q not in seen]
+            nxt += [(q, decay) for q in causes_in(G, p, parents) if q not in seen]
         if not nxt:
             break
         frontier = nxt
     return _clip(worst)
 
 
-def _among(G: nx.MultiDiGraph, p: str, fellows: Collection[str]) -> bool:
+def _among(G: nx.MultiDiGraph, p: str, fellows: Collection[str],
+           parents: dict[str, list[str]] | None = None) -> bool:
     """True when ``p`` is one of ``fellows`` or a topic only they publish."""
     if p in fellows:
         return True
-    pubs = [] if is_node(G, p) else publishers(G, p)
+    pubs = [] if is_node(G, p) else publishers(G, p, parents)
     return bool(pubs) and all(q in fellows for q in pubs)
 
 
@@ -465,9 +469,11 @@ def _excuse(
     lo: float,
     hi: float,
     home: str | None = None,
+    parents: dict[str, list[str]] | None = None,
 ) -> float:
     """How much the cause ``p`` of ``n`` was anomalous at some time in ``[lo, hi]``; a node of
-    ``n``'s process ``home`` counts with its own changes only."""
+    ``n``'s process ``home`` counts with its own changes only. ``parents``: `causal.causes_in`'s
+    memo."""
     if is_node(G, p):  # a server it calls, or a node further upstream
         pv = views.get(p)
         fellow = home is not None and process_of_node(G, p) == home
@@ -476,7 +482,7 @@ def _excuse(
     e = ev_passive.get(p)
     if e is not None and e.meets(lo, hi):
         worst = max(worst, e.strength)
-    for q in publishers(G, p):
+    for q in publishers(G, p, parents):
         qv = views.get(q)
         if q == n or qv is None or qv.implied:
             continue
