@@ -59,6 +59,14 @@ def causes_in(G: nx.MultiDiGraph, m: str, memo: dict[str, list[str]]) -> list[st
     return out
 
 
+def effects_in(G: nx.MultiDiGraph, m: str, memo: dict[str, list[str]]) -> list[str]:
+    """`effects` of ``m``, kept in ``memo`` as `causes_in` keeps causes."""
+    out = memo.get(m)
+    if out is None:
+        out = memo[m] = effects(G, m)
+    return out
+
+
 def is_node(G: nx.MultiDiGraph, m: str) -> bool:
     """True for an active member (a ROS node); ids decide when ``m`` is not in ``G``."""
     d = G._node.get(m)  # one look-up, not `in` then a node view
@@ -79,15 +87,18 @@ def outputs(G: nx.MultiDiGraph, n: str) -> list[str]:
 
 
 def trace(
-    G: nx.MultiDiGraph, c: str, symptomatic: Container[str], max_len: int
+    G: nx.MultiDiGraph, c: str, symptomatic: Container[str], max_len: int,
+    children: dict[str, list[str]] | None = None,
 ) -> tuple[dict[str, float], dict[str, str]]:
     """Dijkstra from ``c`` along causal edges (downstream), up to ``max_len`` members per path.
 
     Entering a member with a symptom costs 1, a silent one `SILENT_COST`, so a path through
     symptoms is preferred. Returns ``(cost, back)``: cost per reached member, and ``back[x]`` the
     member before ``x`` on its path from ``c`` — following ``back`` from a symptom leads
-    upstream, to ``c``: that is the fault trajectory.
+    upstream, to ``c``: that is the fault trajectory. ``children``: `effects_in`'s memo, shared
+    by the traces of one ranking.
     """
+    children = {} if children is None else children
     cost: dict[str, float] = {c: 0.0}
     hops: dict[str, int] = {c: 1}
     back: dict[str, str] = {}
@@ -96,7 +107,7 @@ def trace(
         d, m = heapq.heappop(heap)
         if d > cost[m] or hops[m] >= max_len:
             continue
-        for x in effects(G, m):
+        for x in effects_in(G, m, children):
             nd = d + (1.0 if x in symptomatic else SILENT_COST)
             if nd < cost.get(x, float("inf")):
                 cost[x], hops[x], back[x] = nd, hops[m] + 1, m

@@ -13,6 +13,7 @@ and kind), and whose inputs explain them as much, cannot be told apart, and the 
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -95,7 +96,8 @@ def stalls(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> di
             start = min(views[n].own_onset for n in silent)
             group = {n for n in silent if _close(views[n].own_onset, start, tol)}
             free = (n for n in group if not _fed_by(G, n, group - {n}, parents))
-            if next(free, None) is not None and next(free, None) is not None:  # two are enough
+            # A lone node is no stall; two independent ones are enough to tell, the rest not walked.
+            if len(group) > 1 and len(list(itertools.islice(free, 2))) == 2:
                 for n in group:
                     out[n] = group - {n}
         dead = {n for n in nodes if views[n].exited < INF}

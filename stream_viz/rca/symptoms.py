@@ -19,7 +19,7 @@ import numpy as np
 from stream_viz.model.queries import called_servers, nodes_of_process, process_of_node
 from stream_viz.rca import siblings
 from stream_viz.rca.causal import causes_in, is_node, outputs, publishers
-from stream_viz.rca.charge import charged_nodes, names_in, pointed_nodes, publisher_shares
+from stream_viz.rca.charge import NAME_KEYS, charged_nodes, names_in, pointed_nodes, publisher_shares
 from stream_viz.rca.episodes import Episode, Evidence, as_evidence, merge, overlaps
 from stream_viz.rca.settings import RcaSettings
 from stream_viz.records import Alert
@@ -87,32 +87,46 @@ def collect_symptoms(
         latest = max(a.t for a in chosen)
         chosen = [a for a in chosen if a.t >= latest - settings.window]
     sev = settings.severity
+    warn = sev.get("warn", 0.5)
     direct = set(settings.direct_plugins)
     raw: dict[str, list[float]] = {}
     s = Symptoms()
-    first_t = INF
+    # Local names and one branch per member's first alert: this loop runs over every alert of
+    # the window at every update.
+    anomaly, relevance, plugins = s.anomaly, s.relevance, s.plugins
+    own_anomaly, own_onset, logged, exited, named = s.own_anomaly, s.own_onset, s.logged, s.exited, s.named
+    first_t, latest = INF, s.latest
     for a in chosen:
-        w = sev.get(a.severity, sev.get("warn", 0.5))
-        factor = 1.0 if (a.plugin in direct or not a.member.startswith("node:")) else settings.charge
+        m, t, data = a.member, a.t, a.data
+        w = sev.get(a.severity, warn)
+        factor = 1.0 if (a.plugin in direct or not m.startswith("node:")) else settings.charge
         x = min(1.0, w * factor)
-        raw.setdefault(a.member, []).append(a.t)
-        s.anomaly[a.member] = max(s.anomaly.get(a.member, 0.0), x)
-        s.relevance[a.member] = s.relevance.get(a.member, 0.0) + w
-        s.plugins.setdefault(a.member, set()).add(a.plugin)
-        data = a.data
+        ts = raw.get(m)
+        if ts is None:
+            raw[m] = [t]
+            anomaly[m] = max(0.0, x)
+            relevance[m] = 0.0 + w
+            plugins[m] = {a.plugin}
+        else:
+            ts.append(t)
+            anomaly[m] = max(anomaly[m], x)
+            relevance[m] += w
+            plugins[m].add(a.plugin)
         if not (data and data.get("process")):  # not an alert a node got for its process
-            s.own_anomaly[a.member] = max(s.own_anomaly.get(a.member, 0.0), x)
-            s.own_onset[a.member] = min(s.own_onset.get(a.member, INF), a.t)
+            own_anomaly[m] = max(own_anomaly.get(m, 0.0), x)
+            own_onset[m] = min(own_onset.get(m, INF), t)
             if data and data.get("symptom") == "log":
-                s.logged[a.member] = min(s.logged.get(a.member, INF), a.t)
+                logged[m] = min(logged.get(m, INF), t)
         elif data.get("symptom") == "exit":
-            s.exited[a.member] = min(s.exited.get(a.member, INF), a.t)
-        for name in names_in(data) if data else ():
-            t0, w0 = s.named.get((a.member, name), (INF, 0.0))
-            s.named[(a.member, name)] = (min(t0, a.t), max(w0, w))
-        if a.t < first_t:
-            first_t, s.first = a.t, a.member
-        s.latest = max(s.latest, a.t)
+            exited[m] = min(exited.get(m, INF), t)
+        if data and not data.keys().isdisjoint(NAME_KEYS):
+            for name in names_in(data):
+                t0, w0 = named.get((m, name), (INF, 0.0))
+                named[(m, name)] = (min(t0, t), max(w0, w))
+        if t < first_t:
+            first_t, s.first = t, m
+        latest = max(latest, t)
+    s.latest = latest
     s.count = len(chosen)
     for m, ts in raw.items():
         s.times[m] = np.asarray(sorted(set(ts)), dtype=float)  # np.unique costs more on short lists

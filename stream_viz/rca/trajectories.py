@@ -65,6 +65,8 @@ class Context:
     has_evidence: bool
     first: str | None = None  # the first detected symptom (alert of iteration 1)
     _lags: LagDistribution | None = None
+    # effects per member (`causal.effects_in`): the candidates' traces cross the same members
+    _children: dict[str, list[str]] = field(default_factory=dict, repr=False)
 
     @property
     def lags(self) -> LagDistribution:
@@ -113,7 +115,7 @@ def _series(ctx: Context, m: str) -> np.ndarray:
 def trajectory_of(ctx: Context, c: str) -> Trajectory:
     """Trace ``c``'s fault trajectory and score its dependencies (module docstring, stage 2)."""
     s, settings = ctx.symptoms, ctx.settings
-    cost, back = trace(ctx.G, c, s.times, settings.max_trajectory)
+    cost, back = trace(ctx.G, c, s.times, settings.max_trajectory, ctx._children)
     # A symptom that began before the candidate's own (beyond the tolerance) is not its effect.
     onset = ctx.views[c].onset if c in ctx.views else np.inf
     since = onset - settings.tolerance if np.isfinite(onset) else -np.inf  # metric evidence only: no time
