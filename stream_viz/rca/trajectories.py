@@ -67,6 +67,8 @@ class Context:
     _lags: LagDistribution | None = None
     # effects per member (`causal.effects_in`): the candidates' traces cross the same members
     _children: dict[str, list[str]] = field(default_factory=dict, repr=False)
+    # (effect, cause) → (co-occurrence strength, causal lag): trajectories share their pairs
+    _pairs: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict, repr=False)
 
     @property
     def lags(self) -> LagDistribution:
@@ -134,13 +136,17 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
     alerting = [m for m in path if m in s.times]
     co, lag = [], []
     for effect, cause in itertools.pairwise(alerting):
-        co.append(
-            cooccurrence(
-                _series(ctx, cause), _series(ctx, effect), settings.tolerance, settings.max_offset,
-                settings.icp_iterations,
-            ).strength
-        )
-        lag.append(ctx.lags.lag(s.onset[cause], s.onset[effect]).causal)
+        pair = ctx._pairs.get((effect, cause))
+        if pair is None:
+            pair = ctx._pairs[effect, cause] = (
+                cooccurrence(
+                    _series(ctx, cause), _series(ctx, effect), settings.tolerance, settings.max_offset,
+                    settings.icp_iterations,
+                ).strength,
+                ctx.lags.lag(s.onset[cause], s.onset[effect]).causal,
+            )
+        co.append(pair[0])
+        lag.append(pair[1])
     return Trajectory(
         path,
         explained,
