@@ -64,7 +64,7 @@ class Symptoms:
 
 def gone_members(G: nx.MultiDiGraph) -> set[str]:
     """Return the members of ``G`` marked ``gone`` (vanished: their symptom lasts)."""
-    return {m for m, g in G.nodes(data="gone") if g}
+    return {m for m, d in G._node.items() if d.get("gone")}  # the attribute dicts: no data view
 
 
 def collect_symptoms(

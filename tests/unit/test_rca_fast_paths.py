@@ -18,7 +18,7 @@ from stream_viz.rca.causal import causes, causes_in, effects, effects_in, is_nod
 from stream_viz.rca.charge import _servers_by_edge, names_in
 from stream_viz.rca.cooccurrence import _series
 from stream_viz.rca.episodes import merge
-from stream_viz.rca.symptoms import INF, NodeView, Symptoms, collect_symptoms
+from stream_viz.rca.symptoms import INF, NodeView, Symptoms, collect_symptoms, gone_members
 from stream_viz.records import Alert
 
 A, B, C, S = "node:/a", "node:/b", "node:/c", "node:/srv"
@@ -300,3 +300,12 @@ def test_series_is_numpy_unique_on_random_ticks(seed):
     x = rng.integers(0, 6, rng.integers(0, 9)).astype(float)
     for y in (x, np.sort(x), np.unique(x)):
         assert _series(y).tobytes() == np.unique(y).tobytes()
+
+
+def test_gone_members_is_the_data_view():
+    g = new_graph()
+    for m, gone in ((A, True), (B, False), (T1, None), (T2, 1), (C, 0)):
+        add_member(g, m)
+        if gone is not None:
+            g.nodes[m]["gone"] = gone
+    assert gone_members(g) == {m for m, x in g.nodes(data="gone") if x} == {A, T2}
