@@ -99,7 +99,8 @@ class PluginContext:
 
     def members(self, kind: str) -> Iterator[str]:
         """Yield every member of ``kind`` in the graph, watched or not, in the graph's order."""
-        return (m for m, k in self.graph.nodes(data="kind") if k == kind)
+        # The attribute dicts, not a data view: plugins ask this over every member each sample.
+        return (m for m, attrs in self.graph._node.items() if attrs.get("kind") == kind)
 
     # -- what a member is and measures ----------------------------------------------------------
     @staticmethod
@@ -110,12 +111,12 @@ class PluginContext:
     def attr(self, member: str, key: str, default: Any = None) -> Any:
         """Return the attribute ``key`` of ``member`` (``alive``, ``pid``, ``qos``, ...); ``default``
         when the member or the attribute is missing."""
-        attrs = self.graph.nodes.get(member)
+        attrs = self.graph._node.get(member)  # a dict look-up: asked for every member each sample
         return default if attrs is None else attrs.get(key, default)
 
     def value(self, member: str, attr: str) -> float:
         """Return θ[attr] of ``member`` now; NaN when unknown or not measured."""
-        attrs = self.graph.nodes.get(member)
+        attrs = self.graph._node.get(member)
         if attrs is None:
             return float("nan")
         theta = attrs.get("theta")

@@ -138,10 +138,11 @@ def process_of_node(G: nx.MultiDiGraph, node: str) -> str | None:
     its ``pid`` attribute when that is in the graph), or None when unknown."""
     if node not in G:
         return None
+    attrs = G._node  # the RCA asks this for every candidate, several times an update: no node views
     for u, keys in G._pred[node].items():
-        if PROCESS_TREE in keys and G.nodes[u].get("kind") == "process":
+        if PROCESS_TREE in keys and attrs[u].get("kind") == "process":
             return u
-    pid = G.nodes[node].get("pid")
+    pid = attrs[node].get("pid")
     if isinstance(pid, int) and not isinstance(pid, bool):
         proc = make_id("process", pid)
         if proc in G and G.nodes[proc].get("host") == G.nodes[node].get("host"):

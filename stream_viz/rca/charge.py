@@ -38,8 +38,14 @@ def charged_nodes(G: nx.MultiDiGraph, member: str) -> list[str]:
 
 
 def _servers_by_edge(G: nx.MultiDiGraph, service: str) -> list[str]:
-    return sorted({v for _, v, k, d in G.edges(keys=True, data=True)
-                   if k == FLOW and d.get("kind") == "send" and service in (d.get("services") or ())})
+    # The adjacency itself, not an edge view: this scans every edge, for each service asked.
+    out = set()
+    for nbrs in G._succ.values():
+        for v, kd in nbrs.items():
+            d = kd.get(FLOW)
+            if d is not None and d.get("kind") == "send" and service in (d.get("services") or ()):
+                out.add(v)
+    return sorted(out)
 
 
 def named_nodes(G: nx.MultiDiGraph, name: str) -> list[str]:

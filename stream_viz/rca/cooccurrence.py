@@ -30,7 +30,13 @@ class Cooccurrence:
 
 
 def _series(x: np.ndarray | list[float]) -> np.ndarray:
-    return np.unique(np.asarray(x, dtype=float))  # sorted, duplicates (same tick) merged
+    """``x`` sorted, duplicates (same tick) merged."""
+    x = np.asarray(x, dtype=float)
+    # The RCA's series are sorted and unique already: checking is cheaper than sorting again
+    # (NaN or ±0 fail the check and take the general path).
+    if x.ndim == 1 and (len(x) < 2 or bool(np.all(x[1:] > x[:-1]))):
+        return x
+    return np.unique(x)
 
 
 def _nearest(ref: np.ndarray, q: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ and kind), and whose inputs explain them as much, cannot be told apart, and the 
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -20,7 +21,7 @@ from typing import Protocol
 import networkx as nx
 
 from stream_viz.model.queries import process_of_node
-from stream_viz.rca.causal import causes
+from stream_viz.rca.causal import causes_in
 
 INF = float("inf")
 EPS = 1e-9
@@ -88,12 +89,15 @@ def stalls(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> di
         if not v.implied and (p := process_of_node(G, n)) is not None:
             by_process.setdefault(p, []).append(n)
     out: dict[str, set[str]] = {}
+    parents: dict[str, list[str]] = {}  # the walks upstream of one group cross the same members
     for nodes in by_process.values():
         silent = [n for n in nodes if "output" in views[n].own_kinds]
         if silent:
             start = min(views[n].own_onset for n in silent)
             group = {n for n in silent if _close(views[n].own_onset, start, tol)}
-            if len([n for n in group if not _fed_by(G, n, group - {n})]) >= 2:
+            free = (n for n in group if not _fed_by(G, n, group - {n}, parents))
+            # A lone node is no stall; two independent ones are enough to tell, the rest not walked.
+            if len(group) > 1 and len(list(itertools.islice(free, 2))) == 2:
                 for n in group:
                     out[n] = group - {n}
         dead = {n for n in nodes if views[n].exited < INF}
@@ -109,11 +113,18 @@ def _spoke(v: OwnChange, tol: float) -> bool:
     return v.logged <= v.own_onset + tol
 
 
-def _fed_by(G: nx.MultiDiGraph, n: str, others: set[str]) -> bool:
-    """True when one of ``others`` is upstream of ``n`` within `HOPS` causal steps."""
+def _fed_by(G: nx.MultiDiGraph, n: str, others: set[str],
+            parents: dict[str, list[str]] | None = None) -> bool:
+    """True when one of ``others`` is upstream of ``n`` within `HOPS` causal steps.
+
+    ``parents`` (member → `causes`) is filled and reused across calls on the same graph."""
+    parents = {} if parents is None else parents
     seen, frontier = {n}, [n]
     for _ in range(HOPS):
-        frontier = [p for m in frontier for p in causes(G, m) if p not in seen]
+        nxt: dict[str, None] = {}  # each member once: two paths to it lead to the same parents
+        for m in frontier:
+            nxt.update((p, None) for p in causes_in(G, m, parents) if p not in seen)
+        frontier = list(nxt)
         if any(p in others for p in frontier):
             return True
         seen.update(frontier)

@@ -18,8 +18,8 @@ import numpy as np
 
 from stream_viz.model.queries import called_servers, nodes_of_process, process_of_node
 from stream_viz.rca import siblings
-from stream_viz.rca.causal import causes, is_node, outputs, publishers
-from stream_viz.rca.charge import charged_nodes, names_in, pointed_nodes, publisher_shares
+from stream_viz.rca.causal import causes_in, is_node, outputs, publishers
+from stream_viz.rca.charge import NAME_KEYS, charged_nodes, names_in, pointed_nodes, publisher_shares
 from stream_viz.rca.episodes import Episode, Evidence, as_evidence, merge, overlaps
 from stream_viz.rca.settings import RcaSettings
 from stream_viz.records import Alert
@@ -66,7 +66,7 @@ class Symptoms:
 
 def gone_members(G: nx.MultiDiGraph) -> set[str]:
     """Return the members of ``G`` marked ``gone`` (vanished: their symptom lasts)."""
-    return {m for m, g in G.nodes(data="gone") if g}
+    return {m for m, d in G._node.items() if d.get("gone")}  # the attribute dicts: no data view
 
 
 def collect_symptoms(
@@ -89,34 +89,48 @@ def collect_symptoms(
         latest = max(a.t for a in chosen)
         chosen = [a for a in chosen if a.t >= latest - settings.window]
     sev = settings.severity
+    warn = sev.get("warn", 0.5)
     direct = set(settings.direct_plugins)
     raw: dict[str, list[float]] = {}
     s = Symptoms()
-    first_t = INF
+    # Local names and one branch per member's first alert: this loop runs over every alert of
+    # the window at every update.
+    anomaly, relevance, plugins = s.anomaly, s.relevance, s.plugins
+    own_anomaly, own_onset, logged, exited, named = s.own_anomaly, s.own_onset, s.logged, s.exited, s.named
+    first_t, latest = INF, s.latest
     for a in chosen:
-        w = sev.get(a.severity, sev.get("warn", 0.5))
-        factor = 1.0 if (a.plugin in direct or not a.member.startswith("node:")) else settings.charge
+        m, t, data = a.member, a.t, a.data
+        w = sev.get(a.severity, warn)
+        factor = 1.0 if (a.plugin in direct or not m.startswith("node:")) else settings.charge
         x = min(1.0, w * factor)
-        raw.setdefault(a.member, []).append(a.t)
-        s.anomaly[a.member] = max(s.anomaly.get(a.member, 0.0), x)
-        s.relevance[a.member] = s.relevance.get(a.member, 0.0) + w
-        s.plugins.setdefault(a.member, set()).add(a.plugin)
-        data = a.data
+        ts = raw.get(m)
+        if ts is None:
+            raw[m] = [t]
+            anomaly[m] = max(0.0, x)
+            relevance[m] = 0.0 + w
+            plugins[m] = {a.plugin}
+        else:
+            ts.append(t)
+            anomaly[m] = max(anomaly[m], x)
+            relevance[m] += w
+            plugins[m].add(a.plugin)
         if not (data and data.get("process")):  # not an alert a node got for its process
-            s.own_anomaly[a.member] = max(s.own_anomaly.get(a.member, 0.0), x)
-            s.own_onset[a.member] = min(s.own_onset.get(a.member, INF), a.t)
+            own_anomaly[m] = max(own_anomaly.get(m, 0.0), x)
+            own_onset[m] = min(own_onset.get(m, INF), t)
             if data and data.get("symptom") == "log":
-                s.logged[a.member] = min(s.logged.get(a.member, INF), a.t)
+                logged[m] = min(logged.get(m, INF), t)
         elif data.get("symptom") == "exit":
-            s.exited[a.member] = min(s.exited.get(a.member, INF), a.t)
+            exited[m] = min(exited.get(m, INF), t)
         if data and isinstance(data.get("since"), int | float):
-            s.began[a.member] = min(s.began.get(a.member, INF), float(data["since"]), a.t)
-        for name in names_in(data) if data else ():
-            t0, w0 = s.named.get((a.member, name), (INF, 0.0))
-            s.named[(a.member, name)] = (min(t0, a.t), max(w0, w))
-        if a.t < first_t:
-            first_t, s.first = a.t, a.member
-        s.latest = max(s.latest, a.t)
+            s.began[m] = min(s.began.get(m, INF), float(data["since"]), t)
+        if data and not data.keys().isdisjoint(NAME_KEYS):
+            for name in names_in(data):
+                t0, w0 = named.get((m, name), (INF, 0.0))
+                named[(m, name)] = (min(t0, t), max(w0, w))
+        if t < first_t:
+            first_t, s.first = t, m
+        latest = max(latest, t)
+    s.latest = latest
     s.count = len(chosen)
     for m, ts in raw.items():
         s.times[m] = np.asarray(sorted(set(ts)), dtype=float)  # np.unique costs more on short lists
@@ -356,9 +370,10 @@ def _settle(
     # What can excuse at all: the walk upstream stops once it has passed all of them.
     sources = {m for m in s.anomaly if not m.startswith(("process:", "host:")) and m != "root"}
     sources |= set(views) | set(ev_passive)
+    parents: dict[str, list[str]] = {}  # the candidates' walks upstream cross the same members
     for n, v in these.items():
         v.upstream = _upstream(G, n, v, s, views, ev_passive, settings, sources,
-                               (stalled or {}).get(n, set()))
+                               (stalled or {}).get(n, set()), parents)
 
 
 def _imply_servers(
@@ -399,6 +414,7 @@ def _upstream(
     settings: RcaSettings,
     sources: set[str] | None = None,
     fellows: Collection[str] = (),
+    parents: dict[str, list[str]] | None = None,
 ) -> float:
     """How anomalous ``n``'s causes were while ``n``'s symptoms began.
 
@@ -415,8 +431,9 @@ def _upstream(
     stalled with ``n`` in one executor (`siblings.stalls`) — neither they nor the topics only
     they publish excuse it. A node of ``n``'s own process excuses it only with its own changes:
     what they share (the process's CPU, memory, exit) is one symptom of the process, and does
-    not travel along the data flow between them.
+    not travel along the data flow between them. ``parents``: `causal.causes_in`'s memo.
     """
+    parents = {} if parents is None else parents
     home = process_of_node(G, n)
     if v.onset < INF:
         lo, hi = v.onset - settings.episode_gap, v.onset + settings.tolerance
@@ -426,7 +443,7 @@ def _upstream(
     left = None if sources is None else sources - mine - {n}
     worst = 0.0
     seen = {n}
-    frontier: list[tuple[str, float]] = [(p, 1.0) for p in causes(G, n) if p not in mine]
+    frontier: list[tuple[str, float]] = [(p, 1.0) for p in causes_in(G, n, parents) if p not in mine]
     for _ in range(settings.max_trajectory):
         if left is not None and not left:
             break
@@ -435,27 +452,28 @@ def _upstream(
             if p in seen:
                 continue
             seen.add(p)
-            if fellows and _among(G, p, fellows):
+            if fellows and _among(G, p, fellows, parents):
                 continue
             if left is not None:
                 left.discard(p)
-            found = _excuse(G, p, n, s, views, ev_passive, lo, hi, home)
+            found = _excuse(G, p, n, s, views, ev_passive, lo, hi, home, parents)
             worst = max(worst, w * found)
             if found > 0 or w * SILENT_DECAY <= worst:
                 continue  # an alerting member ends its path: the earlier ones are its own causes
             decay = w * SILENT_DECAY if is_node(G, p) else w
-            nxt += [(q, decay) for q in causes(G, p) if q not in seen]
+            nxt += [(q, decay) for q in causes_in(G, p, parents) if q not in seen]
         if not nxt:
             break
         frontier = nxt
     return _clip(worst)
 
 
-def _among(G: nx.MultiDiGraph, p: str, fellows: Collection[str]) -> bool:
+def _among(G: nx.MultiDiGraph, p: str, fellows: Collection[str],
+           parents: dict[str, list[str]] | None = None) -> bool:
     """True when ``p`` is one of ``fellows`` or a topic only they publish."""
     if p in fellows:
         return True
-    pubs = [] if is_node(G, p) else publishers(G, p)
+    pubs = [] if is_node(G, p) else publishers(G, p, parents)
     return bool(pubs) and all(q in fellows for q in pubs)
 
 
@@ -469,9 +487,11 @@ def _excuse(
     lo: float,
     hi: float,
     home: str | None = None,
+    parents: dict[str, list[str]] | None = None,
 ) -> float:
     """How much the cause ``p`` of ``n`` was anomalous at some time in ``[lo, hi]``; a node of
-    ``n``'s process ``home`` counts with its own changes only."""
+    ``n``'s process ``home`` counts with its own changes only. ``parents``: `causal.causes_in`'s
+    memo."""
     if is_node(G, p):  # a server it calls, or a node further upstream
         pv = views.get(p)
         fellow = home is not None and process_of_node(G, p) == home
@@ -480,7 +500,7 @@ def _excuse(
     e = ev_passive.get(p)
     if e is not None and e.meets(lo, hi):
         worst = max(worst, e.strength)
-    for q in publishers(G, p):
+    for q in publishers(G, p, parents):
         qv = views.get(q)
         if q == n or qv is None or qv.implied:
             continue

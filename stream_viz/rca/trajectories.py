@@ -66,6 +66,10 @@ class Context:
     has_evidence: bool
     first: str | None = None  # the first detected symptom (alert of iteration 1)
     _lags: LagDistribution | None = None
+    # effects per member (`causal.effects_in`): the candidates' traces cross the same members
+    _children: dict[str, list[str]] = field(default_factory=dict, repr=False)
+    # (effect, cause) → (co-occurrence strength, causal lag): trajectories share their pairs
+    _pairs: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict, repr=False)
 
     @property
     def lags(self) -> LagDistribution:
@@ -114,7 +118,7 @@ def _series(ctx: Context, m: str) -> np.ndarray:
 def trajectory_of(ctx: Context, c: str) -> Trajectory:
     """Trace ``c``'s fault trajectory and score its dependencies (module docstring, stage 2)."""
     s, settings = ctx.symptoms, ctx.settings
-    cost, back = trace(ctx.G, c, s.times, settings.max_trajectory)
+    cost, back = trace(ctx.G, c, s.times, settings.max_trajectory, ctx._children)
     # A symptom that began before the candidate's own (beyond the tolerance) is not its effect.
     onset = ctx.views[c].onset if c in ctx.views else np.inf
     since = onset - settings.tolerance if np.isfinite(onset) else -np.inf  # metric evidence only: no time
@@ -133,13 +137,17 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
     alerting = [m for m in path if m in s.times]
     co, lag = [], []
     for effect, cause in itertools.pairwise(alerting):
-        co.append(
-            cooccurrence(
-                _series(ctx, cause), _series(ctx, effect), settings.tolerance, settings.max_offset,
-                settings.icp_iterations,
-            ).strength
-        )
-        lag.append(ctx.lags.lag(s.onset[cause], s.onset[effect]).causal)
+        pair = ctx._pairs.get((effect, cause))
+        if pair is None:
+            pair = ctx._pairs[effect, cause] = (
+                cooccurrence(
+                    _series(ctx, cause), _series(ctx, effect), settings.tolerance, settings.max_offset,
+                    settings.icp_iterations,
+                ).strength,
+                ctx.lags.lag(s.onset[cause], s.onset[effect]).causal,
+            )
+        co.append(pair[0])
+        lag.append(pair[1])
     return Trajectory(
         path,
         explained,
