@@ -192,6 +192,7 @@ class Recorder:
         self._part_t0: float | None = None
         self._last_rca: tuple[Any, ...] | None = None  # shown again at the top of a new part
         self._last_report: tuple[str, float | None] | None = None
+        self._report_shown: str | None = None  # the text `report` last logged, if nothing since
         self.layout: Layout | None = None
         self.grouping = grouping
         self.server: WebViewerServer | None = None
@@ -317,6 +318,7 @@ class Recorder:
         self._drawn_time.forget()  # nor is anything drawn before
         self._drawn_hosts.forget()
         self._drawn_rca.forget()
+        self._report_shown = None
         lanes = {m: [(t, s)] for m, s in self.health.state.items()}
         if lanes:
             log_health(self._only["file"], lanes)
@@ -436,6 +438,7 @@ class Recorder:
         changed a colour since.
         """
         self._last_rca, self._last_report = (G, iteration, root_causes, gone, incidents), None
+        self._report_shown = None  # log_rca logs its own report
         gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
         drawn = self._drawn
         same = (drawn is not None and drawn[0] is G and drawn[1] == gone_all
@@ -481,9 +484,12 @@ class Recorder:
     def report(self, markdown: str, t: float | None = None) -> None:
         """Log a markdown report at ``/rca/report``."""
         self._last_report = (markdown, t)
+        if markdown == self._report_shown:
+            return  # the viewer shows this text by latest-at already: a row more adds nothing
         if t is not None:
             self.set_time(t)
         log_report(self.rec, markdown)
+        self._report_shown = markdown
 
     # -- end ------------------------------------------------------------------------------------
     def flush(self, timeout: float = 5.0) -> None:
