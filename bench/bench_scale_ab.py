@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{args.nodes} nodes, {members} members, {args.samples} samples, crash of {group} at "
                   f"{args.crash_at}: base {args.base} vs this tree ({commit()})", flush=True)
             got: dict[str, list[dict]] = {"base": [], "this": []}
-            marks = f"{args.warmup - 1},{min(args.crash_at, args.samples) - 1}"
+            marks = f"{args.warmup - 1},{min(args.crash_at, args.samples) - 1},{args.samples - 1}"
             for i in range(args.rounds):
                 order = [("base", base), ("this", ROOT)] if i % 2 == 0 else [("this", ROOT), ("base", base)]
                 for name, tree in order:
@@ -123,7 +123,16 @@ def mb_an_hour(run: dict, phase: str, samples: int, crash_at: int, warmup: int) 
     end = min(crash_at, samples) - 1
     if phase == "healthy":
         return (sizes[end] - sizes[warmup - 1]) / (end - warmup + 1) / 1e6 * 3600
-    return (run["rrd"] - sizes[end]) / (samples - end - 1) / 1e6 * 3600
+    # To the last sample's mark, as the healthy phase: the footer written at close (an index
+    # entry for every chunk of the file, both phases) is printed apart (`closed_kb`).
+    last = sizes.get(samples - 1, run["rrd"])
+    return (last - sizes[end]) / (samples - end - 1) / 1e6 * 3600
+
+
+def closed_kb(run: dict, samples: int) -> float:
+    """What the file grew by at close (its footer), in kB."""
+    sizes = {int(k): v for k, v in run["sizes"].items()}
+    return (run["rrd"] - sizes.get(samples - 1, run["rrd"])) / 1e3
 
 
 def summary(got: dict[str, list[dict]], samples: int, crash_at: int, warmup: int) -> str:
@@ -146,7 +155,9 @@ def summary(got: dict[str, list[dict]], samples: int, crash_at: int, warmup: int
             f"{y / x:.2f}" if x > 0.05 else "–" for x, y in zip(b, n, strict=True)) + " |")
     b, n = got["base"][0], got["this"][0]
     lines.append(f".rrd size, whole run: base {b['rrd'] / 1e6:.1f} MB, this {n['rrd'] / 1e6:.1f} MB; MB an "
-                 f"hour: the size grown over the phase's samples (healthy: from sample {warmup}) × 3600")
+                 f"hour: the size grown over the phase's samples (healthy: from sample {warmup}; both to the "
+                 f"phase's last sample, before close) × 3600; written at close (footer): base "
+                 f"{closed_kb(b, samples):.0f} kB, this {closed_kb(n, samples):.0f} kB")
     same = {k: b["report"][k] == n["report"][k] for k in ("alerts", "root_causes", "incidents", "iterations")}
     lines.append(f"alerts stored per sample identical: {b['alerts'] == n['alerts']}; report identical "
                  f"(ended_at aside): {b['report'] == n['report']} ({same}); top causes {n['causes'][:3]}")

@@ -97,6 +97,31 @@ def merge(*changes: dict[str, list[Change]]) -> dict[str, list[Change]]:
     return out
 
 
+class FileEvents:
+    """Alerts and lane changes gathered for the file until they are written together
+    (`Recorder` ``file_events_s``): one chunk per entity for the lot, not one per sample."""
+
+    def __init__(self) -> None:
+        self.alerts: list[Alert] = []
+        self.lanes: dict[str, list[Change]] = {}
+        self.first_t: float | None = None  # the time of the first pending event
+
+    def add(self, alerts: Iterable[Alert], lanes: dict[str, list[Change]]) -> None:
+        alerts = list(alerts)
+        times = [a.t for a in alerts] + [t for ch in lanes.values() for t, _ in ch]
+        if not times:
+            return
+        self.alerts.extend(alerts)
+        self.lanes = merge(self.lanes, lanes)
+        self.first_t = min(times) if self.first_t is None else min(self.first_t, *times)
+
+    def take(self) -> tuple[list[Alert], dict[str, list[Change]]]:
+        """Return the pending alerts (in time order) and lane changes, and forget them."""
+        out = sorted(self.alerts, key=lambda a: a.t), self.lanes
+        self.alerts, self.lanes, self.first_t = [], {}, None
+        return out
+
+
 def log_health(rec: rr.RecordingStream, changes: dict[str, Sequence[Change]]) -> int:
     """Log state changes at ``/health/<kind>/<name>`` (``StateChange`` on ``time``); return #changes.
 

@@ -29,7 +29,7 @@ from stream_viz.viz import paths, style
 from stream_viz.viz.alerts import log_alerts
 from stream_viz.viz.changes import log_changes
 from stream_viz.viz.focus import diagnosis_members
-from stream_viz.viz.health import HealthLanes, log_health
+from stream_viz.viz.health import Change, FileEvents, HealthLanes, log_health
 from stream_viz.viz.hosts_view import DrawnHosts
 from stream_viz.viz.layout import Layout, settle
 from stream_viz.viz.metrics import MetricBatch, log_metrics
@@ -155,6 +155,11 @@ class Recorder:
         Where to tell the user the viewer URL (default: stderr).
     grouping : str
         Groups of the system graph drawn as boxes: ``namespace`` (default), ``process`` or ``none``.
+    file_events_s : float
+        Seconds of ``time`` the file's alerts and health-lane changes are gathered for before
+        they are written (the viewer gets them at once): every write of an entity is a chunk
+        with a fixed cost in the ``.rrd`` (its schema, an index entry in the footer), and an
+        alerting member gets a marker and a lane change every few seconds. 0: at once.
     """
 
     def __init__(
@@ -171,6 +176,7 @@ class Recorder:
         announce: Callable[[str], None] = _stderr,
         grouping: str = "namespace",
         bind: str = DEFAULT_BIND,
+        file_events_s: float = 60.0,
     ) -> None:
         self.save = _check_sinks(viewer, save)  # before anything is opened (and monitoring starts)
         disable_rerun_telemetry(telemetry)
@@ -186,6 +192,7 @@ class Recorder:
         self._part_t0: float | None = None
         self._last_rca: tuple[Any, ...] | None = None  # shown again at the top of a new part
         self._last_report: tuple[str, float | None] | None = None
+        self._report_shown: str | None = None  # the text `report` last logged, if nothing since
         self.layout: Layout | None = None
         self.grouping = grouping
         self.server: WebViewerServer | None = None
@@ -199,6 +206,8 @@ class Recorder:
         self._drawn_hosts = DrawnHosts()  # /hosts/<host>: each computer's part of /system
         self.hosts: list[str] = []  # the computers the layout has a tab for (several only)
         self._rca_j: int | None = None  # the last iteration on the rca_iteration timeline
+        self.file_events_s = file_events_s
+        self._events = FileEvents()  # the file's alerts and lane changes not written yet
         self._closed = False
         self.enabled = viewer != "none" or self.save is not None
         self._open(memory_limit, web_port, grpc_port, bind)
@@ -282,6 +291,7 @@ class Recorder:
         if self.save is None or self._file is None:
             return None
         path = part_path(self.save, len(self.parts))
+        self.send_events()  # the events of a part end in that part
         if not self._switch_file(path):
             return None
         self.parts.append(path)
@@ -308,9 +318,10 @@ class Recorder:
         self._drawn_time.forget()  # nor is anything drawn before
         self._drawn_hosts.forget()
         self._drawn_rca.forget()
+        self._report_shown = None
         lanes = {m: [(t, s)] for m, s in self.health.state.items()}
         if lanes:
-            log_health(self.rec, lanes)
+            log_health(self._only["file"], lanes)
         if G is not None:
             self.system(G, t, force=True)
         if self._last_rca is not None:
@@ -329,7 +340,7 @@ class Recorder:
             self.set_time(t)
         gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
         if t is not None:
-            log_health(self.rec, self.health.set_gone(t, gone_all))
+            self._lanes(self.health.set_gone(t, gone_all), t)
         colouring = drawn_status(self.status, gone_all)
         sig, tree_sig = signatures(G, gone_all, colouring)
         if tree_sig != self._tree_sig or force:
@@ -379,8 +390,39 @@ class Recorder:
         for a in sorted(alerts, key=lambda a: a.t):
             if SEVERITY_RANK.get(a.severity, -1) >= SEVERITY_RANK["warn"]:
                 self.status[a.member] = a.severity
-        log_health(self.rec, self.health.alerts(alerts))
-        return log_alerts(self.rec, alerts)
+        alerts = list(alerts)
+        lanes = self.health.alerts(alerts)
+        if self._file is None or self.file_events_s <= 0:
+            log_health(self.rec, lanes)
+            return log_alerts(self.rec, alerts)
+        if self._live is not None:
+            log_health(self._only["live"], lanes)
+            log_alerts(self._only["live"], alerts)
+        self._events.add(alerts, lanes)
+        self._events_due(max((a.t for a in alerts), default=None))
+        return len(alerts)
+
+    def _lanes(self, changes: dict[str, list[Change]], t: float) -> None:
+        """Log health-lane changes: to the viewer at once, to the file with the alerts."""
+        if self._file is None or self.file_events_s <= 0:
+            log_health(self.rec, changes)
+            return
+        if self._live is not None:
+            log_health(self._only["live"], changes)
+        self._events.add((), changes)
+        self._events_due(t)
+
+    def _events_due(self, t: float | None) -> None:
+        first = self._events.first_t
+        if t is not None and first is not None and t - first >= self.file_events_s:
+            self.send_events()
+
+    def send_events(self) -> int:
+        """Write the file's pending alerts and lane changes (one chunk per entity); return #alerts."""
+        alerts, lanes = self._events.take()
+        if lanes:
+            log_health(self._only["file"], lanes)
+        return log_alerts(self._only["file"], alerts) if alerts else 0
 
     def changes(self, events: Sequence[Event]) -> int:
         """Log the changes of configuration among ``events`` (``/changes``)."""
@@ -396,6 +438,7 @@ class Recorder:
         changed a colour since.
         """
         self._last_rca, self._last_report = (G, iteration, root_causes, gone, incidents), None
+        self._report_shown = None  # log_rca logs its own report
         gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
         drawn = self._drawn
         same = (drawn is not None and drawn[0] is G and drawn[1] == gone_all
@@ -441,13 +484,21 @@ class Recorder:
     def report(self, markdown: str, t: float | None = None) -> None:
         """Log a markdown report at ``/rca/report``."""
         self._last_report = (markdown, t)
+        if markdown == self._report_shown:
+            return  # the viewer shows this text by latest-at already: a row more adds nothing
         if t is not None:
             self.set_time(t)
         log_report(self.rec, markdown)
+        self._report_shown = markdown
 
     # -- end ------------------------------------------------------------------------------------
     def flush(self, timeout: float = 5.0) -> None:
-        """Flush pending data to the sinks; never raises (a vanished viewer must not stop a run)."""
+        """Write the pending events and flush pending data to the sinks; never raises (a vanished
+        viewer must not stop a run)."""
+        try:
+            self.send_events()
+        except Exception as e:
+            _stderr(f"stream-viz: writing the pending alerts to the recording: {e}")
         for stream in self._file_first():
             try:
                 stream.flush(timeout_sec=timeout)

@@ -9,6 +9,7 @@ import numpy as np
 from stream_viz.model.theta import make_theta
 from stream_viz.records import Alert
 from stream_viz.viz import paths
+from stream_viz.viz.health import FileEvents
 from stream_viz.viz.metrics import MANTISSA_BITS, MetricBatch, quantise, run_ends
 from stream_viz.viz.recorder import Recorder
 from stream_viz.viz.system import changed_fields
@@ -152,3 +153,80 @@ def test_a_new_part_logs_the_graph_in_full_again(tmp_path):
         view = shown(second, timeline)
         assert {"GraphNodes:node_ids", "GraphNodes:colors", "GraphNodes:positions",
                 "GraphEdges:edges"} <= set(view)
+
+
+def _alert(t: float, member: str = "topic:/image", severity: str = "error") -> Alert:
+    return Alert(member, "topic_rate", t, severity, "rate fell", {"value": t - T0})
+
+
+def test_file_events_gathers_alerts_and_lanes_in_time_order():
+    ev = FileEvents()
+    assert ev.first_t is None
+    ev.add([_alert(T0 + 3)], {"topic:/image": [(T0 + 3, "error")]})
+    ev.add([_alert(T0 + 1, "node:/cam")], {"topic:/image": [(T0 + 18, "ok")]})
+    assert ev.first_t == T0 + 1
+    alerts, lanes = ev.take()
+    assert [a.t for a in alerts] == [T0 + 1, T0 + 3]
+    assert lanes == {"topic:/image": [(T0 + 3, "error"), (T0 + 18, "ok")]}
+    assert ev.take() == ([], {}) and ev.first_t is None
+
+
+def test_alerts_go_to_the_file_in_few_chunks_and_are_all_shown(tmp_path):
+    """An alert a second for 100 s: the file holds every marker, alert line and lane change,
+    written every `file_events_s` (a chunk per entity), not a chunk per alert."""
+    from rerun.chunk import RrdReader
+
+    rrd = tmp_path / "alerts.rrd"
+    G = robot()
+    with Recorder(save=rrd, file_events_s=30.0) as r:
+        for i in range(100):
+            r.alerts([_alert(T0 + i)] if i < 80 else [])
+            r.system(G, t=T0 + i)
+    data = rows(rrd)
+    markers = [row for row in data["/metrics/topic/image/alerts"] if "Scalars:scalars" in row]
+    assert [row["time"] // 10**9 - int(T0) for row in markers] == list(range(80))
+    assert [row["Scalars:scalars"][0] for row in markers] == [float(i) for i in range(80)]
+    texts = [t for row in data[paths.ALERTS] for t in row.get("TextLog:text") or []]
+    assert len(texts) == 80
+    lane = data["/health/topic/image"]
+    assert shown(lane, "time", int((T0 + 50) * 1e9))["StateChange:state"] == ["error"]
+    assert shown(lane, "time")["StateChange:state"] == ["ok"]  # 15 s after the last alert
+    chunks = [c.entity_path for c in RrdReader(str(rrd)).stream()]
+    assert chunks.count("/metrics/topic/image/alerts") <= 6  # its style, then one per 30 s
+    assert chunks.count(paths.ALERTS) <= 5
+
+
+def test_a_new_part_holds_its_own_alerts(tmp_path):
+    from stream_viz.viz.recorder import part_path
+
+    rrd = tmp_path / "p.rrd"
+    G = robot()
+    with Recorder(save=rrd, part_s=10.0, file_events_s=60.0) as r:
+        for i in range(15):
+            if r.part_due(T0 + i):
+                r.next_part(T0 + i, G)
+            r.alerts([_alert(T0 + i)])
+            r.system(G, t=T0 + i)
+    first, second = rows(rrd), rows(part_path(rrd, 1))
+    times = [[row["time"] // 10**9 - int(T0) for row in d["/metrics/topic/image/alerts"]
+              if "Scalars:scalars" in row] for d in (first, second)]
+    assert times == [list(range(10)), list(range(10, 15))]
+    assert shown(second["/health/topic/image"], "time")["StateChange:state"] == ["error"]
+
+
+def test_an_unchanged_report_is_logged_once_and_shown_later(tmp_path):
+    rrd = tmp_path / "report.rrd"
+    G = robot()
+    it = {"subgraph": ["topic:/image"], "watchlist": [], "edges": [], "alert": "topic:/image"}
+    with Recorder(save=rrd) as r:
+        r.system(G, t=T0)
+        r.rca(G, {**it, "j": 1, "t": T0 + 1})
+        for i in range(2, 6):
+            r.report("# Root-cause analysis\n\nsame", T0 + i)
+        r.report("# Root-cause analysis\n\nnew", T0 + 6)
+    report = [row for row in rows(rrd)[paths.RCA_REPORT] if "TextDocument:text" in row]
+    on_time = [(row["time"] // 10**9 - int(T0), row["TextDocument:text"]) for row in report
+               if row.get("rca_iteration") is None]
+    assert [t for t, _ in on_time] == [2, 6]
+    assert shown(report, "time", int((T0 + 5) * 1e9))["TextDocument:text"][0].endswith("same")
+    assert shown(report, "time")["TextDocument:text"][0].endswith("new")
