@@ -48,6 +48,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 DETECT_AT = "f603bf1"  # issue 18's figure: its detection stores 1,062 alerts by sample 77
 sys.path.insert(0, str(ROOT / "bench"))
+from bench_scale_ab import code_path  # noqa: E402  (bench/ on the path first)
 
 
 def capture(nodes: int, samples: int, crash_at: int, out: Path | None, live_out: Path) -> None:
@@ -163,16 +164,6 @@ def line(name: str, s: dict) -> str:
     return (f"{name}: {s['members']} members, {s['alerts']} alerts stored (sample {s['sample']}): RCA update "
             f"{s['mean_ms']:.1f} ms mean over the next 10 samples, max {s['max_ms']:.1f}; from the crash on "
             f"{s['faulted_mean_ms']:.1f} mean, max {s['faulted_max_ms']:.1f}; digest {s['digest'][:16]}")
-
-
-def code_path(tree: Path, tmp: Path) -> str:
-    """PYTHONPATH that imports stream_viz, its plugins and blueprints from ``tree``."""
-    pkgs = tmp / f"pkgs_{tree.name}"
-    pkgs.mkdir(exist_ok=True)
-    for name, sub in (("stream_viz_plugins", "plugins"), ("stream_viz_blueprints", "blueprints")):
-        if not (pkgs / name).exists():
-            (pkgs / name).symlink_to(tree / sub)
-    return os.pathsep.join([str(tree), str(pkgs)])
 
 
 def worktree(commit: str, where: Path) -> Path:
