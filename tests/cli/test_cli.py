@@ -16,7 +16,7 @@ import pytest
 from rerun.chunk import RrdReader
 
 from stream_viz.testing import EXE, TALKER, wait_for
-from tests.viz.rrd import rows
+from tests.viz.rrd import rows, shown
 
 REPORT_SCHEMA = jsonschema.Draft202012Validator(
     json.loads((Path(__file__).resolve().parents[2] / "docs" / "report.schema.json").read_text()))
@@ -117,7 +117,7 @@ def test_monitor_group_by_process_draws_a_box_around_each_process(children, tmp_
                    "--save", str(tmp_path / "m.rrd")], children.env)
     assert out.returncode == 0, out.stderr
     data = rows(tmp_path / "m.rrd")
-    system = data["/system"][-1]
+    system = shown(data["/system"])  # rows log only the fields that changed: what the viewer shows
     pos = dict(zip(system["GraphNodes:node_ids"], map(tuple, system["GraphNodes:positions"]), strict=True))
     boxes = {path: row["GraphNodes:positions"] for path, found in data.items() if path.startswith("/process/")
              for row in found[-1:] if row.get("GraphNodes:positions")}
