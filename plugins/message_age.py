@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, streak
+from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, held, streak
 from stream_viz.records import Alert
 
 
@@ -37,6 +37,7 @@ class MessageAge(Plugin):
         **BASELINE_SETTINGS,
         "k": 6.0,
         "confirm": 3,
+        "hold_s": 4.0,
         "min_rise_ms": 100.0,
         "rise_ratio": 0.5,
         "max_age_ms": 0.0,
@@ -70,6 +71,8 @@ class MessageAge(Plugin):
             value, med, risen = seen
             seen = (value, med, risen and value - med >= s["rise_ratio"] * abs(med))
         risen = confirm(ctx, topic, "stamp_age_ms", seen, alerting, fresh)
+        if held(ctx.state, topic, seen is not None and seen[2], ctx.t, fresh) < s["hold_s"]:
+            risen = None
         over = s["max_age_ms"] > 0 and age > s["max_age_ms"]
         if risen is None and not over:
             return

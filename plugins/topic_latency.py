@@ -26,10 +26,12 @@ class TopicLatency(Plugin):
     ``drops_per_s ≥ max(drops_min_per_s, drops_ratio × rate)`` for ``confirm`` samples. Only
     samples with a message newer than the previous sample count (``age_s``): a topic slower than
     the sampling keeps one late message in its window for several samples, which is one
-    observation, not ``confirm``. A jitter rise must also have held for ``jitter_hold_s``: the
-    collector's jitter is the spread of the intervals in its 3 s window, so one gap (a mux
-    switching sources, a process stalled for a moment) holds it up for the whole window; only a
-    rise that outlasts the window is a change of the topic's rhythm.
+    observation, not ``confirm``. A rise must also have held for ``latency_hold_s`` /
+    ``jitter_hold_s``, longer than the collector's 3 s window: its latency is the mean and its
+    jitter the spread over the window, so one late message (a publisher or the network busy for
+    a moment while a participant joins) or one gap (a mux switching sources, a process stalled)
+    holds the value up for the whole window, on a slow topic at several times its baseline;
+    only a rise that outlasts the window is a change of the topic.
 
     Common mode: when at least ``common_mode_min`` topics and ``common_mode_ratio`` of the topics
     measured in a sample rise at once, the sample is a stall of the host or of the monitor (the
@@ -53,6 +55,7 @@ class TopicLatency(Plugin):
         "common_mode_min": 4,
         "common_mode_ratio": 0.5,
         "usual_quantile": 0.9,
+        "latency_hold_s": 4.0,
         "jitter_hold_s": 4.0,
     }
 
@@ -79,9 +82,9 @@ class TopicLatency(Plugin):
             counts = fresh and not stall
             risen = confirm(ctx, topic, attr, ex, alerting, counts)
             lasted = held(ctx.state, (topic, attr), ex is not None and ex[2], ctx.t, counts)
-            if risen is not None and (attr != "jitter_ms" or lasted >= s["jitter_hold_s"]):
+            what = attr.removesuffix("_ms")
+            if risen is not None and lasted >= s[f"{what}_hold_s"]:
                 value, med = risen
-                what = attr.removesuffix("_ms")
                 yield ctx.alert(topic, "warn", f"{what} {value:.1f} ms, normally {med:.1f} ms",
                                 symptom=f"{what}_rise", value_ms=value, baseline_ms=med)
         yield from drops

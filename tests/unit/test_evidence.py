@@ -525,17 +525,22 @@ def _aged(age_ms, t, newest=0.05):
 def test_message_age_stale_against_its_own_baseline():
     healthy = [_aged(2.0 + (t % 3) * 0.5, t) for t in range(15)]
     assert drive("message_age", healthy) == []
-    lagging = healthy + [_aged(302.0, t) for t in range(15, 19)]
+    # Confirmed after 3 samples, counted once it outlasts the 3 s window (hold_s 4 s).
+    lagging = healthy + [_aged(302.0, t) for t in range(15, 21)]
     alerts = drive_alerts("message_age", lagging)
-    assert [(a.t, a.member, a.severity) for a in alerts] == [(17.0, "topic:/img", "warn"),
-                                                             (18.0, "topic:/img", "warn")]
+    assert [(a.t, a.member, a.severity) for a in alerts] == [(19.0, "topic:/img", "warn"),
+                                                             (20.0, "topic:/img", "warn")]
     assert alerts[0].data["symptom"] == "stale" and alerts[0].data["baseline_ms"] == pytest.approx(2.5)
     # a pipeline whose data is normally 1 s old: 1.4 s is within half its baseline
     slow = [_aged(1000.0 + (t % 3), t) for t in range(15)] + [_aged(1400.0, t) for t in range(15, 19)]
     assert drive("message_age", slow) == []
     # the same late message held in the window (no newer one): one observation, not three
-    held = healthy + [_aged(302.0, t, newest=1.0 + t) for t in range(15, 19)]
+    held = healthy + [_aged(302.0, t, newest=1.0 + t) for t in range(15, 21)]
     assert drive("message_age", held) == []
+    # one old-stamped message among new ones (a latched map sent again) lifts the window's mean
+    # for the 3 samples it stays in the window: not stale data
+    once = healthy + [_aged(302.0 if t < 18 else 2.0, t) for t in range(15, 25)]
+    assert drive("message_age", once) == []
 
 
 def test_message_age_skewed_or_implausible_clocks_are_said_so_not_called_latency():

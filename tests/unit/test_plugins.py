@@ -506,8 +506,9 @@ def test_topic_rate_no_drop_on_a_bursty_topic_but_on_a_continuous_one():
 def test_topic_latency_quiet_then_rise_and_drops():
     healthy = [(float(t), model(latency=noisy(2.0, 0.3), jitter=noisy(1.0, 0.3)), []) for t in range(40)]
     assert drive("topic_latency", healthy) == []
-    sick = healthy[:30] + [(float(t), model(latency=150.0, jitter=1.0), []) for t in range(30, 34)]
-    assert drive("topic_latency", sick) == [(32.0, "topic:/img", "warn"), (33.0, "topic:/img", "warn")]
+    # Confirmed after 3 samples, counted once it has outlasted the 3 s window (latency_hold_s 4 s).
+    sick = healthy[:30] + [(float(t), model(latency=150.0, jitter=1.0), []) for t in range(30, 36)]
+    assert drive("topic_latency", sick) == [(34.0, "topic:/img", "warn"), (35.0, "topic:/img", "warn")]
     # Jitter must rise by half the period (50 ms at 10 Hz), not just by 20 ms.
     busy = healthy[:30] + [(float(t), model(jitter=40.0), []) for t in range(30, 34)]
     assert drive("topic_latency", busy) == []
@@ -547,9 +548,9 @@ def test_topic_latency_one_gap_held_by_the_window_is_no_jitter_rise():
     # Held past the window, it is a change of the topic's rhythm.
     longer = [(float(t), model(jitter=90.0), []) for t in range(30, 35)]
     assert drive("topic_latency", healthy + longer) == [(34.0, "topic:/img", "warn")]
-    # Latency is a mean, not held up by one message: it keeps its 3-sample confirmation.
+    # Latency, the window's mean, is held up by one late message alike: 3 samples are no rise.
     late = [(float(t), model(latency=150.0), []) for t in range(30, 33)]
-    assert drive("topic_latency", healthy + late) == [(32.0, "topic:/img", "warn")]
+    assert drive("topic_latency", healthy + late) == []
 
 
 # --------------------------------------------------------------------------- process_resources
@@ -889,19 +890,19 @@ def topics_model(n, risen=(), jitter=1.0):
 
 def test_topic_latency_a_stall_of_most_topics_at_once_is_not_a_fault_of_each():
     healthy = [(float(t), topics_model(6), []) for t in range(30)]
-    # A stall: 5 of 6 topics rise together for 4 samples, then all recover. No alert.
-    stall = healthy + [(float(t), topics_model(6, risen={0, 1, 2, 3, 4}), []) for t in range(30, 34)]
-    stall += [(float(t), topics_model(6), []) for t in range(34, 38)]
+    # A stall: 5 of 6 topics rise together for 6 samples, then all recover. No alert.
+    stall = healthy + [(float(t), topics_model(6, risen={0, 1, 2, 3, 4}), []) for t in range(30, 36)]
+    stall += [(float(t), topics_model(6), []) for t in range(36, 40)]
     assert drive("topic_latency", stall) == []
     # One topic of six rising is that topic's fault, as before.
-    one = healthy + [(float(t), topics_model(6, risen={2}), []) for t in range(30, 34)]
-    assert drive("topic_latency", one) == [(32.0, "topic:/t2", "warn"), (33.0, "topic:/t2", "warn")]
+    one = healthy + [(float(t), topics_model(6, risen={2}), []) for t in range(30, 36)]
+    assert drive("topic_latency", one) == [(34.0, "topic:/t2", "warn"), (35.0, "topic:/t2", "warn")]
     # A fault reaching 3 of 10 topics (below the ratio) still alerts on each.
     ten = [(float(t), topics_model(10), []) for t in range(30)]
-    ten += [(float(t), topics_model(10, risen={1, 2, 3}), []) for t in range(30, 33)]
+    ten += [(float(t), topics_model(10, risen={1, 2, 3}), []) for t in range(30, 35)]
     assert sorted(m for _, m, _ in drive("topic_latency", ten)) == ["topic:/t1", "topic:/t2", "topic:/t3"]
     # The ratio and the minimum are settings: off (ratio > 1) gives the per-topic alerts back.
-    off = drive("topic_latency", stall[:33], settings={"common_mode_ratio": 2.0})
+    off = drive("topic_latency", stall[:36], settings={"common_mode_ratio": 2.0})
     assert sorted({m for _, m, _ in off}) == [f"topic:/t{i}" for i in range(5)]
 
 
@@ -936,9 +937,21 @@ def test_topic_latency_rise_of_a_slow_topic_must_be_a_tenth_of_its_period():
     base = [(float(t), model(rate=1.0, latency=noisy(3.0, 0.2), age=0.1), []) for t in range(30)]
     small = base + [(float(t), model(rate=1.0, latency=43.0, age=0.1), []) for t in range(30, 34)]
     assert drive("topic_latency", small) == []
-    big = base + [(float(t), model(rate=1.0, latency=153.0, age=0.1), []) for t in range(30, 34)]
-    assert drive("topic_latency", big) == [(32.0, "topic:/img", "warn"), (33.0, "topic:/img", "warn")]
+    big = base + [(float(t), model(rate=1.0, latency=153.0, age=0.1), []) for t in range(30, 36)]
+    assert drive("topic_latency", big) == [(34.0, "topic:/img", "warn"), (35.0, "topic:/img", "warn")]
     # At 10 Hz the 20 ms floor rules (a tenth of the period is 10 ms): +40 ms alerts.
     fast = [(float(t), model(rate=10.0, latency=noisy(3.0, 0.2)), []) for t in range(30)]
-    fast += [(float(t), model(rate=10.0, latency=43.0), []) for t in range(30, 34)]
-    assert drive("topic_latency", fast) == [(32.0, "topic:/img", "warn"), (33.0, "topic:/img", "warn")]
+    fast += [(float(t), model(rate=10.0, latency=43.0), []) for t in range(30, 36)]
+    assert drive("topic_latency", fast) == [(34.0, "topic:/img", "warn"), (35.0, "topic:/img", "warn")]
+
+
+def test_topic_latency_one_late_message_held_in_the_window_is_no_rise():
+    # A 2 Hz topic (~0.3 ms): one message 360 ms late, while a participant joins, lifts the 3 s
+    # window's mean to ~60 ms for the 3 samples it stays in the window, each with a new message.
+    base = [(float(t), model(rate=2.0, latency=noisy(0.3, 0.2), age=0.2), []) for t in range(30)]
+    late = base + [(float(t), model(rate=2.0, latency=61.0 if t < 33 else 0.3, age=0.2), [])
+                   for t in range(30, 40)]
+    assert drive("topic_latency", late) == []
+    # The same rise kept up is a change of the topic: counted once it outlasts the window.
+    kept = base + [(float(t), model(rate=2.0, latency=61.0, age=0.2), []) for t in range(30, 36)]
+    assert [a[0] for a in drive("topic_latency", kept)] == [34.0, 35.0]
