@@ -46,13 +46,19 @@ def subgraph_arrays(iteration: Mapping[str, Any], layout: Layout) -> dict[str, l
 
 def trajectory_arrays(root_causes: Sequence[Mapping[str, Any]], layout: Layout) -> dict[str, list]:
     """Return the plain arrays of the ``/rca/trajectory`` overlay: the top trajectory, drawn in the
-    direction the fault spread (root cause -> … -> first symptom), the root cause black."""
+    direction the fault spread (root cause -> … -> first symptom), the root cause black.
+
+    A root cause the graph does not draw (a host: computers are not in ``/system``) is shown
+    through the nodes it explains (``evidence.explains_nodes``), black as the cause."""
     if not root_causes:
         return {"ids": [], "colors": [], "radii": [], "positions": [], "edges": []}
     top = root_causes[0]
     path = list(reversed(top.get("trajectory") or [top["member"]]))
-    ids = list(dict.fromkeys(m for m in path if m in layout.pos))
-    colors = [style.ROOT_CAUSE_COLOR if m == top["member"] else style.TRAJECTORY_COLOR for m in ids]
+    roots = {top["member"]}
+    if top["member"] not in layout.pos:
+        roots |= set((top.get("evidence") or {}).get("explains_nodes") or ())
+    ids = list(dict.fromkeys(m for m in [*path, *sorted(roots)] if m in layout.pos))
+    colors = [style.ROOT_CAUSE_COLOR if m in roots else style.TRAJECTORY_COLOR for m in ids]
     keep = set(ids)
     edges = [(u, v) for u, v in itertools.pairwise(path) if u in keep and v in keep and u != v]
     return {"ids": ids, "colors": colors, "radii": [_radius(m) * 1.1 for m in ids],

@@ -20,7 +20,7 @@ from rerun.chunk import RrdReader
 
 from stream_viz.testing import EXE, claim_domain
 from stream_viz.testing_hosts import NODE, OBSERVER, Lab, Samples, inner, lab_env, why_not
-from stream_viz.viz import paths
+from stream_viz.viz import paths, style
 from tests.cli.test_cli import check_report
 from tests.viz import rrd
 
@@ -169,6 +169,13 @@ def test_a_computer_off_the_network_is_ranked_first_as_that_host(lab, tmp_path):
     data = rrd.rows(tmp_path / "r.rrd")
     text = [row["TextDocument:text"][0] for row in data[paths.RCA_REPORT]][-1]
     assert "**`host:b`**" in text and "it explains `node:/cam`, `node:/imu`" in text, text
+    # the trajectory overlay draws the host, which the graph has no place for, as its nodes in
+    # the root cause's colour (a packed RGBA)
+    traj = rrd.shown(data[paths.RCA_TRAJECTORY])
+    root = int.from_bytes(bytes([*style.ROOT_CAUSE_COLOR, 255]), "big")
+    colors = zip(traj["GraphNodes:node_ids"], traj["GraphNodes:colors"], strict=True)
+    black = {m for m, c in colors if c == root}
+    assert black == {"node:/cam", "node:/imu"}, traj
     for h in ("a", "b"):
         theta = data.get(paths.metrics_path(f"host:{h}", paths.THETA), [])
         assert [row for row in theta if "Scalars:scalars" in row], sorted(data)

@@ -85,3 +85,23 @@ def test_lanes_and_the_diagnosis_layout_are_in_the_file(tmp_path):
     names = next(names for names in layouts if "Diagnosis" in names)
     assert {"Diagnosis", "Health", "θ camera", "θ image", "Topics", "Processes"} <= names
     assert {"/metrics/process/10/**", "/metrics/node/camera/**", "/health/topic/image"} <= names
+
+
+def test_a_host_ranked_first_is_drawn_through_the_nodes_it_explains():
+    from stream_viz.viz import style
+    from stream_viz.viz.layout import Layout
+    from stream_viz.viz.rca import trajectory_arrays
+
+    L = Layout(pos={"node:/cam": (0.0, 0.0), "topic:/img": (1.0, 0.0), "node:/imu": (0.0, 1.0),
+                    "node:/det": (2.0, 0.0)})
+    host = {"member": "host:b", "score": 0.5, "trajectory": ["topic:/img", "node:/cam", "host:b"],
+            "evidence": {"host": "host:b", "explains_nodes": ["node:/cam", "node:/imu"]}}
+    a = trajectory_arrays([host], L)
+    assert a["ids"] == ["node:/cam", "topic:/img", "node:/imu"]
+    assert a["colors"] == [style.ROOT_CAUSE_COLOR, style.TRAJECTORY_COLOR, style.ROOT_CAUSE_COLOR]
+    assert a["edges"] == [("node:/cam", "topic:/img")]
+    # A drawn root cause stays the only black one, whatever its evidence says.
+    node = {**host, "member": "node:/cam", "trajectory": ["topic:/img", "node:/cam"]}
+    b = trajectory_arrays([node], L)
+    assert b["ids"] == ["node:/cam", "topic:/img"]
+    assert b["colors"] == [style.ROOT_CAUSE_COLOR, style.TRAJECTORY_COLOR]
