@@ -125,18 +125,20 @@ def held(state: dict[str, Any], key: Any, condition: bool, t: float, fresh: bool
 
 
 @reads_settings("k", *BASELINE_SETTINGS)
-def excess(ctx: Any, member: str, attr: str, floor: float, alerting: set) -> tuple[float, float, bool] | None:
+def excess(ctx: Any, member: str, attr: str, floor: float, alerting: set,
+           since: float | None = None) -> tuple[float, float, bool] | None:
     """Return ``(value, median, exceeded)`` of ``member``'s ``attr`` against its own baseline.
 
     ``exceeded`` means ``value - median ≥ max(k·σ, floor)`` (``k`` from ``ctx.settings``). The
     baseline (`cached_baseline`, from ``ctx.settings``' ``warmup_s``, ``min_samples``,
-    ``refresh_s``, ``window``) is frozen while ``(member, attr)`` is in ``alerting``. None while
-    warming up or when the value is missing (NaN).
+    ``refresh_s``, ``window``) is frozen while ``(member, attr)`` is in ``alerting`` and learnt
+    only from ``since`` on when given (`cached_baseline`). None while warming up or when the value
+    is missing (NaN).
     """
     value = ctx.value(member, attr)
     if value != value:  # NaN: not measured this sample
         return None
-    base = cached_baseline(ctx, member, attr, frozen=(member, attr) in alerting)
+    base = cached_baseline(ctx, member, attr, frozen=(member, attr) in alerting, since=since)
     if base is None:
         return None
     med, sigma, _ = base

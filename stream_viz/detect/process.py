@@ -49,12 +49,14 @@ import numpy as np
 
 from stream_viz.detect.api import PluginContext, reads_settings
 from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, exceeds, excess, robust, slope
+from stream_viz.detect.reconfigure import RECONFIGURE_SETTINGS, learnt_since, param_changes, reconfigured
 from stream_viz.model.history import History
 from stream_viz.model.queries import nodes_of_process
 from stream_viz.model.theta import SCHEMAS
 
 SETTINGS: dict[str, Any] = {
     **BASELINE_SETTINGS,
+    **RECONFIGURE_SETTINGS,
     "min_samples": 8,
     "k": 5.0,
     "confirm": 2,
@@ -106,17 +108,21 @@ def symptoms(ctx: PluginContext, procs: Iterable[str]) -> Iterator[tuple[str, li
     for gone in ctx.diff.removed_members:  # bound the state when processes come and go
         windows.pop(gone, None)
         runs.pop(gone, None)
+    changes = param_changes(ctx)
     for proc in procs:
-        found = _symptoms(ctx, proc, alerting)
+        found = _symptoms(ctx, proc, alerting, bool(changes))
         if found:
             yield proc, found
 
 
-def _symptoms(ctx: PluginContext, proc: str, alerting: set) -> list[Symptom]:
+def _symptoms(ctx: PluginContext, proc: str, alerting: set, changes: bool) -> list[Symptom]:
     found = []
     rate = _leak(ctx, proc)  # first: it keeps the RSS window the memory rise reads
+    nodes = ctx.nodes_of(proc, by_pid=True) if changes else ()
     for attr, floor, what, unit in RESOURCES:
-        seen = excess(ctx, proc, attr, ctx.settings[floor], alerting)
+        seen = excess(ctx, proc, attr, ctx.settings[floor], alerting, since=learnt_since(ctx, proc, attr))
+        if reconfigured(ctx, proc, attr, nodes, seen):
+            seen = None  # a parameter change brought it: learnt anew from the change
         if what == "cpu":
             seen = _beyond_bursts(ctx, proc, seen)
         risen = confirm(ctx, proc, attr, seen, alerting)

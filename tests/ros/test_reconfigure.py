@@ -16,6 +16,7 @@ import time
 import pytest
 
 from stream_viz.config import load_config
+from stream_viz.model.theta import SCHEMAS
 from stream_viz.monitor import Monitor
 from stream_viz.progress import Progress
 from stream_viz.testing import wait_for
@@ -125,3 +126,56 @@ def test_a_node_reconfigured_to_a_slower_rate_is_its_new_normal_and_a_degrade_is
     assert [c for c in changes if "rate_hz" in c] == [
         f"[param] node:/camera: parameter of /camera: rate_hz = {v}" for v in ("4.0", "0.5", "10.0")]
     assert "[param] node:/camera: parameter of /camera: exposure = 0.02" in changes
+
+
+# An encoder whose CPU follows its parameter quality (a share of each 0.1 s tick spent working);
+# SIGUSR1 makes it spin a full core (a fault: no parameter changes).
+ENCODER = HEAD + """
+from rcl_interfaces.msg import SetParametersResult
+n = Node("camera")
+n.declare_parameter("quality", 0.0)
+pub = n.create_publisher(String, "/image", 10)
+share, hog = [0.0], [False]
+def tick():
+    end = time.monotonic() + (0.1 if hog[0] else share[0] * 0.1)
+    while time.monotonic() < end:
+        pass
+    pub.publish(String(data="frame"))
+n.create_timer(0.1, tick)
+def on_set(params):
+    for p in params:
+        if p.name == "quality":
+            share[0] = p.value
+    return SetParametersResult(successful=True)
+n.add_on_set_parameters_callback(on_set)
+signal_ = __import__("signal")
+signal_.signal(signal_.SIGUSR1, lambda *a: hog.__setitem__(0, True))
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+
+def test_a_node_tuned_to_use_more_cpu_is_its_new_normal_and_a_hog_is_not(children, tmp_path):
+    encoder = children.python(ENCODER, name="encoder")
+    cfg = tmp_path / "stream-viz.toml"
+    cfg.write_text(CONFIG)
+    mon = Monitor(load_config(cfg), db=tmp_path / "alerts.sqlite", viewer="none",
+                  domain_id=int(children.env["ROS_DOMAIN_ID"]), progress=Progress(open(os.devnull, "w")))
+    try:
+        wait_for(lambda: (mon.step(), "node:/camera" in mon.seen)[1], timeout=20, period=1.0)
+        # quality 0 -> 0.4 after the CPU baseline is learnt: ~2 % -> ~40 % of a core, for good
+        children.python(TUNER, "quality=0.4@15", name="tuner")
+        _observe(mon, 40.0)
+        pid = mon.seen.nodes["node:/camera"]["pid"]
+        cpu = mon.shadow.history.values(f"process:{pid}", last=5)[:, SCHEMAS["process"].index("cpu_percent")]
+        assert min(cpu) > 25.0, cpu  # the change took effect
+        _no_alerts(mon, "an encoder tuned to a higher quality")
+        assert (f"process:{pid}", "cpu_percent") in _plugin(mon, "process_resources").state["_relearn"]
+
+        t_fault = time.time()
+        os.kill(encoder.pid, signal.SIGUSR1)  # a full core, no parameter changed: a CPU rise
+        _observe(mon, 12.0)
+        cpu_alerts = [a for a in mon.store.alerts() if a.t > t_fault and a.plugin == "process_resources"]
+        assert "node:/camera" in {a.member for a in cpu_alerts}, mon.store.alerts()
+    finally:
+        mon.close()

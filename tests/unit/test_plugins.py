@@ -570,6 +570,28 @@ def test_process_resources_cpu_hog_alerts_on_the_hosted_node():
     assert both[:2] == [(31.0, "node:/camera", "warn"), (31.0, "process:100", "warn")]
 
 
+def test_process_resources_a_rise_a_parameter_change_brought_is_the_new_normal():
+    from stream_viz.records import Event
+
+    # /camera (pid 100) set to a higher resolution at 29.5 s: its CPU 5 -> 60 % from then on.
+    change = Event(29.5, "param", "node:/camera", "info", "parameter of /camera: resolution = 1080")
+    cpu = [noisy(5.0, 0.2) if t < 30 else noisy(60.0, 0.05) for t in range(60)]
+    tuned = [(float(t), model(cpu=c), [change] if t == 30 else []) for t, c in enumerate(cpu)]
+    assert drive("process_resources", tuned) == []
+    # From the new normal, a hog (95 %) with no change is a rise again (once the new baseline is
+    # learnt: warmup_s after the change).
+    hog = tuned + [(float(t), model(cpu=95.0), []) for t in range(60, 63)]
+    assert drive("process_resources", hog) == [(61.0, "node:/camera", "warn"), (62.0, "node:/camera", "warn")]
+    # The same rise without a change, or with one of another node, or a rise that began before
+    # the change, or one that began more than reconfigure_s (10 s) after it, is a rise.
+    for events in ({}, {30: Event(29.5, "param", "node:/detector", "info", "x")},
+                   {33: Event(32.5, "param", "node:/camera", "info", "x")},
+                   {18: Event(17.5, "param", "node:/camera", "info", "x")}):
+        frames = [(float(t), model(cpu=c), [events[t]] if t in events else [])
+                  for t, c in enumerate(cpu[:33])]
+        assert drive("process_resources", frames)[:1] == [(31.0, "node:/camera", "warn")], events
+
+
 def test_process_resources_memory_growth():
     rss = [80.0 + RNG.normal(0, 0.2) for _ in range(30)] + [80.0 + 5.0 * i for i in range(1, 11)]
     frames = [(float(t), model(rss=r), []) for t, r in enumerate(rss)]
