@@ -68,6 +68,7 @@ SETTINGS: dict[str, Any] = {
     "growth_steady": 0.7,
     "growth_min_samples": 4,
     "startup_s": 120.0,
+    "cpu_hold_s": 3.0,
     "burst_max_s": 10.0,
     "burst_margin": 1.5,
 }
@@ -137,9 +138,11 @@ def _symptoms(ctx: PluginContext, proc: str, alerting: set, changes: bool) -> li
 
 def _beyond_bursts(ctx: PluginContext, proc: str,
                    seen: tuple[float, float, bool] | None) -> tuple[float, float, bool] | None:
-    """`excess` of the process's CPU, risen only once it outlasts ``burst_margin`` × the longest
-    of its earlier rises that ended within ``burst_max_s`` (its bursts: a planner's plans, a map
-    re-inflated), so bursts it has shown are its rhythm; a hog lasts longer. The first is a rise."""
+    """`excess` of the process's CPU, risen only once it has lasted ``cpu_hold_s`` and outlasts
+    ``burst_margin`` × the longest of its earlier rises that ended within ``burst_max_s`` (its
+    bursts: a planner's plans, a map re-inflated), so bursts it has shown are its rhythm; a hog
+    lasts longer. ``cpu_hold_s`` covers the first burst, of which nothing is known yet: a few
+    seconds of work at a goal or a map update is how robots run."""
     if seen is None:
         return None
     runs = ctx.state.setdefault("cpu_runs", {})
@@ -152,7 +155,7 @@ def _beyond_bursts(ctx: PluginContext, proc: str,
         return seen
     start = ctx.t if start is None else start
     runs[proc] = (start, bursts)
-    if bursts and ctx.t - start <= s["burst_margin"] * max(bursts):
+    if ctx.t - start < s["cpu_hold_s"] or (bursts and ctx.t - start <= s["burst_margin"] * max(bursts)):
         return seen[0], seen[1], False
     return seen
 

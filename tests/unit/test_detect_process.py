@@ -45,12 +45,12 @@ def _run(cpus, settings):
 
 
 def test_tuning_the_plugin_tunes_the_evidence():
-    cpus = [5.0 + t % 3 for t in range(20)] + [60.0, 60.0, 60.0]
+    cpus = [5.0 + t % 3 for t in range(20)] + [60.0] * 6
     evidence, alerts = _run(cpus, {})
-    # The evidence speaks on the first risen sample; the plugin confirms it over 2.
-    assert evidence[19:] == [[], ["node:/planner", "process:2"], ["node:/planner", "process:2"],
-                             ["node:/planner", "process:2"]]
-    assert alerts == [(21.0, "node:/planner"), (22.0, "node:/planner")]
+    # The evidence speaks on the first risen sample; the plugin once the rise has held 3 s
+    # (cpu_hold_s: a burst of work is no rise) and then over 2 samples (confirm).
+    assert evidence[19:] == [[]] + [["node:/planner", "process:2"]] * 6
+    assert alerts == [(24.0, "node:/planner"), (25.0, "node:/planner")]
     # A floor above the rise silences both.
     evidence, alerts = _run(cpus, {"cpu_min_rise": 70.0})
     assert evidence == [[]] * len(cpus) and alerts == []

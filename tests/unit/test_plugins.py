@@ -563,11 +563,15 @@ def test_process_resources_quiet_with_idle_noise():
 
 
 def test_process_resources_cpu_hog_alerts_on_the_hosted_node():
-    frames = [(float(t), model(cpu=noisy(5.0, 0.2) if t < 30 else 95.0), []) for t in range(33)]
-    assert drive("process_resources", frames) == [(31.0, "node:/camera", "warn"),
-                                                  (32.0, "node:/camera", "warn")]
+    # A rise counts once it has held cpu_hold_s (3 s: a burst of work is no hog), then confirm (2).
+    frames = [(float(t), model(cpu=noisy(5.0, 0.2) if t < 30 else 95.0), []) for t in range(36)]
+    assert drive("process_resources", frames) == [(34.0, "node:/camera", "warn"),
+                                                  (35.0, "node:/camera", "warn")]
     both = drive("process_resources", frames, settings={"alert_on": "both"})
-    assert both[:2] == [(31.0, "node:/camera", "warn"), (31.0, "process:100", "warn")]
+    assert both[:2] == [(34.0, "node:/camera", "warn"), (34.0, "process:100", "warn")]
+    # A first burst of 4 s (a plan, a map loaded) is over before it counts.
+    burst = [(float(t), model(cpu=95.0 if 30 <= t < 34 else noisy(5.0, 0.2)), []) for t in range(40)]
+    assert drive("process_resources", burst) == []
 
 
 def test_process_resources_a_rise_a_parameter_change_brought_is_the_new_normal():
@@ -580,16 +584,16 @@ def test_process_resources_a_rise_a_parameter_change_brought_is_the_new_normal()
     assert drive("process_resources", tuned) == []
     # From the new normal, a hog (95 %) with no change is a rise again (once the new baseline is
     # learnt: warmup_s after the change).
-    hog = tuned + [(float(t), model(cpu=95.0), []) for t in range(60, 63)]
-    assert drive("process_resources", hog) == [(61.0, "node:/camera", "warn"), (62.0, "node:/camera", "warn")]
+    hog = tuned + [(float(t), model(cpu=95.0), []) for t in range(60, 66)]
+    assert drive("process_resources", hog) == [(64.0, "node:/camera", "warn"), (65.0, "node:/camera", "warn")]
     # The same rise without a change, or with one of another node, or a rise that began before
     # the change, or one that began more than reconfigure_s (10 s) after it, is a rise.
     for events in ({}, {30: Event(29.5, "param", "node:/detector", "info", "x")},
                    {33: Event(32.5, "param", "node:/camera", "info", "x")},
                    {18: Event(17.5, "param", "node:/camera", "info", "x")}):
         frames = [(float(t), model(cpu=c), [events[t]] if t in events else [])
-                  for t, c in enumerate(cpu[:33])]
-        assert drive("process_resources", frames)[:1] == [(31.0, "node:/camera", "warn")], events
+                  for t, c in enumerate(cpu[:36])]
+        assert drive("process_resources", frames)[:1] == [(34.0, "node:/camera", "warn")], events
 
 
 def test_process_resources_memory_growth():
@@ -636,11 +640,15 @@ def test_process_resources_growth_from_the_start_is_start_up_until_startup_s():
 
 
 def test_process_resources_cpu_bursts_it_has_shown_are_its_rhythm_a_hog_outlasts_them():
-    # A planner busy for 2 s every 20 s: the first burst is a rise (nothing known yet), the next
-    # ones are its rhythm; then a hog from 100 s on is a rise once it outlasts 1.5 × 2 s.
+    # A planner busy for 2 s every 20 s: the first burst is over before it counts (cpu_hold_s),
+    # the next ones are its rhythm; then a hog from 100 s on is a rise once it outlasts 1.5 × 2 s.
     cpu = [90.0 if t >= 20 and t % 20 < 2 else noisy(5.0, 0.2) for t in range(100)] + [95.0] * 10
     alerts = drive("process_resources", [(float(t), model(cpu=c), []) for t, c in enumerate(cpu)])
-    assert [t for t, _, _ in alerts] == [21.0, 105.0, 106.0, 107.0, 108.0, 109.0]  # 3 s, then 2 samples
+    assert [t for t, _, _ in alerts] == [105.0, 106.0, 107.0, 108.0, 109.0]  # 3 s, then 2 samples
+    # Bursts of 6 s, longer than the hold: the first is a rise, the next ones its rhythm.
+    cpu = [90.0 if t >= 20 and t % 20 < 6 else noisy(5.0, 0.2) for t in range(100)]
+    alerts = drive("process_resources", [(float(t), model(cpu=c), []) for t, c in enumerate(cpu)])
+    assert [t for t, _, _ in alerts] == [24.0, 25.0]
 
 
 def test_process_resources_slow_leak():
@@ -651,8 +659,8 @@ def test_process_resources_slow_leak():
 
 
 def test_process_resources_watched_through_the_node():
-    frames = [(float(t), model(cpu=5.0 if t < 30 else 95.0), []) for t in range(32)]
-    assert drive("process_resources", frames, watch={"node:/camera"}) == [(31.0, "node:/camera", "warn")]
+    frames = [(float(t), model(cpu=5.0 if t < 30 else 95.0), []) for t in range(35)]
+    assert drive("process_resources", frames, watch={"node:/camera"}) == [(34.0, "node:/camera", "warn")]
     assert drive("process_resources", frames, watch={"node:/detector"}) == []
 
 
