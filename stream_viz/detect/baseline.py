@@ -153,15 +153,17 @@ def exceeds(value: float, median: float, sigma: float, k: float, floor: float) -
 @reads_settings("confirm")
 def confirm(ctx: Any, member: str, attr: str, seen: tuple[float, float, bool] | None, alerting: set,
             fresh: bool = True) -> tuple[float, float] | None:
-    """Return ``(value, median)`` once `excess` ``seen`` has held for ``confirm`` fresh samples in a
-    row, keeping ``alerting`` up to date; a sample that is not ``fresh`` (the same data as the one
-    before, e.g. a slow topic's window holding the same message) neither counts nor breaks the
-    streak. None otherwise."""
+    """Return ``(value, median)`` while `excess` ``seen`` is exceeded and has been for ``confirm``
+    fresh samples in a row, keeping ``alerting`` up to date; a sample that is not ``fresh`` (the
+    same data as the one before, e.g. a slow topic's window holding the same message) neither
+    counts nor breaks the streak, and is risen only if its own value is. None otherwise."""
     if seen is None:
         return None
     value, med, exceeded = seen
     key = (member, attr)
-    if streak(ctx.state, key, exceeded, fresh) >= ctx.settings["confirm"]:
+    # A value that no longer exceeds is no rise, even where it does not break the streak (a topic
+    # that stopped: its window's value moves as old messages leave it, without a new one).
+    if streak(ctx.state, key, exceeded, fresh) >= ctx.settings["confirm"] and exceeded:
         alerting.add(key)
         return value, med
     alerting.discard(key)

@@ -975,6 +975,16 @@ def test_topic_latency_rise_of_a_slow_topic_must_be_a_tenth_of_its_period():
     assert drive("topic_latency", fast) == [(34.0, "topic:/img", "warn"), (35.0, "topic:/img", "warn")]
 
 
+def test_topic_latency_a_rise_that_ended_as_its_topic_stopped_is_no_alert_later():
+    # An action's command topic: its jitter risen for 3 fresh samples as a goal began, then the
+    # goal ended: no new message (not fresh), the window's jitter back to 1 ms. The streak is
+    # neither counted nor broken, but a value that no longer exceeds is no rise, however long.
+    base = [(float(t), model(jitter=noisy(1.0, 0.3), age=0.05), []) for t in range(30)]
+    rise = [(float(t), model(jitter=90.0, age=0.05), []) for t in range(30, 33)]
+    quiet = [(float(t), model(jitter=1.2, age=float(t - 32)), []) for t in range(33, 45)]
+    assert drive("topic_latency", base + rise + quiet) == []
+
+
 def test_topic_latency_one_late_message_held_in_the_window_is_no_rise():
     # A 2 Hz topic (~0.3 ms): one message 360 ms late, while a participant joins, lifts the 3 s
     # window's mean to ~60 ms for the 3 samples it stays in the window, each with a new message.
