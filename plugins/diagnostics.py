@@ -35,13 +35,19 @@ class Diagnostics(Plugin):
     collector fell back to the publisher or to nothing. The alert says how it was mapped
     (``mapped_by`` of its worst status; each status's in ``statuses``).
 
+    A WARN a status shows in its first ``learn_s`` seconds, and keeps, is its normal (a GPS
+    without a fix indoors, a frequency check set too tight, an optional device unplugged: robots
+    run with standing warnings): no alert while it stays WARN; a status that was OK then warns is
+    news, as is any ERROR or STALE (``learn_s`` 0: every WARN alerts).
+
     Event plugins alert whether or not the member is watched (``watched_only`` to change it):
     a reported fault is evidence, not an attribute to screen.
     """
 
     name = "diagnostics"
     kinds = ("node",)
-    settings: ClassVar[dict[str, Any]] = {"stale_severity": "warn", "watched_only": False, "hardware": []}
+    settings: ClassVar[dict[str, Any]] = {"stale_severity": "warn", "watched_only": False, "hardware": [],
+                                          "learn_s": 10.0}
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         s = ctx.settings
@@ -50,7 +56,8 @@ class Diagnostics(Plugin):
             if e.kind != "diag":
                 continue
             level = diag_level(e)
-            if level == "ok":
+            standing = _standing(ctx, e, level, s["learn_s"])  # every status: when it was first seen
+            if level == "ok" or (standing and level == "warn"):
                 continue
             member, by = _mapped(ctx, e)
             if s["watched_only"] and member not in ctx.watch:
@@ -68,6 +75,18 @@ class Diagnostics(Plugin):
             more = f" (+{len(texts) - 3} more)" if len(texts) > 3 else ""
             yield ctx.alert(member, sev, "diagnostics " + "; ".join(texts[:3]) + more + f" (mapped by {by})",
                             symptom="diagnostics", statuses=statuses, mapped_by=by)
+
+
+def _standing(ctx: PluginContext, e: Event, level: str, learn_s: float) -> bool:
+    """True when a WARN is the normal of ``e``'s status: it warned within ``learn_s`` of when it was
+    first seen, at any level (kept per status name in the plugin state; called for every status)."""
+    first = ctx.state.setdefault("first_seen", {})  # status name -> (first seen, warned while learning)
+    name = str(e.data.get("name", ""))
+    since, warned = first.setdefault(name, (e.t, False))
+    if level == "warn" and not warned and e.t - since < learn_s:
+        first[name] = (since, True)
+        return True
+    return warned
 
 
 def _mapped(ctx: PluginContext, e: Event) -> tuple[str, str]:

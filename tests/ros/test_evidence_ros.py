@@ -228,6 +228,36 @@ def test_diagnostics_updater_status_mapped_to_its_node_by_name(children, run_of)
     assert {e.data["publisher"] for e in events} == {"node:/robot/monitor"}  # the gid told the publisher
 
 
+STANDING = """
+import os, sys
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+rclpy.init()
+n = rclpy.create_node('gps_driver')
+pub = n.create_publisher(DiagnosticArray, '/diagnostics', 10)
+def tick():  # no fix indoors from the start (a standing WARN); the battery OK until the flag
+    low = os.path.exists(sys.argv[1])
+    pub.publish(DiagnosticArray(status=[
+        DiagnosticStatus(level=DiagnosticStatus.WARN, name='gps_driver: fix', message='no fix'),
+        DiagnosticStatus(level=DiagnosticStatus.WARN if low else DiagnosticStatus.OK,
+                         name='gps_driver: battery', message='low' if low else 'ok')]))
+n.create_timer(0.5, tick)
+""" + _spin("n")
+
+
+def test_a_standing_diagnostics_warning_is_normal_and_a_new_one_is_not(children, tmp_path, run_of):
+    flag = tmp_path / "low"
+    children.python(STANDING, str(flag), name="gps")
+    run = run_of(["diagnostics"])
+    _ready(run, "node:/gps_driver")
+    run.observe(14.0)  # past learn_s (10 s) from the first report
+    assert [a for a in run.alerts if a.plugin == "diagnostics"] == []
+    flag.write_text("1")
+    found = run.until(lambda a: a.plugin == "diagnostics", 10.0)
+    assert found and found[0].member == "node:/gps_driver" and found[0].severity == "warn", found
+    assert [st["name"] for st in found[0].data["statuses"]] == ["gps_driver: battery"]
+
+
 SERVER = """
 import os, sys, time
 import rclpy

@@ -801,6 +801,28 @@ def test_diagnostics_levels():
     assert drive("diagnostics", [(1.0, G, ev[:1])]) == []
 
 
+def test_diagnostics_a_standing_warning_is_the_status_normal_a_new_one_is_news():
+    G = model()
+
+    def diag(t, name, level, node="node:/camera"):
+        return Event(t, "diag", node, "info", f"{name}: {level}", {"name": name, "level": level})
+
+    # "gps" warns from its first report (no fix indoors) and keeps warning; "temp" is OK for 20 s,
+    # then warns; "lens" warns from the start, then errors; "late" appears at 30 s already warning.
+    frames = []
+    for t in range(0, 40):
+        ev = [diag(t, "gps", 1), diag(t, "temp", 0 if t < 20 else 1), diag(t, "lens", 1 if t < 25 else 2)]
+        ev += [diag(t, "late", 1, "node:/detector")] if t >= 30 else []
+        frames.append((float(t), G, ev))
+    alerts = drive("diagnostics", frames)
+    warned = [t for t, m, sev in alerts if m == "node:/camera" and sev == "warn"]
+    assert warned == [float(t) for t in range(20, 25)]
+    assert [t for t, m, sev in alerts if sev == "error"] == [float(t) for t in range(25, 40)]
+    assert [a for a in alerts if a[1] == "node:/detector"] == []  # warned as it appeared: its normal
+    # learn_s 0: every WARN alerts, as robots without standing warnings may want
+    assert len(drive("diagnostics", frames, settings={"learn_s": 0.0})) == 40 + 10
+
+
 def test_rosout_levels():
     G = model()
     ev = [Event(1.0, "log", "node:/camera", "warn", "meh"),
