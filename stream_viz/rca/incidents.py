@@ -142,6 +142,7 @@ def find_incidents(
     gap: float,
     now: float,
     links: Mapping[str, set[str]] | None = None,
+    alerted: Mapping[str, list[Episode]] | None = None,
 ) -> list[Incident]:
     """Group symptom episodes into incidents (module docstring), oldest first, ids from 1.
 
@@ -160,6 +161,9 @@ def find_incidents(
         The latest alert or evidence time.
     links : mapping, optional
         Extra one-hop pairs (member → members), e.g. an alert and the node it names.
+    alerted : mapping, optional
+        The episodes that are alerts' (of ``episodes``): a group with none of them is no
+        incident (metric evidence is a hint where something alerted, not a symptom of its own).
     """
     items = [(m, ep) for m in sorted(episodes) for ep in episodes[m]]
     index: dict[str, list[int]] = {}
@@ -199,6 +203,8 @@ def find_incidents(
         groups.setdefault(root(i), []).append(i)
     out = []
     for members in groups.values():
+        if alerted is not None and not any(items[i][1] in alerted.get(items[i][0], ()) for i in members):
+            continue
         eps: dict[str, list[Episode]] = {}
         for i in members:
             eps.setdefault(items[i][0], []).append(items[i][1])
@@ -282,7 +288,10 @@ def diagnose(
     for m, n in pairs:
         links.setdefault(m, set()).add(n)
         links.setdefault(n, set()).add(m)
-    incidents = find_incidents(G, episodes, settings.incident_hops, settings.episode_gap, now, links)
+    if not s.count:  # evidence alone, with nothing alerted, names no cause
+        return Diagnosis([], [], None)
+    incidents = find_incidents(G, episodes, settings.incident_hops, settings.episode_gap, now, links,
+                               s.episodes)
     if not incidents:
         ctx = make_context(G, alerts, settings, keep, evidence, first, gone)
         return Diagnosis(ranker(ctx), [], ctx.symptoms.first)
