@@ -495,12 +495,23 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     quieting = quiet is not None and quiet >= _base_limit(s, med)
     # An empty window is a quiet (judged by `_silence`), not a lower rate.
     low = not quieting and 0 < now_rate < s["drop_ratio"] * med and med - now_rate >= s["drop_k"] * sigma
+    low = low and not _lost_on_the_way(ctx, topic, rate, med)
     # A drop lasts longer than any healthy pause of the topic (its recent rate counts a pause).
     samples, lasted = streak(ctx.state, (topic, "drop"), low), held(ctx.state, (topic, "drop"), low, ctx.t)
     if samples < s["confirm"] or lasted < r.longest:
         return None
     return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {med:.3g} Hz",
                      symptom="rate_drop", rate_hz=now_rate, baseline_hz=med)
+
+
+def _lost_on_the_way(ctx: PluginContext, topic: str, rate: float, med: float) -> bool:
+    """True when most of what the window lacks against the baseline ``med`` are gaps in the
+    publisher's sequence numbers (``drops_per_s``, known with one publisher): it sent them and
+    they were lost on the way to the monitor (its own receive on a loaded host, a busy link),
+    which the robot's reliable subscribers do not see. Not a lower rate of the publisher."""
+    drops = ctx.value(topic, "drops_per_s")
+    missing = med - rate
+    return drops == drops and missing > 0 and drops >= 0.5 * missing
 
 
 def _below_expected(ctx: PluginContext, topic: str, rate: float) -> Alert | None:

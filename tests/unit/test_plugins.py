@@ -70,6 +70,15 @@ def test_topic_rate_drop():
     assert drive("topic_rate", frames) == [(t, "topic:/img", "warn") for t in (31.0, 32.0, 33.0)]
 
 
+def test_topic_rate_messages_sent_and_lost_on_the_way_are_no_drop():
+    # 10 Hz published; the monitor receives 3/s and the sequence numbers skip 7/s: the publisher
+    # sent them (lost at a loaded monitor, on a busy link). 1 gap/s of 7 missing is a drop.
+    for drops, want in ((7.0, []), (1.0, [31.0, 32.0, 33.0])):
+        frames = [(float(t), model(rate=noisy(10.0) if t < 30 else 3.0, drops=0.0 if t < 30 else drops), [])
+                  for t in range(34)]
+        assert [a[0] for a in drive("topic_rate", frames)] == want, drops
+
+
 def test_topic_rate_silence_and_recovery():
     rates = [10.0] * 20 + [0.0] * 3 + [10.0] * 3
     frames = [(float(t), model(rate=r), []) for t, r in enumerate(rates)]
