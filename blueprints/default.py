@@ -71,12 +71,14 @@ def build_blueprint(
     collapse_panels: bool = False,
     diagnosis: Mapping[str, Sequence[str]] | None = None,
     hosts: Sequence[str] = (),
+    condensed: bool = False,
 ) -> rrb.Blueprint:
     """Return the default layout.
 
     Top, full width: the system graph with the RCA overlays (one GraphView of ``/system``,
     ``/rca/subgraph`` and ``/rca/trajectory``); with several computers, beside it a tab per host
-    (its part of the graph, ``/hosts/<host>``). Below: metrics (`metrics_tabs`), report / process
+    (its part of the graph, ``/hosts/<host>``); a large system's condensed graph (``/condensed``)
+    in a tab before it, shown first. Below: metrics (`metrics_tabs`), report / process
     tree, alert log.
 
     Parameters
@@ -94,6 +96,9 @@ def build_blueprint(
         Hide the side and time panels (for screenshots).
     hosts : sequence of str
         The computers of the model (several): a graph tab and a metrics tab for them.
+    condensed : bool
+        A tab with the condensed system graph (`stream_viz.viz.condensed`), first and active:
+        at 1,000 nodes the full graph's labels cannot be read without zooming.
     """
     if paused is None:
         paused = timeline == paths.RCA_ITERATION
@@ -104,9 +109,12 @@ def build_blueprint(
                   paths.SYSTEM],
         name="System graph + RCA overlays",
     )
-    if hosts:
-        graph = rrb.Tabs(graph, *(rrb.GraphView(origin=paths.host_graph_path(h), name=f"Host {h}")
-                                  for h in hosts), active_tab=0, name="System")
+    tabs: list[rrb.View] = [graph, *(rrb.GraphView(origin=paths.host_graph_path(h), name=f"Host {h}")
+                                     for h in hosts)]
+    if condensed:
+        tabs.insert(0, rrb.GraphView(origin=paths.CONDENSED, name="Condensed system graph"))
+    if len(tabs) > 1:
+        graph = rrb.Tabs(*tabs, active_tab=0, name="System")
     bottom = rrb.Horizontal(
         metrics_tabs(watched, diagnosis, hosts=bool(hosts)),
         rrb.Tabs(

@@ -25,13 +25,16 @@ WATCH_MODES = ("auto", "all", "config")
 class MonitorConfig:
     """``[monitor]``: sampling period (s), whether to measure topics, history length (samples),
     how long a vanished member stays in the model (s; <= 0: the whole run), minutes per file part
-    of a saved recording (0 = one file)."""
+    of a saved recording (0 = one file), whether the viewer gets the condensed system graph
+    (``auto``: above ``condense_above`` members; ``on``; ``off``)."""
 
     period: float = setting(1.0, gt=0)
     topic_metrics: bool = True
     history: int = setting(600, ge=2)
     forget_gone_s: float = 600.0
     recording_part_minutes: float = setting(10.0, ge=0)
+    condensed: str = setting("auto", choices=("auto", "on", "off"))
+    condense_above: int = setting(300, ge=0)
 
 
 @dataclass(frozen=True)

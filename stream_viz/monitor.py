@@ -65,6 +65,7 @@ class Monitor:
         domain_id: int | None = None,
         serve_at: ServeAt | None = None,
         group_by: str = "namespace",
+        condensed: str | None = None,
         samples: Path | None = None,
         collector: Any = None,
         started_at: float | None = None,
@@ -87,7 +88,9 @@ class Monitor:
         self._say_problems(self.plugins.load_problems)
         self.store.add_problems(self.plugins.load_problems, t=self.started_at)
         self.view = LiveView(viewer=viewer, save=save, part_s=60.0 * config.monitor.recording_part_minutes,
-                             serve_at=serve_at, grouping=group_by)
+                             serve_at=serve_at, grouping=group_by,
+                             condensed=condensed or config.monitor.condensed,
+                             condense_above=config.monitor.condense_above)
         self.shadow = Shadow(history=config.monitor.history, forget_gone_s=config.monitor.forget_gone_s)
         self.watchlist = Watchlist()
         self.detector = Detector(self.plugins, self.watchlist, config.watchlist, config.expected_rates)

@@ -79,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
         robot.topology.check_fault(fault)
     # The monitor checks its outputs before any robot process starts: a bad path costs nothing.
     mon = Monitor(config, db=args.db, save=save, report=args.report, viewer=viewer, domain_id=args.domain,
-                  serve_at=serve_at(args), group_by=args.group_by, samples=args.samples)
+                  serve_at=serve_at(args), group_by=args.group_by, samples=args.samples,
+                  condensed=args.condensed)
     try:
         size = "" if fault is None or fault.size is None else f" (size {fault.size:g})"
         what = f"{fault.fault}{size} of {fault.target} {fault.at:g} s after it is up" if fault else "no fault"

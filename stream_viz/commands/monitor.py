@@ -44,6 +44,9 @@ def add_outputs(p: argparse.ArgumentParser) -> None:
                    help="with --viewer serve: the port the page reads the data from")
     p.add_argument("--group-by", choices=GROUPINGS, default="namespace",
                    help="the system graph's boxes: per namespace (default), per process, or none")
+    p.add_argument("--condensed", choices=("auto", "on", "off"), default=None,
+                   help="the condensed system graph (groups as one disc, the diagnosis in full): auto "
+                        "above [monitor] condense_above members (300; the default), on, or off")
 
 
 def add_samples(p: argparse.ArgumentParser) -> None:
@@ -73,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
     install_stop_handlers(stop)
     viewer = args.viewer or "none"
     mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=viewer,
-                  serve_at=serve_at(args), group_by=args.group_by, samples=args.samples)
+                  serve_at=serve_at(args), group_by=args.group_by, samples=args.samples,
+                  condensed=args.condensed)
     mon.progress.say(f"alert database: {mon.db_path}")
     try:
         mon.run(args.duration, stop)

@@ -57,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
         config = replay_config(args.config, source.header)
         mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=viewer,
                       serve_at=serve_at(args), group_by=args.group_by, collector=source,
+                      condensed=args.condensed,
                       started_at=source.header.get("started_at"), plugin_timeout_s=PLUGIN_TIMEOUT_S)
     except BaseException:
         source.close()

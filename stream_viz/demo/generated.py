@@ -5,6 +5,11 @@ layers and republishes on receipt of the first (so a fault travels downstream); 
 holds sinks. About one node in ten serves a ``std_srvs/srv/Trigger`` service that a later node
 calls periodically and needs fresh answers from before it publishes. Nodes are shuffled into
 processes of ``nodes_per_process``; ``/system_monitor`` (the diagnostics publisher) joins the first.
+
+With ``namespaces`` the system is split into subsystems as a real robot's is (``/perception``,
+``/planning``, …): each node lives in one namespace, takes its inputs from its own namespace but
+for a share ``cross`` of them, publishes ``<node>/out``, and its process hosts nodes of its
+namespace only. Without (the default), the system and its random draws are as before.
 """
 
 from __future__ import annotations
@@ -17,11 +22,19 @@ from stream_viz.errors import DemoError
 
 MSG = "std_msgs/msg/Float64"
 SRV = "std_srvs/srv/Trigger"
+SUBSYSTEMS = ("perception", "localization", "mapping", "planning", "control", "drivers", "safety",
+              "manipulation", "navigation", "fleet", "teleop", "docking")
+
+
+def namespace_names(k: int) -> list[str]:
+    """Return ``k`` subsystem namespaces: ``/perception``, …, then ``/perception_2``, …"""
+    n = len(SUBSYSTEMS)
+    return [f"/{SUBSYSTEMS[i % n]}" + (f"_{i // n + 1}" if i >= n else "") for i in range(k)]
 
 
 def generate(n_nodes: int, seed: int = 0, nodes_per_process: int = 8,
              rate: tuple[float, float] = (2.0, 5.0), service_fraction: float = 0.1,
-             layers: int | None = None) -> Topology:
+             layers: int | None = None, namespaces: int = 0, cross: float = 0.05) -> Topology:
     """Return a seeded random layered system of ``n_nodes`` nodes (plus ``/system_monitor``).
 
     Parameters
@@ -38,6 +51,11 @@ def generate(n_nodes: int, seed: int = 0, nodes_per_process: int = 8,
         Share of nodes serving a service that a downstream node calls.
     layers : int, optional
         Number of layers (default ``clamp(round(sqrt(n) / 2), 3, 12)``).
+    namespaces : int
+        Subsystems (namespaces) to split the nodes into; 0: none (flat names ``/n007_l0``).
+    cross : float
+        With ``namespaces``: the chance that a node's first input, and apart from it that its
+        other inputs, may come from another namespace.
     """
     if n_nodes < 3:
         raise DemoError(f"a generated system needs at least 3 nodes, got {n_nodes}")
@@ -52,11 +70,17 @@ def generate(n_nodes: int, seed: int = 0, nodes_per_process: int = 8,
         sizes[rng.randrange(n_layers)] += 1
     names: list[list[str]] = []
     k = 0
+    spaces = namespace_names(namespaces)
+    ns_of: dict[str, str] = {}
     for li, size in enumerate(sizes):
-        names.append([f"/n{k + i:03d}_l{li}" for i in range(size)])
+        layer = [f"/n{k + i:03d}_l{li}" for i in range(size)]
+        if spaces:  # node k in namespace k mod #namespaces: every namespace spans the layers
+            layer = [f"{spaces[(k + i) % len(spaces)]}{n}" for i, n in enumerate(layer)]
+            ns_of.update((n, spaces[(k + i) % len(spaces)]) for i, n in enumerate(layer))
+        names.append(layer)
         k += size
 
-    topic = {n: f"/t{n}" for layer in names for n in layer}
+    topic = {n: (f"{n}/out" if spaces else f"/t{n}") for layer in names for n in layer}
     src_rate: dict[str, float] = {}
     subs: dict[str, list[str]] = {}
     for li, layer in enumerate(names):
@@ -64,8 +88,13 @@ def generate(n_nodes: int, seed: int = 0, nodes_per_process: int = 8,
             if li == 0:
                 src_rate[n] = round(rng.uniform(*rate), 1)
                 continue
-            first = rng.choice(names[li - 1])
+            pool = names[li - 1]
+            if spaces and rng.random() >= cross:
+                pool = [m for m in pool if ns_of[m] == ns_of[n]] or pool
+            first = rng.choice(pool)
             earlier = [m for layer_ in names[:li] for m in layer_ if m != first]
+            if spaces and rng.random() >= cross:  # other inputs from the node's own namespace
+                earlier = [m for m in earlier if ns_of[m] == ns_of[n]]
             extra = rng.sample(earlier, min(len(earlier), rng.randrange(3)))
             subs[n] = [first, *extra]
             src_rate[n] = src_rate[first]
@@ -76,6 +105,8 @@ def generate(n_nodes: int, seed: int = 0, nodes_per_process: int = 8,
     for server in rng.sample(candidates, round(service_fraction * n_nodes)):
         li = int(server.rpartition("_l")[2])
         later = [m for layer in names[li + 1:] for m in layer if m not in servers]
+        if spaces:  # a subsystem's services are called from within it
+            later = [m for m in later if ns_of[m] == ns_of[server]] or later
         if later:
             servers[rng.choice(later)] = server
 
@@ -100,6 +131,8 @@ def generate(n_nodes: int, seed: int = 0, nodes_per_process: int = 8,
                 services=(ServiceSpec(f"{n}/srv", SRV),) if n in served else (),
                 clients=client))
     rng.shuffle(nodes)
+    if spaces:  # a process hosts nodes of one namespace (as a subsystem's launch file starts them)
+        nodes.sort(key=lambda nd: spaces.index(ns_of[nd.name]))
     groups = [GroupSpec(f"p{i // nodes_per_process:03d}", tuple(nodes[i:i + nodes_per_process]))
               for i in range(0, len(nodes), nodes_per_process)]
     groups[0] = GroupSpec(groups[0].name, (*groups[0].nodes, NodeSpec("/system_monitor", diag_monitor=True)))

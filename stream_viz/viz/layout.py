@@ -239,20 +239,23 @@ def layered(G: nx.MultiDiGraph, grouping: str = "namespace") -> Layout:
     group_of = member_groups(G, members, grouping)
     beside = {s: servers[0] for s, servers in service_servers(G).items() if servers and s in G}
     exe = layout_dot.dot_executable()
+    key = structure(G)
     if len(members) > layout_dot.MAX_MEMBERS:
         _warn(f"more than {layout_dot.MAX_MEMBERS} members: the system graph uses the simple layout")
+    elif len(key[1]) > layout_dot.MAX_EDGES_PER_MEMBER * max(1, len(members)):
+        _warn("a graph this dense takes dot minutes: it uses the simple layout")
     elif exe is not None:
         try:
             out = layout_dot.run_dot(layout_dot.dot_source(G, members, group_of, beside, flow_dag(G)), exe)
             groups = sorted(set(group_of.values()))
             pos, boxes = layout_dot.read_positions(out, members, groups)
             if set(pos) == set(members):
-                return Layout(pos=pos, group_of=group_of, boxes=boxes, grouping=grouping, key=structure(G))
+                return Layout(pos=pos, group_of=group_of, boxes=boxes, grouping=grouping, key=key)
         except OutputError as e:
             _warn(str(e))
     else:
         _warn("Graphviz 'dot' not found (Debian package graphviz): the system graph uses the simple layout")
-    return replace(place(G), grouping=grouping, key=structure(G))
+    return replace(place(G), grouping=grouping, key=key)
 
 
 _warned: set[str] = set()

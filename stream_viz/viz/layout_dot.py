@@ -32,6 +32,10 @@ TIMEOUT_S = 120.0
 # Above this many members dot takes tens of seconds (a 2,000-member generated system: ~20 s), and
 # the monitor waits for it: such a graph gets the simple layout (`stream_viz.viz.layout.place`).
 MAX_MEMBERS = 1500
+# A dense graph takes dot minutes even in fast mode (125 discs with 1,800 edges: 11 s, the full
+# mode > 120 s): the condensed graph of a randomly wired system. Above this many edges per member
+# the simple layout is used.
+MAX_EDGES_PER_MEMBER = 6
 
 
 def dot_executable() -> str | None:
@@ -56,7 +60,10 @@ def dot_source(
     calls back upstream over hundreds of layers.
     """
     index = {m: i for i, m in enumerate(members)}
-    fast = len(members) > FAST_ABOVE
+    keep = set(index)
+    edges = sorted({(index[u], index[v]) for u, v, _ in flow_edges(G) if u in keep and v in keep and u != v})
+    # Dense graphs too: a condensed 1,000-node system (125 groups, 1,800 edges) took > 120 s in full.
+    fast = len(members) > FAST_ABOVE or len(edges) > 2 * FAST_ABOVE
     lines = ["digraph system {",
              f"graph [rankdir=LR, ranksep={RANK_SEP}, nodesep={NODE_SEP}, "
              f"newrank=true, splines=false{', mclimit=0.1, nslimit=1' if fast else ''}];",
@@ -73,8 +80,6 @@ def dot_source(
         lines += [node(m) for m in members if group_of.get(m) == g]
         lines.append("}")
     lines += [node(m) for m in members if m not in group_of]
-    keep = set(index)
-    edges = sorted({(index[u], index[v]) for u, v, _ in flow_edges(G) if u in keep and v in keep and u != v})
     ranked = None if dag is None else {(index[u], index[v]) for u, v in dag.edges if u in keep and v in keep}
     lines += [f"n{u} -> n{v};" if ranked is None or (u, v) in ranked else f"n{u} -> n{v} [constraint=false];"
               for u, v in edges]

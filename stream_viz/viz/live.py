@@ -8,6 +8,7 @@ from typing import Any
 import networkx as nx
 
 from stream_viz.records import Alert, Sample
+from stream_viz.viz.condensed import CONDENSE_ABOVE
 from stream_viz.viz.metrics import MetricBatch
 from stream_viz.viz.rca import report_markdown
 from stream_viz.viz.recorder import Recorder
@@ -38,14 +39,19 @@ class LiveView:
         Address and ports of a ``serve``d viewer (default: loopback, 9090 and 9876).
     grouping : str
         The system graph's boxes: ``namespace``, ``process`` or ``none``.
+    condensed, condense_above
+        The condensed system graph (`stream_viz.viz.condensed`): ``auto`` above
+        ``condense_above`` members, ``on``, ``off``.
     """
 
     def __init__(self, viewer: str = "none", save: Path | None = None, metrics_every: float = 5.0,
                  max_chunks_per_s: float = 20.0, part_s: float = 0.0, file_chunks_per_s: float = 5.0,
-                 serve_at: ServeAt | None = None, grouping: str = "namespace") -> None:
+                 serve_at: ServeAt | None = None, grouping: str = "namespace",
+                 condensed: str = "auto", condense_above: int = CONDENSE_ABOVE) -> None:
         at = serve_at or ServeAt()
         self.rec = Recorder(viewer=viewer, save=save, part_s=part_s, bind=at.bind, web_port=at.web_port,
-                            grpc_port=at.grpc_port, grouping=grouping)
+                            grpc_port=at.grpc_port, grouping=grouping,
+                            condensed=condensed, condense_above=condense_above)
         self.metrics_every, self.max_chunks_per_s = metrics_every, max_chunks_per_s
         self.file_chunks_per_s = file_chunks_per_s
         self._batch = MetricBatch()

@@ -20,6 +20,9 @@ RCA = "/rca"
 RCA_SUBGRAPH = "/rca/subgraph"  # G_j and W_j, drawn over /system at the same positions
 RCA_TRAJECTORY = "/rca/trajectory"  # top fault trajectory, same positions
 RCA_REPORT = "/rca/report"  # TextDocument (markdown)
+# Large systems: /system condensed around the diagnosis (groups as one disc each; alerted, gone
+# and trajectory members and their neighbours in full); GraphNodes + GraphEdges in one entity.
+CONDENSED = "/condensed"
 HOSTS = "/hosts"  # /hosts/<host name>: one computer's part of /system (several computers only)
 # Groups of /system drawn as boxes: one entity per group, two invisible corner nodes; the viewer
 # captions each entity's rectangle with its path ("namespace/amr1", "process/navigation").

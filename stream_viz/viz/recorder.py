@@ -28,6 +28,7 @@ from stream_viz.records import SEVERITY_RANK, Alert, Event
 from stream_viz.viz import paths, style
 from stream_viz.viz.alerts import log_alerts
 from stream_viz.viz.changes import log_changes
+from stream_viz.viz.condensed import CONDENSE_ABOVE, DrawnCondensed, is_condensed
 from stream_viz.viz.focus import diagnosis_members
 from stream_viz.viz.health import Change, FileEvents, HealthLanes, log_health
 from stream_viz.viz.hosts_view import DrawnHosts
@@ -155,6 +156,9 @@ class Recorder:
         Where to tell the user the viewer URL (default: stderr).
     grouping : str
         Groups of the system graph drawn as boxes: ``namespace`` (default), ``process`` or ``none``.
+    condensed : str
+        The condensed system graph ``/condensed`` (`stream_viz.viz.condensed`) and its tab, shown
+        first: ``auto`` once the graph has more than ``condense_above`` members, ``on``, ``off``.
     file_events_s : float
         Seconds of ``time`` the file's alerts and health-lane changes are gathered for before
         they are written (the viewer gets them at once): every write of an entity is a chunk
@@ -177,6 +181,8 @@ class Recorder:
         grouping: str = "namespace",
         bind: str = DEFAULT_BIND,
         file_events_s: float = 60.0,
+        condensed: str = "auto",
+        condense_above: int = CONDENSE_ABOVE,
     ) -> None:
         self.save = _check_sinks(viewer, save)  # before anything is opened (and monitoring starts)
         disable_rerun_telemetry(telemetry)
@@ -204,6 +210,13 @@ class Recorder:
         # What each timeline shows of /system: the next log sends only what changed.
         self._drawn_time, self._drawn_rca = DrawnGraph(), DrawnGraph()
         self._drawn_hosts = DrawnHosts()  # /hosts/<host>: each computer's part of /system
+        is_condensed(condensed, 0, condense_above)  # an unknown mode fails here, before the run
+        self.condensed, self.condense_above = condensed, condense_above
+        self.condensed_on = False  # once on, stays on: a tab that comes and goes would confuse
+        self._condensed = DrawnCondensed()  # /condensed, on `time`
+        self._causes: Sequence[Mapping[str, Any]] = ()  # the last root causes (the condensed focus)
+        self._t: float | None = None  # the last `time` of `system`
+        self._gone: frozenset[str] = frozenset()
         self.hosts: list[str] = []  # the computers the layout has a tab for (several only)
         self._rca_j: int | None = None  # the last iteration on the rca_iteration timeline
         self.file_events_s = file_events_s
@@ -318,6 +331,7 @@ class Recorder:
         self._drawn_time.forget()  # nor is anything drawn before
         self._drawn_hosts.forget()
         self._drawn_rca.forget()
+        self._condensed.forget()
         self._report_shown = None
         lanes = {m: [(t, s)] for m, s in self.health.state.items()}
         if lanes:
@@ -332,13 +346,34 @@ class Recorder:
     # -- entities -------------------------------------------------------------------------------
     def system(self, G: nx.MultiDiGraph, t: float | None = None, gone: Collection[str] = (),
                force: bool = False) -> bool:
-        """Log ``/system`` (and ``/process_tree``) if the graph, gone set or alert status changed.
+        """Log ``/system`` (and ``/process_tree``) if the graph, gone set or alert status changed,
+        and ``/condensed`` (large systems) if that or the diagnosis changed.
 
         Returns True if ``/system`` was logged.
         """
         if t is not None:
             self.set_time(t)
+            self._t = t
+        logged = self._system(G, t, gone, force)
+        self._condense(G)
+        return logged
+
+    def _condense(self, G: nx.MultiDiGraph) -> None:
+        """Log ``/condensed`` when it is on (or turns on now: the layout gets its tab) and what it
+        is drawn from changed: the system's signature, the alerts, the root causes."""
+        if not self.condensed_on:
+            members = len(self._drawn[3]["ids"]) if self._drawn is not None else 0
+            if not is_condensed(self.condensed, members, self.condense_above):
+                return
+            self.condensed_on = True
+            self._send_layout()
+        causes = tuple((rc["member"], tuple(rc.get("trajectory") or ())) for rc in self._causes[:3])
+        key = (self._system_sig, frozenset(self.status.items()), causes)
+        self._condensed.log(self.rec, G, self.grouping, self._gone, self.status, self._causes, key)
+
+    def _system(self, G: nx.MultiDiGraph, t: float | None, gone: Collection[str], force: bool) -> bool:
         gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
+        self._gone = gone_all
         if t is not None:
             self._lanes(self.health.set_gone(t, gone_all), t)
         colouring = drawn_status(self.status, gone_all)
@@ -452,6 +487,14 @@ class Recorder:
                          drawn=self._drawn_rca)
         if layout is not self.layout:
             self.layout, self._drawn = layout, None  # the arrays drawn before have other places
+        self._causes = root_causes
+        if self.condensed_on:
+            # On `time` at the last sample's time if later: a row at the iteration's (earlier)
+            # time would stay hidden behind the row `system` logged for that sample.
+            t_it = float(iteration["t"])
+            self.set_time(max(t_it, self._t or t_it))
+            self._condense(G)
+            self.set_time(t_it)
         self.focus(G, root_causes)
 
     def focus(self, G: nx.MultiDiGraph, root_causes: Sequence[Mapping[str, Any]]) -> bool:
@@ -472,11 +515,14 @@ class Recorder:
     def _send_layout(self) -> None:
         """Build the layout for the current diagnosis and computers; make it the viewer's and the
         file's active and default one. A layout function is given ``hosts`` only when there are
-        several computers (one written before hosts existed still works on one)."""
+        several computers and ``condensed`` only when it is on (one written before these existed
+        still works without them)."""
         if self._layout is None:
             return
-        hosts = {"hosts": self.hosts} if self.hosts else {}
-        self.blueprint = self._layout(diagnosis=self.diagnosis, **hosts)
+        extra: dict[str, Any] = {"hosts": self.hosts} if self.hosts else {}
+        if self.condensed_on:
+            extra["condensed"] = True
+        self.blueprint = self._layout(diagnosis=self.diagnosis, **extra)
         for stream in (self._live, self._file):
             if stream is not None:
                 stream.send_blueprint(self.blueprint, make_active=True, make_default=True)

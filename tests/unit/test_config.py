@@ -89,8 +89,8 @@ def test_plugin_settings_checked_against_the_plugin(tmp_path):
 
 @pytest.mark.parametrize(("text", "message"), [
     ("[monitr]\nperiod = 1\n", "unknown section [monitr] (known: monitor, plugins, rca, topics, watchlist)"),
-    ("[monitor]\nperod = 1\n", "[monitor] unknown key 'perod' (known: forget_gone_s, history, period, "
-                               "recording_part_minutes, topic_metrics)"),
+    ("[monitor]\nperod = 1\n", "[monitor] unknown key 'perod' (known: condense_above, condensed, "
+                               "forget_gone_s, history, period, recording_part_minutes, topic_metrics)"),
     ("[monitor]\nperiod = 'fast'\n", '[monitor] period = "fast": expected a number > 0'),
     ("[monitor]\nperiod = -1\n", "[monitor] period = -1: expected a number > 0"),
     ("[monitor]\nperiod = nan\n", "[monitor] period = nan: expected a number > 0"),
