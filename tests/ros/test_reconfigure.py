@@ -26,6 +26,18 @@ from tests.viz.rrd import rows
 
 pytestmark = pytest.mark.ros
 
+def _serve(fault: str) -> str:
+    """The end of a child script: its parameter callback set, SIGUSR1 sets the flag list
+    ``fault`` (the fault, no parameter changed), then spin."""
+    return f"""
+n.add_on_set_parameters_callback(on_set)
+signal_ = __import__("signal")
+signal_.signal(signal_.SIGUSR1, lambda *a: {fault}.__setitem__(0, True))
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+
 # A camera whose rate is its parameter rate_hz (applied at once, as drivers do); SIGUSR1 makes it
 # drop 3 of every 4 frames (a fault: no parameter changes).
 CAMERA = HEAD + """
@@ -47,12 +59,7 @@ def on_set(params):
             n.destroy_timer(timer[0])
             timer[0] = n.create_timer(1.0 / p.value, tick)
     return SetParametersResult(successful=True)
-n.add_on_set_parameters_callback(on_set)
-signal_ = __import__("signal")
-signal_.signal(signal_.SIGUSR1, lambda *a: lossy.__setitem__(0, True))
-print("ready", flush=True)
-rclpy.spin(n)
-"""
+""" + _serve("lossy")
 
 RELAY = HEAD + """
 n = Node("relay")
@@ -147,12 +154,7 @@ def on_set(params):
         if p.name == "quality":
             share[0] = p.value
     return SetParametersResult(successful=True)
-n.add_on_set_parameters_callback(on_set)
-signal_ = __import__("signal")
-signal_.signal(signal_.SIGUSR1, lambda *a: hog.__setitem__(0, True))
-print("ready", flush=True)
-rclpy.spin(n)
-"""
+""" + _serve("hog")
 
 
 def test_a_node_tuned_to_use_more_cpu_is_its_new_normal_and_a_hog_is_not(children, tmp_path):
