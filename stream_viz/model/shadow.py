@@ -36,7 +36,6 @@ class Shadow:
         gone = drop_gone(self.seen, t, self.forget_gone_s)
         if gone:
             self.history.forget(set(self.seen))
-        for m, theta in G.nodes(data="theta"):
-            if theta is not None:
-                self.history.add(m, t, theta)
+        # The attribute dicts, not a data view: every member, every sample.
+        self.history.add_all(t, ((m, a["theta"]) for m, a in G._node.items() if a.get("theta") is not None))
         return gone

@@ -1,0 +1,101 @@
+"""The main loop's fast paths (record and show steps) against the straightforward definitions they
+replace, on small literal graphs and seeded random ones: the same answers, exactly."""
+
+from __future__ import annotations
+
+import random
+
+import networkx as nx
+import numpy as np
+
+from stream_viz.model.graph import FLOW, add_flow_edge, add_member, add_tree_edge, new_graph
+from stream_viz.model.history import History
+from stream_viz.model.seen import missing_edges
+from stream_viz.viz.system import signatures
+
+A, B, T = "node:/a", "node:/b", "topic:/t"
+
+
+def _missing_by_definition(seen: nx.MultiDiGraph, G: nx.MultiDiGraph) -> list[tuple]:
+    return [(u, v, k, a) for u, v, k, a in seen.edges(keys=True, data=True) if not G.has_edge(u, v, k)]
+
+
+def _signatures_by_definition(G: nx.MultiDiGraph, gone: frozenset, colouring: frozenset) -> tuple:
+    flow, tree = set(), set()
+    for u, v, key, kind in G.edges(keys=True, data="kind"):
+        if key == FLOW:
+            flow.add((u, v, kind))
+        else:
+            tree.add((u, v, key))
+    return ((frozenset(G.nodes), frozenset(flow), gone, colouring, frozenset(G.nodes(data="label"))),
+            (frozenset(tree), gone))
+
+
+def _graph(edges: list[tuple[str, str, int]]) -> nx.MultiDiGraph:
+    g = new_graph()
+    for u, v, k in edges:
+        for m in (u, v):
+            if m not in g:
+                add_member(g, m)
+        g.add_edge(u, v, key=k, kind="pub")
+    return g
+
+
+def test_missing_edges_literal():
+    seen = _graph([(A, T, 0), (T, B, 0), (A, B, 1), ("process:1", A, 1)])
+    live = _graph([(A, T, 0), (A, B, 1)])
+    assert [e[:3] for e in missing_edges(seen, live)] == [(T, B, 0), ("process:1", A, 1)]
+    assert missing_edges(seen, seen) == []
+    assert [e[:3] for e in missing_edges(seen, new_graph())] == [(A, T, 0), (A, B, 1), (T, B, 0),
+                                                                  ("process:1", A, 1)]
+    # Another key between the same two members is missing too; the attribute dict is seen's own.
+    live.add_edge(T, B, key=1)
+    got = missing_edges(seen, live)
+    assert [e[:3] for e in got] == [(T, B, 0), ("process:1", A, 1)]
+    assert got[0][3] is seen.edges[T, B, 0]
+
+
+def test_missing_edges_equals_the_definition_on_random_graphs():
+    rng = random.Random(7)
+    members = [f"node:/n{i}" for i in range(12)]
+    for _ in range(200):
+        pool = [(rng.choice(members), rng.choice(members), rng.randrange(3)) for _ in range(30)]
+        seen, live = _graph(pool), _graph([e for e in pool if rng.random() < 0.8])
+        assert missing_edges(seen, live) == _missing_by_definition(seen, live)
+        assert missing_edges(live, seen) == _missing_by_definition(live, seen)
+
+
+def test_signatures_equal_the_definition():
+    g = new_graph()
+    for m in (A, B, T, "process:1"):
+        add_member(g, m)
+    add_flow_edge(g, A, T, "pub")
+    add_flow_edge(g, T, B, "sub")
+    add_tree_edge(g, "process:1", A)
+    g.add_edge(B, A, key=FLOW)  # a flow edge without a kind
+    g.nodes[B]["label"] = "/b (2)"
+    gone, colouring = frozenset({B}), frozenset({(A, "warn")})
+    assert signatures(g, gone, colouring) == _signatures_by_definition(g, gone, colouring)
+    flow = signatures(g, gone, colouring)[0][1]
+    assert flow == {(A, T, "pub"), (T, B, "sub"), (B, A, None)}
+
+
+def test_history_add_all_equals_add_one_by_one():
+    rng = np.random.default_rng(3)
+    one, many = History(maxlen=20), History(maxlen=20)
+    for step in range(45):  # rings grow from 16 to 20 and wrap
+        t = float(step)
+        rows = [("topic:/a", rng.normal(size=4)), ("process:1", rng.normal(size=6)),
+                ("topic:/b", [1.0, float(step), 2.0, 3.0])]  # a list: converted as `add` does
+        if step == 30:
+            rows.append(("topic:/a", rng.normal(size=5)))  # another layout: a new ring
+        if step % 7 == 0:
+            rows.append(("node:/late", np.arange(3, dtype=np.int64) + step))  # not a float array
+        for m, theta in rows:
+            one.add(m, t, theta)
+        many.add_all(t, iter(rows))
+    assert sorted(one) == sorted(many)
+    for m in one:
+        t1, v1 = one.series(m)
+        t2, v2 = many.series(m)
+        assert np.array_equal(t1, t2) and np.array_equal(v1, v2) and v1.dtype == v2.dtype
