@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import networkx as nx
 
+from stream_viz.model.graph import copy_graph
+
 
 def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float) -> nx.MultiDiGraph:
     """Return the union of ``seen`` and the live model ``G`` at time ``t``.
@@ -36,7 +38,7 @@ def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float) -> nx.MultiDiG
     edges = missing_edges(seen, G)
     if not nodes and not edges:
         return G
-    out = G.copy()
+    out = copy_graph(G)
     for m, attrs in nodes:
         out.add_node(m, **attrs)
         if not attrs.get("gone"):

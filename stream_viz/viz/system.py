@@ -11,7 +11,7 @@ import numpy as np
 import rerun as rr
 
 from stream_viz.errors import ModelError
-from stream_viz.model.graph import FLOW, flow_edges
+from stream_viz.model.graph import FLOW, copy_graph, flow_edges
 from stream_viz.model.ids import kind_of, name_of
 from stream_viz.viz import paths, style
 from stream_viz.viz.graph_arrays import edge_array, graph_archetypes
@@ -25,7 +25,7 @@ def with_gone(G: nx.MultiDiGraph, gone: Collection[str]) -> nx.MultiDiGraph:
     extra = sorted(m for m in gone if m not in G and kind_of(m) in style.KIND_COLOR)
     if not extra:
         return G
-    G = G.copy()
+    G = copy_graph(G)
     G.add_nodes_from((m, {"kind": kind_of(m), "label": name_of(m), "gone": True}) for m in extra)
     return G
 

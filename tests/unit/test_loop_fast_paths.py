@@ -8,7 +8,7 @@ import random
 import networkx as nx
 import numpy as np
 
-from stream_viz.model.graph import FLOW, add_flow_edge, add_member, add_tree_edge, new_graph
+from stream_viz.model.graph import FLOW, add_flow_edge, add_member, add_tree_edge, copy_graph, new_graph
 from stream_viz.model.history import History
 from stream_viz.model.seen import missing_edges
 from stream_viz.viz.system import signatures
@@ -99,3 +99,51 @@ def test_history_add_all_equals_add_one_by_one():
         t1, v1 = one.series(m)
         t2, v2 = many.series(m)
         assert np.array_equal(t1, t2) and np.array_equal(v1, v2) and v1.dtype == v2.dtype
+
+
+def _layout_of(G: nx.MultiDiGraph) -> tuple:
+    """Everything a copy must reproduce, orders included."""
+    return (G.graph, list(G._node.items()),
+            [(u, list((v, list(k.items())) for v, k in nbrs.items())) for u, nbrs in G._succ.items()],
+            [(v, list((u, list(k.items())) for u, k in nbrs.items())) for v, nbrs in G._pred.items()])
+
+
+def _check_copy(G: nx.MultiDiGraph) -> None:
+    H = copy_graph(G)
+    assert _layout_of(H) == _layout_of(G.copy())
+    for u, nbrs in H._succ.items():
+        for v, keys in nbrs.items():
+            assert H._pred[v][u] is keys  # one key dict for both directions, as networkx keeps it
+            for k, attrs in keys.items():
+                assert attrs is not G._succ[u][v][k]  # copied: marking H's edge gone leaves G alone
+    for n, attrs in H._node.items():
+        assert attrs is not G._node[n]
+    H.add_edge(A, "node:/new", key=0)  # a working graph
+    assert "node:/new" not in G and H.has_edge(A, "node:/new", 0)
+
+
+def test_copy_graph_equals_networkx_copy_literal():
+    g = new_graph()
+    g.graph["name"] = "robot"
+    for m in (T, B, A, "process:1"):  # not sorted: the order is kept
+        add_member(g, m, theta=np.array([1.0, 2.0]))
+    add_flow_edge(g, A, T, "pub", qos={"reliability": "reliable"})
+    add_flow_edge(g, T, B, "sub")
+    g.add_edge(A, T, key=3, kind="other")
+    add_tree_edge(g, "process:1", A)
+    add_tree_edge(g, "process:1", B)
+    _check_copy(g)
+    _check_copy(new_graph())
+
+
+def test_copy_graph_equals_networkx_copy_on_random_graphs():
+    rng = random.Random(11)
+    members = [f"node:/n{i}" for i in range(10)]
+    for _ in range(100):
+        g = new_graph()
+        for m in rng.sample(members, 7):
+            g.add_node(m, kind="node", x=rng.random())
+        for _ in range(25):
+            u, v = rng.choice(members), rng.choice(members)
+            g.add_edge(u, v, key=rng.randrange(3), w=rng.random())  # may add u, v without attributes
+        _check_copy(g)
