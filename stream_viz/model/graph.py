@@ -54,6 +54,25 @@ def copy_graph(G: nx.MultiDiGraph) -> nx.MultiDiGraph:
     return H
 
 
+def graph_over(G: nx.MultiDiGraph) -> nx.MultiDiGraph:
+    """Return a new graph of ``G``'s members and edges, in ``G``'s orders, that shares ``G``'s
+    attribute dicts: `copy_graph` without copying the attributes. Members and edges added to it
+    and its structure are its own; changing an attribute of one of ``G``'s members changes it in
+    both, so treat those as read-only (the model's graphs are, once built)."""
+    if type(G) is not nx.MultiDiGraph:
+        return copy_graph(G)
+    H = nx.MultiDiGraph()
+    H.graph.update(G.graph)
+    succ, pred, node = H._succ, H._pred, H._node
+    for n, attrs in G._node.items():
+        succ[n], pred[n], node[n] = {}, {}, attrs
+    for u, nbrs in G._succ.items():
+        out = succ[u]
+        for v, keys in nbrs.items():
+            out[v] = pred[v][u] = dict(keys)  # its own key dict: an edge added to H is not G's
+    return H
+
+
 def add_member(G: nx.MultiDiGraph, member: str, **attrs: Any) -> None:
     """Add ``member`` (or update its attributes); its kind is taken from the id.
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import networkx as nx
 
-from stream_viz.model.graph import copy_graph
+from stream_viz.model.graph import graph_over
 
 
 def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float) -> nx.MultiDiGraph:
@@ -27,8 +27,9 @@ def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float) -> nx.MultiDiG
     Returns
     -------
     MultiDiGraph
-        A new graph; or ``G`` itself when ``seen`` holds nothing ``G`` lacks (the steady state:
-        no copy), so treat the result as read-only, like ``G``.
+        A new graph that shares ``G``'s attribute dicts (`graph_over`; the gone members' and
+        edges' are its own); or ``G`` itself when ``seen`` holds nothing ``G`` lacks (the steady
+        state: no copy). Treat the result as read-only, like ``G``.
     """
     # Read through the adjacency dicts, not networkx's views: called every sample on every member
     # and edge, and in the steady state nothing is missing (a set comparison per node in C).
@@ -38,7 +39,7 @@ def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float) -> nx.MultiDiG
     edges = missing_edges(seen, G)
     if not nodes and not edges:
         return G
-    out = copy_graph(G)
+    out = graph_over(G)  # G's attribute dicts: read-only, as G itself when nothing is gone
     for m, attrs in nodes:
         out.add_node(m, **attrs)
         if not attrs.get("gone"):

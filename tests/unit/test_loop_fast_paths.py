@@ -8,9 +8,17 @@ import random
 import networkx as nx
 import numpy as np
 
-from stream_viz.model.graph import FLOW, add_flow_edge, add_member, add_tree_edge, copy_graph, new_graph
+from stream_viz.model.graph import (
+    FLOW,
+    add_flow_edge,
+    add_member,
+    add_tree_edge,
+    copy_graph,
+    graph_over,
+    new_graph,
+)
 from stream_viz.model.history import History
-from stream_viz.model.seen import missing_edges
+from stream_viz.model.seen import missing_edges, remember
 from stream_viz.viz.system import signatures
 
 A, B, T = "node:/a", "node:/b", "topic:/t"
@@ -147,3 +155,27 @@ def test_copy_graph_equals_networkx_copy_on_random_graphs():
             u, v = rng.choice(members), rng.choice(members)
             g.add_edge(u, v, key=rng.randrange(3), w=rng.random())  # may add u, v without attributes
         _check_copy(g)
+
+
+def test_graph_over_shares_the_attributes_and_remember_leaves_the_live_graph_alone():
+    g = new_graph()
+    for m in (T, B, A, "process:1"):
+        add_member(g, m, pid=1)
+    add_flow_edge(g, A, T, "pub")
+    add_flow_edge(g, T, B, "sub")
+    add_tree_edge(g, "process:1", A)
+    H = graph_over(g)
+    assert _layout_of(H) == _layout_of(g.copy())
+    assert all(H._node[m] is g._node[m] for m in g)
+    assert all(H._pred[v][u] is keys and keys is not g._succ[u][v] and keys[k] is g._succ[u][v][k]
+               for u, nbrs in H._succ.items() for v, keys in nbrs.items() for k in keys)
+    # A member and an edge gone while another edge between the same two members stays.
+    g.add_edge(A, T, key=2, kind="other")
+    live = g.copy()
+    live.remove_edge(A, T, key=2)
+    live.remove_node(B)
+    before = _layout_of(live)
+    seen = remember(g, live, 5.0)
+    assert _layout_of(live) == before  # nothing of the live graph changed
+    assert seen.edges[A, T, 2]["gone"] is True and seen.nodes[B]["gone_at"] == 5.0
+    assert "gone" not in seen.edges[A, T, 0] and seen.nodes[A] is live.nodes[A]
