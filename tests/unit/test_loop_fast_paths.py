@@ -179,3 +179,18 @@ def test_graph_over_shares_the_attributes_and_remember_leaves_the_live_graph_alo
     assert _layout_of(live) == before  # nothing of the live graph changed
     assert seen.edges[A, T, 2]["gone"] is True and seen.nodes[B]["gone_at"] == 5.0
     assert "gone" not in seen.edges[A, T, 0] and seen.nodes[A] is live.nodes[A]
+
+
+def test_members_by_kind_keeps_the_graph_order_and_plugins_read_it():
+    from stream_viz.detect.api import PluginContext, members_by_kind
+
+    g = new_graph()
+    for m in (T, B, "process:1", A, "topic:/s"):
+        add_member(g, m)
+    g.add_node("x")  # no kind
+    assert members_by_kind(g) == {"topic": [T, "topic:/s"], "node": [B, A], "process": ["process:1"],
+                                  None: ["x"]}
+    ctx = PluginContext(t=1.0, graph=g, watch=frozenset(), history=History())
+    for kind in ("node", "topic", "process", "service"):
+        by_definition = [m for m, a in g.nodes(data=True) if a.get("kind") == kind]
+        assert list(ctx.members(kind)) == by_definition
