@@ -7,7 +7,8 @@ import networkx as nx
 from stream_viz.model.graph import graph_over
 
 
-def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float) -> nx.MultiDiGraph:
+def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float,
+             edges_kept: bool = False) -> nx.MultiDiGraph:
     """Return the union of ``seen`` and the live model ``G`` at time ``t``.
 
     Members and edges of ``G`` take their current attributes (no ``gone``; an attribute they no
@@ -23,6 +24,9 @@ def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float) -> nx.MultiDiG
         The live model now.
     t : float
         Time of ``G``.
+    edges_kept : bool
+        The caller knows ``G`` has every edge of ``seen`` (``seen`` is the previous live model
+        and the collector's diff removed no edge): they are not searched for.
 
     Returns
     -------
@@ -36,7 +40,7 @@ def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float) -> nx.MultiDiG
     live = G._node
     lost = seen._node.keys() - live.keys()
     nodes = [(m, a) for m, a in seen._node.items() if m in lost]
-    edges = missing_edges(seen, G)
+    edges = [] if edges_kept else missing_edges(seen, G)
     if not nodes and not edges:
         return G
     out = graph_over(G)  # G's attribute dicts: read-only, as G itself when nothing is gone

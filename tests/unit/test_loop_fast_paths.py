@@ -194,3 +194,23 @@ def test_members_by_kind_keeps_the_graph_order_and_plugins_read_it():
     for kind in ("node", "topic", "process", "service"):
         by_definition = [m for m, a in g.nodes(data=True) if a.get("kind") == kind]
         assert list(ctx.members(kind)) == by_definition
+
+
+def test_shadow_with_the_samples_diffs_equals_without():
+    from stream_viz.model.diff import diff
+    from stream_viz.model.shadow import Shadow
+
+    rng = random.Random(5)
+    members = [f"node:/n{i}" for i in range(8)]
+    pool = [(rng.choice(members), rng.choice(members), rng.randrange(2)) for _ in range(20)]
+    with_diff, without = Shadow(forget_gone_s=3.0), Shadow(forget_gone_s=3.0)
+    prev = new_graph()
+    for step in range(60):
+        G = _graph([e for e in pool if rng.random() < (0.97 if step % 10 else 0.7)])
+        for m in G:
+            G.nodes[m]["theta"] = np.array([float(step)])
+        t = float(step)
+        assert with_diff.record(G, t, diff(prev, G)) == without.record(G, t)
+        assert _layout_of(with_diff.seen) == _layout_of(without.seen)
+        prev = G
+    assert sorted(with_diff.history) == sorted(without.history)
