@@ -115,7 +115,7 @@ class Monitor:
         if self.samples_file:
             self.samples_file.write(sample)
         self.samples += 1
-        forgotten = self.shadow.record(sample.graph, sample.t)
+        forgotten = self.shadow.record(sample.graph, sample.t, sample.diff)
         self.watchlist.forget(forgotten)
         found = self.detector.detect(sample, self.shadow.history)
         # The store rate-limits an ongoing symptom (episodes); the RCA sees what the database

@@ -77,6 +77,8 @@ class PluginContext:
     kinds: tuple[str, ...] = ()
     # Watched members per kind, sorted; computed once per sample and shared by all plugins.
     by_kind: dict[str, list[str]] | None = field(default=None, repr=False)
+    # Every member per kind, in the graph's order; likewise once per sample for all plugins.
+    of_kind: dict[str, list[str]] | None = field(default=None, repr=False)
 
     # -- the members to check -------------------------------------------------------------------
     def watched(self, kind: str | None = None) -> Iterator[str]:
@@ -99,8 +101,10 @@ class PluginContext:
 
     def members(self, kind: str) -> Iterator[str]:
         """Yield every member of ``kind`` in the graph, watched or not, in the graph's order."""
-        # The attribute dicts, not a data view: plugins ask this over every member each sample.
-        return (m for m, attrs in self.graph._node.items() if attrs.get("kind") == kind)
+        # Plugins ask this over every member each sample: the graph is grouped by kind once.
+        if self.of_kind is None:
+            self.of_kind = members_by_kind(self.graph)
+        return iter(self.of_kind.get(kind, ()))
 
     # -- what a member is and measures ----------------------------------------------------------
     @staticmethod
@@ -279,6 +283,15 @@ def watched_by_kind(G: nx.MultiDiGraph, watch: Iterable[str]) -> dict[str, list[
     for m in sorted(watch):
         if m in G:
             out.setdefault(kinds[m], []).append(m)
+    return out
+
+
+def members_by_kind(G: nx.MultiDiGraph) -> dict[str, list[str]]:
+    """Return kind → every member of that kind in ``G``, in the graph's order (the attribute
+    ``kind``)."""
+    out: dict[str, list[str]] = {}
+    for m, attrs in G._node.items():  # the attribute dicts, not a data view: every member
+        out.setdefault(attrs.get("kind"), []).append(m)
     return out
 
 

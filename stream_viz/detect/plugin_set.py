@@ -16,7 +16,7 @@ from typing import Any
 
 import networkx as nx
 
-from stream_viz.detect.api import Plugin, PluginContext, watched_by_kind
+from stream_viz.detect.api import Plugin, PluginContext, members_by_kind, watched_by_kind
 from stream_viz.detect.discovery import discover
 from stream_viz.detect.isolation import Runner, screen
 from stream_viz.detect.problems import PluginProblem
@@ -178,14 +178,15 @@ class PluginSet:
         events = list(events)
         rates = dict(expected_rates or {})
         known = set(graph.nodes) | set(diff.removed_members) | {e.member for e in events}
-        by_kind = watched_by_kind(graph, watch)
+        by_kind, of_kind = watched_by_kind(graph, watch), members_by_kind(graph)
         alerts: list[Alert] = []
         problems: list[PluginProblem] = []
         for lp in self.plugins:
             if lp.disabled:
                 continue
             ctx = PluginContext(t, graph, watch, history, events, diff, lp.settings, lp.state, rates,
-                                plugin=lp.name, kinds=tuple(lp.plugin.kinds), by_kind=by_kind)
+                                plugin=lp.name, kinds=tuple(lp.plugin.kinds), by_kind=by_kind,
+                                of_kind=of_kind)
             items, more, problem = lp.runner.call(ctx)
             if problem is not None:
                 problems += self._failed(lp, problem)

@@ -370,8 +370,8 @@ def anomalous_processes(G: nx.MultiDiGraph, history: History,
     """
     rule = evidence_rule(settings)
     out: set[str] = set()
-    for m, kind in G.nodes(data="kind"):
-        if kind != "process" or m not in history:
+    for m, attrs in G._node.items():  # the attribute dicts, not a data view: every member, every sample
+        if attrs.get("kind") != "process" or m not in history:
             continue
         times, values = history.series(m, rule.window)
         if process_anomaly(times, values, times[-1], rule):

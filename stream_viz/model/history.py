@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -63,6 +63,21 @@ class History:
         if ring is None or ring.v.shape[1] != len(theta):  # new member (or a new θ layout)
             ring = self._series[member] = _Ring(self.maxlen, len(theta))
         ring.add(t, theta)
+
+    def add_all(self, t: float, thetas: Iterable[tuple[str, np.ndarray]]) -> None:
+        """Append one sample ``(member, θ)`` of each member at ``t``: `add` for each, in order.
+
+        The record step's call (every member, every sample): a θ that is already a flat float
+        array of its ring's width goes to the ring without `add`'s conversion.
+        """
+        series = self._series
+        for m, theta in thetas:
+            ring = series.get(m)
+            if (ring is not None and type(theta) is np.ndarray and theta.dtype == np.float64
+                    and theta.ndim == 1 and ring.v.shape[1] == len(theta)):
+                ring.add(t, theta)
+            else:
+                self.add(m, t, theta)  # new member, another layout, or not a float array
 
     def times(self, member: str, last: int | None = None) -> np.ndarray:
         """Sample times of ``member`` (oldest first; only the ``last`` ones when given)."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import networkx as nx
 
+from stream_viz.model.diff import GraphDiff
 from stream_viz.model.graph import new_graph
 from stream_viz.model.history import History
 from stream_viz.model.seen import drop_gone, remember
@@ -25,18 +26,25 @@ class Shadow:
         self.seen: nx.MultiDiGraph = new_graph()
         self.history = History(maxlen=history)
         self.forget_gone_s = forget_gone_s
+        self._live: nx.MultiDiGraph | None = None  # the previous live model
 
-    def record(self, G: nx.MultiDiGraph, t: float) -> list[str]:
+    def record(self, G: nx.MultiDiGraph, t: float, diff: GraphDiff | None = None) -> list[str]:
         """Add the live model ``G`` at ``t`` (its members, its θ); return the members forgotten
-        (sorted)."""
-        self.seen = remember(self.seen, G, t)
+        (sorted).
+
+        ``diff`` is the sample's (what changed since the previous live model): while the seen
+        graph is that model itself (nothing gone), the edges it lacks are the diff's removed ones,
+        so with none removed they are not searched for (every edge, every sample).
+        """
+        kept = diff is not None and self.seen is self._live and not diff.removed_edges
+        self.seen = remember(self.seen, G, t, edges_kept=kept)
+        self._live = G
         # Long after a member vanished (longer than the RCA window by default) it can no longer
         # be a cause: drop it and its history, so a churning system does not grow the run.
         # The database keeps it (snapshots, alerts) for `analyze`.
         gone = drop_gone(self.seen, t, self.forget_gone_s)
         if gone:
             self.history.forget(set(self.seen))
-        for m, theta in G.nodes(data="theta"):
-            if theta is not None:
-                self.history.add(m, t, theta)
+        # The attribute dicts, not a data view: every member, every sample.
+        self.history.add_all(t, ((m, a["theta"]) for m, a in G._node.items() if a.get("theta") is not None))
         return gone

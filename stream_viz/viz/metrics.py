@@ -149,11 +149,12 @@ class MetricBatch:
 
     def add(self, t: float, G: nx.MultiDiGraph) -> None:
         """Take the θ rows of one sample (members of ``kinds`` with a θ of their schema, not all NaN)."""
-        for m, data in G.nodes(data=True):
+        for m, data in G._node.items():  # the attribute dicts, not a data view: every member, every sample
             kind, theta = data.get("kind"), data.get("theta")
             if kind not in self.kinds or theta is None or data.get("gone"):
                 continue
-            theta = np.asarray(theta, dtype=float)
+            if type(theta) is not np.ndarray or theta.dtype != np.float64:
+                theta = np.asarray(theta, dtype=float)
             if theta.shape != (len(SCHEMAS[kind]),) or not np.isfinite(theta).any():
                 continue
             series = self.rows.get(m)

@@ -372,7 +372,7 @@ class Recorder:
         self._condensed.log(self.rec, G, self.grouping, self._gone, self.status, self._causes, key)
 
     def _system(self, G: nx.MultiDiGraph, t: float | None, gone: Collection[str], force: bool) -> bool:
-        gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
+        gone_all = frozenset(gone) | {m for m, a in G._node.items() if a.get("gone")}  # dicts: every sample
         self._gone = gone_all
         if t is not None:
             self._lanes(self.health.set_gone(t, gone_all), t)
@@ -474,7 +474,7 @@ class Recorder:
         """
         self._last_rca, self._last_report = (G, iteration, root_causes, gone, incidents), None
         self._report_shown = None  # log_rca logs its own report
-        gone_all = frozenset(gone) | {m for m, g in G.nodes(data="gone") if g}
+        gone_all = frozenset(gone) | {m for m, a in G._node.items() if a.get("gone")}  # dicts: every sample
         drawn = self._drawn
         same = (drawn is not None and drawn[0] is G and drawn[1] == gone_all
                 and drawn[2] == drawn_status(self.status, gone_all))

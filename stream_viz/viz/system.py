@@ -11,7 +11,7 @@ import numpy as np
 import rerun as rr
 
 from stream_viz.errors import ModelError
-from stream_viz.model.graph import FLOW, flow_edges
+from stream_viz.model.graph import FLOW, copy_graph, flow_edges
 from stream_viz.model.ids import kind_of, name_of
 from stream_viz.viz import paths, style
 from stream_viz.viz.graph_arrays import edge_array, graph_archetypes
@@ -25,7 +25,7 @@ def with_gone(G: nx.MultiDiGraph, gone: Collection[str]) -> nx.MultiDiGraph:
     extra = sorted(m for m in gone if m not in G and kind_of(m) in style.KIND_COLOR)
     if not extra:
         return G
-    G = G.copy()
+    G = copy_graph(G)
     G.add_nodes_from((m, {"kind": kind_of(m), "label": name_of(m), "gone": True}) for m in extra)
     return G
 
@@ -79,15 +79,18 @@ def drawn_status(status: Mapping[str, str], gone: Collection[str] = ()) -> froze
 def signatures(G: nx.MultiDiGraph, gone: frozenset[str], colouring: frozenset) -> tuple[tuple, tuple]:
     """Return what ``/system`` and ``/process_tree`` are drawn from, comparable between samples:
     members, flow edges, ``gone``, ``colouring`` (`drawn_status`) and labels; tree edges and ``gone``.
-    One pass over the edges (a large graph is compared every sample)."""
+    One pass over the adjacency dicts, not networkx's views, and no list of the edges: a large
+    graph is compared every sample, and what is allocated here is walked by the garbage collector."""
     flow, tree = set(), set()
-    for u, v, key, kind in G.edges(keys=True, data="kind"):
-        if key == FLOW:
-            flow.add((u, v, kind))
-        else:
-            tree.add((u, v, key))
-    return ((frozenset(G.nodes), frozenset(flow), gone, colouring, frozenset(G.nodes(data="label"))),
-            (frozenset(tree), gone))
+    for u, nbrs in G._succ.items():
+        for v, keys in nbrs.items():
+            for key, a in keys.items():
+                if key == FLOW:
+                    flow.add((u, v, a.get("kind")))
+                else:
+                    tree.add((u, v, key))
+    labels = frozenset((m, a.get("label")) for m, a in G._node.items())
+    return (frozenset(G._node), frozenset(flow), gone, colouring, labels), (frozenset(tree), gone)
 
 
 def group_boxes(layout: Layout) -> dict[str, list[Pos]]:
