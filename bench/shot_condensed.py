@@ -6,8 +6,9 @@ A generated system (`stream_viz.demo.generated`, seed 0) of ``--nodes`` nodes in
 subsystems (``/perception``, ``/planning``, …) is recorded without running it
 (`stream_viz.demo.synthetic`, one sample a second; at ``--crash-at`` the process whose loss
 silences the most topics is killed), replayed through the real `Monitor` (default
-configuration, a ``.rrd`` written), and the end of the recording rendered at 1600×900 with its
-default blueprint (`stream_viz.viz.screenshot`). Prints the top root causes, the ``.rrd`` size
+configuration, a ``.rrd`` written), and the end of the recording rendered at ``--size``
+(2400×1350: at 1600×900 the graph's labels are too small to read) with its default blueprint
+(`stream_viz.viz.screenshot`). Prints the top root causes, the ``.rrd`` size
 and the paths written.
 """
 
@@ -50,6 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--png", type=Path)
     ap.add_argument("--rrd", type=Path, help="keep the recording here (default: a temporary file)")
     ap.add_argument("--condensed", choices=("auto", "on", "off"), default="auto")
+    ap.add_argument("--size", default="2400x1350", help="the viewer window, WIDTHxHEIGHT")
     args = ap.parse_args(argv)
     tmp = Path(tempfile.mkdtemp(prefix="stream_condensed_"))
     rrd = args.rrd or tmp / "run.rrd"
@@ -66,8 +68,13 @@ def main(argv: list[str] | None = None) -> int:
     print(f"crashed process group {group}; recording {rrd} ({rrd.stat().st_size / 1e6:.1f} MB, "
           f"{args.samples} s)")
     if args.png:
-        print(f"screenshot {screenshot(rrd, args.png, settle=6.0)}")
+        print(f"screenshot {screenshot(rrd, args.png, size=_size(args.size), settle=6.0)}")
     return 0
+
+
+def _size(text: str) -> tuple[int, int]:
+    w, _, h = text.partition("x")
+    return int(w), int(h)
 
 
 if __name__ == "__main__":

@@ -133,18 +133,17 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
     ``reconfigure_s`` after it: a slower rate shows its next message by then and is learned; a
     topic still quiet then (a hang that came with the change, a publisher switched off) is judged
     against its old rhythm. A departure that begins later, or a drop under way before the
-    change, is no reconfiguration's.
+    change, is no reconfiguration's. A parameter whose change moved no rate (an exposure set every
+    cycle) is no cause when it changes again (`_note_changes`).
     """
     s = ctx.settings
     window, ratio = s["reconfigure_s"], s["drop_ratio"]
     changed: dict[str, float] = ctx.state.setdefault("reconfigured", {})  # node -> its newest param event
-    for e in ctx.events:
-        if e.kind == "param":
-            changed[e.member] = max(e.t, changed.get(e.member, e.t))
+    relearn: dict[str, float] = ctx.state["relearn"]
+    _note_changes(ctx, changed, relearn, window)
     causes: dict[str, float] = ctx.state.setdefault("reconfig_causes", {})  # topic -> the cause it follows
     # topic -> (judged again at, the last message before its quiet)
     deferred: dict[str, tuple[float, float]] = ctx.state.setdefault("reconfig_deferred", {})
-    relearn: dict[str, float] = ctx.state["relearn"]
     for table, keep in ((changed, window), (causes, window), (relearn, FORGET_S)):
         for k in [k for k, x in table.items() if ctx.t - x > keep]:
             del table[k]
@@ -502,6 +501,29 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
         return None
     return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {med:.3g} Hz",
                      symptom="rate_drop", rate_hz=now_rate, baseline_hz=med)
+
+
+def _note_changes(ctx: PluginContext, changed: dict[str, float], relearn: dict[str, float],
+                  window: float) -> None:
+    """Note this sample's ``param`` events in ``changed`` (node → its newest change), except those
+    that change only parameters known to move no rate: a change after which no topic was learned
+    anew within ``window`` marks its parameters so (per node). A node that sets one parameter
+    every cycle (an executive tuning a camera's exposure) otherwise keeps its topics in a state
+    where any drop is taken for the change's new normal."""
+    inert: set[tuple[str, str]] = ctx.state.setdefault("inert_params", set())
+    pending: list[tuple[float, str, set[str]]] = ctx.state.setdefault("param_pending", [])
+    while pending and ctx.t - pending[0][0] > window:
+        at, node, names = pending.pop(0)
+        if not any(at <= x <= at + window for x in relearn.values()):  # nothing learned anew after it
+            inert.update((node, n) for n in names)
+    for e in ctx.events:
+        if e.kind != "param":
+            continue
+        names = {*e.data.get("changed", {}), *e.data.get("deleted", ())}
+        if names and all((e.member, n) in inert for n in names):
+            continue
+        changed[e.member] = max(e.t, changed.get(e.member, e.t))
+        pending.append((e.t, e.member, names))
 
 
 def _lost_on_the_way(ctx: PluginContext, topic: str, rate: float, med: float) -> bool:

@@ -430,6 +430,26 @@ def test_topic_rate_a_reconfigured_rate_is_the_new_normal_a_drop_without_a_chang
     assert drive("topic_rate", frames)[:1] == [(63.5, "topic:/img", "warn")]
 
 
+def test_topic_rate_a_parameter_that_moved_no_rate_is_no_cause_when_it_changes_again():
+    # 10 Hz, then 4 Hz from 30.0; /camera's exposure set at 30.2 (as at 30.2 it is the drop's cause:
+    # a new normal, above). Set twice before, at 5.2 and 17.2, with the rate as it was, it is
+    # known to move no rate: the drop at 30.0 is a fault (an executive setting the exposure
+    # every cycle would otherwise hide any drop that came within seconds of one).
+    msgs = [i / 10 for i in range(300)] + [30 + i / 4 for i in range(240)]
+    exposures = {5.5: [param(5.2, exposure="0.01")], 17.5: [param(17.2, exposure="0.02")],
+                 30.5: [param(30.2, exposure="0.03")]}
+    frames = [(t, model(**seen(msgs, t)), exposures.get(t, [])) for t in HALF[:90]]
+    assert drive("topic_rate", frames)[:1] == [(32.5, "topic:/img", "warn")]
+    # Its rate_hz set at 30.2 instead, after the same exposures: still a change of its rate.
+    exposures[30.5] = [param(30.2, rate_hz="4.0")]
+    frames = [(t, model(**seen(msgs, t)), exposures.get(t, [])) for t in HALF[:90]]
+    assert drive("topic_rate", frames) == []
+    # Only the exposure at 30.2 (no history): taken for the change's new normal, as before.
+    frames = [(t, model(**seen(msgs, t)), [param(30.2, exposure="0.03")] if t == 30.5 else [])
+              for t in HALF[:90]]
+    assert drive("topic_rate", frames) == []
+
+
 def test_topic_rate_a_bursty_topic_keeps_its_rhythm_through_parameter_changes():
     # 10 Hz for 2 s every 8 s; its node's threshold set every 4 s: its gaps are learned as ever,
     # and its hang (nothing after 98 s) is a silence at twice its longest gap.
