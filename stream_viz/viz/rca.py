@@ -15,6 +15,7 @@ from stream_viz.errors import ModelError
 from stream_viz.model.ids import kind_of
 from stream_viz.viz import paths, style
 from stream_viz.viz.graph_arrays import graph_archetypes
+from stream_viz.viz.hosts_view import DrawnHosts
 from stream_viz.viz.layout import Layout
 from stream_viz.viz.system import DrawnGraph, system_view
 
@@ -165,6 +166,7 @@ def log_rca(
     incidents: Sequence[Mapping[str, Any]] = (),
     system: Mapping[str, list] | None = None,
     drawn: DrawnGraph | None = None,
+    hosts: DrawnHosts | None = None,
 ) -> Layout:
     """Log RCA iteration ``j`` on both timelines (``time`` = its ``t``, ``rca_iteration`` = ``j``).
 
@@ -187,6 +189,9 @@ def log_rca(
     drawn : DrawnGraph, optional
         What the ``rca_iteration`` timeline shows of ``/system`` so far (iterations logged in
         order): only what changed since is logged. Without it the graph is logged in full.
+    hosts : DrawnHosts, optional
+        The same for each computer's ``/hosts/<host>`` (several computers): the per-host tabs
+        show each iteration's graph too. Without it they are left to the ``time`` timeline.
     """
     rec.set_time(paths.RCA_ITERATION, sequence=int(iteration["j"]))
     try:
@@ -195,6 +200,8 @@ def log_rca(
         # On `time` the graph is Recorder.system's: this copy is for stepping through iterations.
         rec.disable_timeline(paths.TIME)
         (drawn or DrawnGraph()).log(rec, system, layout)
+        if hosts is not None:
+            hosts.log(rec, G, system)
         rec.set_time(paths.TIME, timestamp=float(iteration["t"]))
         _log_overlay(rec, paths.RCA_SUBGRAPH, subgraph_arrays(iteration, layout))
         _log_overlay(rec, paths.RCA_TRAJECTORY, trajectory_arrays(root_causes, layout))

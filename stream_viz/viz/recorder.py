@@ -210,6 +210,7 @@ class Recorder:
         # What each timeline shows of /system: the next log sends only what changed.
         self._drawn_time, self._drawn_rca = DrawnGraph(), DrawnGraph()
         self._drawn_hosts = DrawnHosts()  # /hosts/<host>: each computer's part of /system
+        self._drawn_hosts_rca = DrawnHosts()  # the same on the rca_iteration timeline
         is_condensed(condensed, 0, condense_above)  # an unknown mode fails here, before the run
         self.condensed, self.condense_above = condensed, condense_above
         self.condensed_on = False  # once on, stays on: a tab that comes and goes would confuse
@@ -331,6 +332,7 @@ class Recorder:
         self._drawn_time.forget()  # nor is anything drawn before
         self._drawn_hosts.forget()
         self._drawn_rca.forget()
+        self._drawn_hosts_rca.forget()
         self._condensed.forget()
         self._report_shown = None
         lanes = {m: [(t, s)] for m, s in self.health.state.items()}
@@ -481,10 +483,11 @@ class Recorder:
         j = int(iteration["j"])
         if self._rca_j is not None and j <= self._rca_j:
             self._drawn_rca.forget()  # latest-at before j is not what was logged last: log it all
+            self._drawn_hosts_rca.forget()
         self._rca_j = j
         layout = log_rca(self.rec, G, self.layout, iteration, root_causes, gone=sorted(gone_all),
                          status=self.status, incidents=incidents, system=drawn[3] if same else None,
-                         drawn=self._drawn_rca)
+                         drawn=self._drawn_rca, hosts=self._drawn_hosts_rca)
         if layout is not self.layout:
             self.layout, self._drawn = layout, None  # the arrays drawn before have other places
         self._causes = root_causes

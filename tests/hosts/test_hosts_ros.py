@@ -183,6 +183,9 @@ def test_a_computer_off_the_network_is_ranked_first_as_that_host(lab, tmp_path):
     ids = {h: set(rrd.shown(data[paths.host_graph_path(h)])["GraphNodes:node_ids"]) for h in ("a", "b")}
     assert ids["b"] == {"node:/cam", "node:/imu", "topic:/cam/out", "topic:/imu/out"}
     assert ids["a"] == {"node:/planner", "topic:/planner/out", "topic:/cam/out", "topic:/imu/out"}
+    # stepping through the RCA iterations, each host's tab shows its graph as well
+    by_step = rrd.shown(data[paths.host_graph_path("b")], timeline=paths.RCA_ITERATION)
+    assert set(by_step["GraphNodes:node_ids"]) == ids["b"]
     # (the reader's order of the blueprints sent is not the order they were sent in)
     layouts = [rrd.strings(tmp_path / "r.rrd", bp) for bp in RrdReader(str(tmp_path / "r.rrd")).blueprints()]
     assert any({"Host a", "Host b", "Hosts"} <= names for names in layouts), layouts
