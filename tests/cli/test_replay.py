@@ -62,7 +62,9 @@ def test_a_killed_monitors_samples_replay_to_their_last_sample(children, tmp_pat
                           "--db", str(tmp_path / "m.sqlite")], env=children.env,
                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        wait_for(lambda: samples.exists() and _lines(samples) >= 5, timeout=60, period=0.5)
+        # 5 samples, the talker in them (a cold start may take seconds to discover it)
+        wait_for(lambda: samples.exists() and len(lines := _lines(samples)) >= 5
+                 and any("/talker" in ln for ln in lines[1:]), timeout=60, period=0.5)
         p.send_signal(signal.SIGKILL)
         p.wait(10)
     finally:
@@ -75,16 +77,17 @@ def test_a_killed_monitors_samples_replay_to_their_last_sample(children, tmp_pat
     assert "node:/talker" in {m["id"] for m in report["members"]}
 
 
-def _lines(path) -> int:
+def _lines(path) -> list[str]:
     """Complete lines of a gzip file still being written (it has no end yet)."""
-    n = 0
+    out = []
     with gzip.open(path, "rt") as f:
         try:
-            for _ in f:
-                n += 1
+            for line in f:
+                if line.endswith("\n"):
+                    out.append(line)
         except EOFError:
             pass
-    return n
+    return out
 
 
 @pytest.mark.parametrize(
