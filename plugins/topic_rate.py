@@ -21,6 +21,7 @@ EXECUTOR_CPU = "executor_cpu_percent"
 PROMPT_INTERVALS = 6  # a reconfigured rate shows in the collector's recent rate within this many intervals
 FORGET_S = 600.0  # as long as the monitor keeps a vanished member by default (forget_gone_s)
 SINGLE_RUN_S = 0.5  # a run of messages this short is one answer (a few messages at most)
+STOP_CONFIRM = 2  # samples in a row a withholding node's executor must work less
 ANSWERS_HZ = 1.0  # a server's topic at most this fast while publishing can be its answers
 
 
@@ -251,7 +252,7 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     if not r.departed and not stalled and _healthy_quiet(ctx, topic, r, transitions):
         r.explained = True
         return None
-    if not r.departed and (_inherited(ctx, topic, r, rhythms) or _busy(ctx, topic)):
+    if not r.departed and (_inherited(ctx, topic, r, rhythms, transitions) or _busy(ctx, topic)):
         r.explained = True
         return None
     if not r.departed and _withheld(ctx, topic, r, rhythms):
@@ -286,30 +287,51 @@ def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[
     return any(last - grace <= x <= last + grace for x in near)
 
 
-def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm]) -> bool:
+def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm],
+               transitions: dict[str, list[float]], seen: frozenset[str] = frozenset()) -> bool:
     """True when every publisher of ``topic`` has an input that went quiet just before it did.
 
     An input counts when its last message came at most ``input_grace_s`` before the topic's last
     one (data computed from it, or forwarded until a mux's timeout) and it is quiet by its own
     base limit now. The topic's quiet is then the input's: judged on the input, as a symptom or
-    as healthy (a burst ending, a lifecycle transition), never twice.
+    as healthy (a burst ending, a lifecycle transition), never twice. Not an input published in
+    the node's own process when that process's single-threaded executor has stopped
+    (`_starved_together`), unless the input's quiet has a cause of its own outside that stall.
     """
     pubs = ctx.publishers(topic)
     if not pubs or r.newest is None:
         return False
     s, grace = ctx.settings, ctx.settings["input_grace_s"]
+    seen = seen | {topic}
 
     def stopped(node: str) -> bool:
         for name in ctx.subscribed_topics(node):
             i = rhythms.get(name)
-            if name == topic or i is None or i.newest is None:
+            if name in seen or i is None or i.newest is None:
                 continue
             stopped_at = r.newest - grace <= i.newest <= r.newest
-            if stopped_at and ctx.t - i.newest >= _base_limit(s, _ref_hz(i, None)):
+            if not (stopped_at and ctx.t - i.newest >= _base_limit(s, _ref_hz(i, None))):
+                continue
+            if not _starved_together(ctx, topic, r, node, name) \
+                    or _healthy_quiet(ctx, name, i, transitions) \
+                    or _inherited(ctx, name, i, rhythms, transitions, seen):
                 return True
         return False
 
     return all(stopped(p) for p in pubs)
+
+
+def _starved_together(ctx: PluginContext, topic: str, r: Rhythm, node: str, name: str) -> bool:
+    """True when every publisher of input ``name`` runs in ``node``'s process and that process's
+    single-threaded executor has stopped (`_executor_ratio` under ``stalled_cpu_ratio``).
+
+    One blocked callback stops every node on that thread at once, so the order in which their
+    outputs went quiet says nothing of which caused which: a hung merger silences the drivers
+    that feed it. Its quiet is then no input's, and the RCA ties the stalled nodes (`stalls`)."""
+    proc = ctx.process_of(node)
+    if proc is None or any(ctx.process_of(p) != proc for p in ctx.publishers(name)):
+        return False
+    return _executor_ratio(ctx, node, _this_quiet(ctx, topic, r)) < ctx.settings["stalled_cpu_ratio"]
 
 
 def _withheld(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm]) -> bool:
@@ -329,15 +351,22 @@ def _withheld(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhyt
     if not pubs or r.newest is None:
         return False
     q = _this_quiet(ctx, topic, r)
+    dip = False
     for node in pubs:
         if ctx.called_servers(node):
             return False
         fed = _fed(ctx, topic, node, r.newest, rhythms)
+        ratio = _executor_ratio(ctx, node, q) if fed > 0 else math.nan
         if fed > 0 and (_other_output(ctx, topic, node, r.newest, rhythms)
-                        or _executor_ratio(ctx, node, q) >= ctx.settings["withheld_cpu_ratio"] * fed):
+                        or ratio >= ctx.settings["withheld_cpu_ratio"] * fed):
             continue
-        if not (fed == 0 and q["withheld"]):  # not working, or never seen withheld this quiet
+        if ratio >= ctx.settings["stalled_cpu_ratio"]:
+            dip = True  # working less, not stopped: one sample can dip (a core shared), twice is real
+        elif not (fed == 0 and q["withheld"]):  # stopped, or never seen withheld this quiet
             return False
+    q["dips"] = q.get("dips", 0) + 1 if dip else 0
+    if dip:
+        return q["dips"] < STOP_CONFIRM
     q["withheld"] = True
     return True
 

@@ -469,3 +469,61 @@ def test_a_busy_monitor_still_sees_the_quiets_between_its_samples(children, tmp_
         assert mon.store.alerts() == []
     finally:
         mon.close()
+
+
+# Three nodes on one single-threaded executor: a driver (/raw, 10 Hz), an IMU (/imu, 30 Hz) and a
+# merger that republishes /raw on /merged and reads /imu. Once the file argv[2] exists, either the
+# merger's IMU callback blocks for good (argv[1] "hang": the thread stops, every node with it) or the driver
+# stops publishing while its timer and the IMU's go on (argv[1] "lost": a device lost).
+SHARED_THREAD = HEAD + """
+from rclpy.executors import SingleThreadedExecutor
+mode, flag = sys.argv[1], sys.argv[2]
+drv, imu, mer = Node("driver"), Node("imu"), Node("merger")
+raw = drv.create_publisher(String, "/raw", 10)
+def tick():
+    if not (mode == "lost" and os.path.exists(flag)):
+        raw.publish(String(data="r"))
+drv.create_timer(0.1, tick)
+ip = imu.create_publisher(String, "/imu", 10)
+imu.create_timer(1 / 30, lambda: ip.publish(String(data="i")))
+mp = mer.create_publisher(String, "/merged", 10)
+mer.create_subscription(String, "/raw", mp.publish, 10)
+def deskew(m):  # the merger's IMU callback: its output's last message can follow its inputs'
+    while mode == "hang" and os.path.exists(flag):
+        time.sleep(0.5)
+mer.create_subscription(String, "/imu", deskew, 10)
+ex = SingleThreadedExecutor()
+for node in (drv, imu, mer):
+    ex.add_node(node)
+print("ready", flush=True)
+ex.spin()
+"""
+
+
+@pytest.mark.parametrize("mode", ["hang", "lost"])
+def test_a_stalled_executor_silences_its_nodes_together_and_the_rca_ties_them(children, tmp_path, mode):
+    flag = tmp_path / "flag"
+    children.python(SHARED_THREAD, mode, str(flag), name="sensors")
+    mon = _monitor(children, tmp_path)
+    try:
+        wait_for(lambda: (mon.step(), "node:/merger" in mon.seen)[1], timeout=20, period=1.0)
+        _observe(mon, 14.0)  # > warmup_s: every topic continuous, the executor's CPU learned
+        _no_alerts(mon, "three nodes on one thread")
+        t0 = time.time()
+        flag.touch()
+        _observe(mon, 6.0)
+        silent = {a.member for a in mon.store.alerts(since=t0) if a.data.get("symptom") == "silence"}
+        causes = mon.engine.result().root_causes
+        if mode == "hang":
+            # The merger stopped the thread: all three go quiet at once, and which node blocked it
+            # cannot be told from the order of their quiets. The merger is not excused by its input.
+            assert silent == {"topic:/raw", "topic:/imu", "topic:/merged"}, mon.store.alerts(since=t0)
+            first = [c.member for c in causes if abs(c.score - causes[0].score) < 1e-6]
+            assert set(first) == {"node:/driver", "node:/imu", "node:/merger"}, causes[:4]
+        else:
+            # The thread goes on (the IMU publishes): the merger's quiet is its input's.
+            assert silent == {"topic:/raw"}, mon.store.alerts(since=t0)
+            assert causes and causes[0].member == "node:/driver", causes[:3]
+    finally:
+        flag.unlink(missing_ok=True)
+        mon.close()

@@ -284,6 +284,41 @@ def test_topic_rate_a_quiet_that_follows_its_inputs_is_the_inputs():
     assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/det", "error")]
 
 
+def one_thread_model(img, det, t, main, running=1, latched_img=False):
+    """`chain_model` with the camera and the detector in one process (pid 100) whose executor
+    (one thread running, or ``running``) uses ``main(t)`` % of a core."""
+    G = chain_model(img, det, t, latched_img=latched_img)
+    G.remove_edge("process:200", "node:/detector")
+    G.remove_node("process:200")
+    G.nodes["node:/detector"]["pid"] = 100
+    add_tree_edge(G, "process:100", "node:/detector")
+    G.nodes["process:100"]["theta"] = make_theta("process", {
+        "cpu_percent": 5.0, "rss_mb": 80.0, "threads": 4, "executor_cpu_percent": main(t),
+        "running_threads": running})
+    return G
+
+
+def test_topic_rate_a_stalled_executor_silences_its_nodes_together_not_one_after_the_other():
+    # The camera and the detector share one thread; both stop at 20 s (the detector's callback
+    # blocks it, or the camera's: the order of their quiets cannot tell).
+    img = [i / 10 for i in range(200)]
+    det = [m + 0.05 for m in img]
+    stopped = lambda t: noisy(3.0, 0.3) if t < 20 else 0.0  # noqa: E731
+    frames = [(t, one_thread_model(img, det, t, stopped), []) for t in HALF[:40]]
+    assert {(m, s) for _, m, s in drive("topic_rate", frames)} == {("topic:/img", "error"),
+                                                                   ("topic:/det", "error")}
+    # The thread goes on (other callbacks run: the camera lost its device): /det's quiet is /img's.
+    going = lambda t: noisy(3.0, 0.3)  # noqa: E731
+    frames = [(t, one_thread_model(img, det, t, going), []) for t in HALF[:40]]
+    assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img"}
+    # Threads of a multi-threaded process say nothing of one executor: as in two processes.
+    frames = [(t, one_thread_model(img, det, t, stopped, running=3), []) for t in HALF[:40]]
+    assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img"}
+    # The input's quiet is healthy (its latched publisher stopped): the thread idles, no alert.
+    frames = [(t, one_thread_model(img, det, t, stopped, latched_img=True), []) for t in HALF[:40]]
+    assert drive("topic_rate", frames) == []
+
+
 def withholding_model(det, t, main=None, img_until=40.0, status=None, client=False, running=1, sibling=False):
     """`chain_model` with /img at 10 Hz until ``img_until``; the detector's process's executor (one
     thread running, or ``running``) at ``main(t)`` % (None: not measured), its own /det_status at
