@@ -11,6 +11,7 @@ import pytest
 from rclpy.qos import ReliabilityPolicy
 
 from stream_viz.collect.collector import Collector
+from stream_viz.collect.processes import ProcessSampler
 from stream_viz.demo.amr.topology import AMR, LATCHED
 from stream_viz.demo.messages import load_type
 from stream_viz.demo.robot import FaultSpec, Robot
@@ -96,6 +97,16 @@ def test_the_model_has_the_amr_structures(ros_domain):
             assert next(iter(fields.items())) == ("header", "std_msgs/Header"), topic
             assert _rate(G, f"topic:{topic}") > 1.0, topic
         assert s.graph.nodes[ONE_SHOT]["alive"] is True
+        # A single-threaded container looks so to the collector: one thread runs its callbacks
+        # (the harness's own threads, looking for a fault to inject, stay under the idle floor).
+        sampler, pids = ProcessSampler(probe_every=1), robot.pids()
+        single = [pids[g] for g in ("sensors", "perception", "behavior")]
+        seen = []
+        for _ in range(5):
+            got = sampler.sample(single).processes
+            seen.append({pid: got[pid].metrics.get("running_threads") for pid in single})
+            time.sleep(1.0)
+        assert all(row == dict.fromkeys(single, 1.0) for row in seen[2:]), seen
 
 
 def test_a_one_shot_job_exits_0_and_a_lifecycle_node_changes_state(ros_domain):
