@@ -288,7 +288,7 @@ def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[
 
 
 def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm],
-               transitions: dict[str, list[float]], seen: frozenset[str] = frozenset()) -> bool:
+               transitions: dict[str, list[float]], seen: set[str] | None = None) -> bool:
     """True when every publisher of ``topic`` has an input that went quiet just before it did.
 
     An input counts when its last message came at most ``input_grace_s`` before the topic's last
@@ -302,7 +302,8 @@ def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhy
     if not pubs or r.newest is None:
         return False
     s, grace = ctx.settings, ctx.settings["input_grace_s"]
-    seen = seen | {topic}
+    seen = set() if seen is None else seen  # each topic asked once: the walk stays linear
+    seen.add(topic)
 
     def stopped(node: str) -> bool:
         for name in ctx.subscribed_topics(node):
