@@ -110,8 +110,9 @@ class Station:
             (self.fault_dir / target.rsplit("/", 1)[1]).write_text(how.split(":", 1)[1])
 
 
-def run(fault: str | None, seconds_before: float, post: float) -> dict:
-    """One run: the station, the monitor, ``fault`` injected ``seconds_before`` s after the start."""
+def run(fault: str | None, seconds_before: float, post: float, samples: Path | None = None) -> dict:
+    """One run: the station, the monitor, ``fault`` injected ``seconds_before`` s after the start;
+    every sample written to ``samples`` when given (`stream-viz replay` reads it)."""
     from stream_viz.config import load_config
     from stream_viz.monitor import Monitor
 
@@ -119,7 +120,7 @@ def run(fault: str | None, seconds_before: float, post: float) -> dict:
     (tmp / "faults").mkdir()
     station = Station(tmp / "faults", tmp)
     mon = Monitor(load_config(None), db=tmp / "alerts.sqlite", viewer="none",
-                  domain_id=int(os.environ["ROS_DOMAIN_ID"]))
+                  domain_id=int(os.environ["ROS_DOMAIN_ID"]), samples=samples)
     injected_at = None
     try:
         station.start()
@@ -182,6 +183,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--post", type=float, default=30.0, help="s monitored after the injection")
     ap.add_argument("--faults", default=",".join(FAULTS), help="comma list (none: no fault runs)")
     ap.add_argument("--out", type=Path, default=Path("bench/out/station"))
+    ap.add_argument("--samples", type=Path, help="keep each run's samples here (<run>.jsonl.gz)")
     args = ap.parse_args(argv)
     own_domain()
     args.out.mkdir(parents=True, exist_ok=True)
@@ -190,7 +192,11 @@ def main(argv: list[str] | None = None) -> int:
     plan = ([None] if args.healthy > 0 else []) + faults
     for fault in plan:
         print(f"run {fault or 'healthy'}", flush=True)
-        rec = run(fault, args.healthy if fault is None else args.warmup, args.post)
+        keep = None
+        if args.samples:
+            args.samples.mkdir(parents=True, exist_ok=True)
+            keep = args.samples / f"{fault or 'healthy'}.jsonl.gz"
+        rec = run(fault, args.healthy if fault is None else args.warmup, args.post, keep)
         rec["code"] = code_version()
         runs.append(rec)
         with open(args.out / "runs.jsonl", "a") as f:
