@@ -18,6 +18,7 @@ from stream_viz.records import Alert
 Baseline = tuple[float, float, int] | None
 TRANSITIONS_KEPT = 8  # per node: enough for the changes around one quiet
 EXECUTOR_CPU = "executor_cpu_percent"
+INERT_AFTER = 2  # changes of a parameter in a row that moved no rate: one can be missed (timing)
 PROMPT_INTERVALS = 6  # a reconfigured rate shows in the collector's recent rate within this many intervals
 FORGET_S = 600.0  # as long as the monitor keeps a vanished member by default (forget_gone_s)
 SINGLE_RUN_S = 0.5  # a run of messages this short is one answer (a few messages at most)
@@ -189,8 +190,11 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
             if began is not None and began < at - grace:
                 continue  # a drop under way before the change is not the change's
             # A new rate shows within a few of its intervals (the window's rate: once the window
-            # turned over); a change that comes later is not this one.
-            prompt = max(grace, PROMPT_INTERVALS / now) + (0.0 if recent == recent else s["rate_window_s"])
+            # turned over), and is seen at the sample after; a change that comes later is not this one.
+            step = ctx.state.get("interval", 0.0)
+            step = step if step < s["rate_window_s"] else 0.0  # the first call's is unknown
+            prompt = max(grace, PROMPT_INTERVALS / now) + step \
+                + (0.0 if recent == recent else s["rate_window_s"])
             if ctx.t - at <= prompt and (now < ratio * base[0] or now > base[0] / ratio):
                 fresh = Rhythm()
                 rhythms[topic], relearn[topic], causes[topic] = fresh, at, at
@@ -536,16 +540,29 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
 def _note_changes(ctx: PluginContext, changed: dict[str, float], relearn: dict[str, float],
                   window: float) -> None:
     """Note this sample's ``param`` events in ``changed`` (node → its newest change), except those
-    that change only parameters known to move no rate: a change after which no topic was learned
-    anew within ``window`` marks its parameters so (per node). A node that sets one parameter
+    that change only parameters known to move no rate: changes after which no topic was learned
+    anew within ``window``, `INERT_AFTER` of them in a row, mark their parameters so (per node;
+    one can be missed: a new rate that showed a moment too late; a change while a topic of the node
+    alerts is not counted: its baseline is frozen, a move cannot show). A node that sets one parameter
     every cycle (an executive tuning a camera's exposure) otherwise keeps its topics in a state
     where any drop is taken for the change's new normal."""
     inert: set[tuple[str, str]] = ctx.state.setdefault("inert_params", set())
-    pending: list[tuple[float, str, set[str]]] = ctx.state.setdefault("param_pending", [])
+    misses: dict[tuple[str, str], int] = ctx.state.setdefault("param_misses", {})
+    alerting = ctx.state.get("alerting", set())
+    # (when, node, names, whether a topic of the node was alerting then or since)
+    pending: list[tuple[float, str, set[str], bool]] = ctx.state.setdefault("param_pending", [])
+    for k, (at, node, names, frozen) in enumerate(pending):
+        if not frozen and alerting & set(ctx.published_topics(node)):
+            pending[k] = (at, node, names, True)
     while pending and ctx.t - pending[0][0] > window:
-        at, node, names = pending.pop(0)
-        if not any(at <= x <= at + window for x in relearn.values()):  # nothing learned anew after it
-            inert.update((node, n) for n in names)
+        at, node, names, frozen = pending.pop(0)
+        moved = any(at <= x <= at + window for x in relearn.values())  # something learned anew after it
+        if not moved and frozen:
+            continue  # its topic's baseline was frozen by an alert: a move could not show
+        for key in ((node, n) for n in names):
+            misses[key] = 0 if moved else misses.get(key, 0) + 1
+            if misses[key] >= INERT_AFTER:
+                inert.add(key)
     for e in ctx.events:
         if e.kind != "param":
             continue
@@ -553,7 +570,7 @@ def _note_changes(ctx: PluginContext, changed: dict[str, float], relearn: dict[s
         if names and all((e.member, n) in inert for n in names):
             continue
         changed[e.member] = max(e.t, changed.get(e.member, e.t))
-        pending.append((e.t, e.member, names))
+        pending.append((e.t, e.member, names, bool(alerting & set(ctx.published_topics(e.member)))))
 
 
 def _lost_on_the_way(ctx: PluginContext, topic: str, rate: float, med: float) -> bool:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -482,6 +484,42 @@ def test_topic_rate_a_parameter_that_moved_no_rate_is_no_cause_when_it_changes_a
     # Only the exposure at 30.2 (no history): taken for the change's new normal, as before.
     frames = [(t, model(**seen(msgs, t)), [param(30.2, exposure="0.03")] if t == 30.5 else [])
               for t in HALF[:90]]
+    assert drive("topic_rate", frames) == []
+
+
+def slowed_while_idle(slows, lag, end):
+    """15 Hz, 5 Hz for 25 s from each of ``slows`` (an executive slowing a camera while the station
+    idles); the ``fps`` events stamped ``lag`` s from each change (or from the k-th, ``lag[k]``)."""
+    lags = lag if isinstance(lag, list) else [lag] * len(slows)
+    bounds = sorted([(x, 5.0) for x in slows] + [(x + 25, 15.0) for x in slows])
+    msgs, t, rate = [], 0.0, 15.0
+    while t < end:
+        while bounds and bounds[0][0] <= t:
+            rate = bounds.pop(0)[1]
+        msgs.append(t)
+        t += 1.0 / rate
+    events = {}
+    for x, lag in zip(slows, lags, strict=True):
+        for at, fps in ((x + lag, "5.0"), (x + 25 + lag, "15.0")):
+            events.setdefault(math.floor(at) + 0.5, []).append(param(at, fps=fps))
+    return [(t, model(**seen(msgs, t)), events.get(t, [])) for t in (k + 0.5 for k in range(end))]
+
+
+def test_topic_rate_a_slower_rate_seen_a_sample_late_is_still_the_changes():
+    # The event stamped 0.6 s before the camera slows: the recent rate is under half the baseline
+    # only at the second sample after it (2.1 s), one sample later than a new rate's few intervals.
+    assert drive("topic_rate", slowed_while_idle([55.0, 135.0], -0.6, 170)) == []
+    # One change stamped 2.5 s early is a rate drop (too late to be the change's); it does not make
+    # `fps` a parameter that moves no rate, so the next slowdowns are changes again.
+    late = drive("topic_rate", slowed_while_idle([55.0, 135.0, 215.0, 295.0], [-0.6, -2.5, -0.6, -0.6], 330))
+    assert late and {int(t) // 80 for t, _, _ in late} == {1}, late
+
+
+def test_topic_rate_a_parameter_set_once_to_its_value_still_moves_the_rate_later():
+    # An executive sets the camera's fps to the 15 it has at 10 s (no rate moves), then to 5 at 55:
+    # one change that moved nothing does not make `fps` a parameter that moves no rate.
+    frames = slowed_while_idle([55.0], -0.3, 90)
+    frames[10] = (frames[10][0], frames[10][1], [param(10.2, fps="15.0")])
     assert drive("topic_rate", frames) == []
 
 
