@@ -548,12 +548,9 @@ def _note_changes(ctx: PluginContext, changed: dict[str, float], relearn: dict[s
     where any drop is taken for the change's new normal."""
     inert: set[tuple[str, str]] = ctx.state.setdefault("inert_params", set())
     misses: dict[tuple[str, str], int] = ctx.state.setdefault("param_misses", {})
-    alerting = ctx.state.get("alerting", set())
     # (when, node, names, whether a topic of the node was alerting then or since)
     pending: list[tuple[float, str, set[str], bool]] = ctx.state.setdefault("param_pending", [])
-    for k, (at, node, names, frozen) in enumerate(pending):
-        if not frozen and alerting & set(ctx.published_topics(node)):
-            pending[k] = (at, node, names, True)
+    _note_frozen(ctx, pending)
     while pending and ctx.t - pending[0][0] > window:
         at, node, names, frozen = pending.pop(0)
         moved = any(at <= x <= at + window for x in relearn.values())  # something learned anew after it
@@ -570,7 +567,16 @@ def _note_changes(ctx: PluginContext, changed: dict[str, float], relearn: dict[s
         if names and all((e.member, n) in inert for n in names):
             continue
         changed[e.member] = max(e.t, changed.get(e.member, e.t))
-        pending.append((e.t, e.member, names, bool(alerting & set(ctx.published_topics(e.member)))))
+        pending.append((e.t, e.member, names, False))
+    _note_frozen(ctx, pending)
+
+
+def _note_frozen(ctx: PluginContext, pending: list[tuple[float, str, set[str], bool]]) -> None:
+    """Mark the pending changes of nodes with a topic alerting now (its baseline frozen)."""
+    alerting = ctx.state.get("alerting", set())
+    for k, (at, node, names, frozen) in enumerate(pending):
+        if not frozen and alerting & set(ctx.published_topics(node)):
+            pending[k] = (at, node, names, True)
 
 
 def _lost_on_the_way(ctx: PluginContext, topic: str, rate: float, med: float) -> bool:

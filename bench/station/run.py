@@ -187,15 +187,14 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     own_domain()
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.samples:
+        args.samples.mkdir(parents=True, exist_ok=True)
     runs = []
     faults = [f for f in args.faults.split(",") if f and f != "none"]
     plan = ([None] if args.healthy > 0 else []) + faults
     for fault in plan:
         print(f"run {fault or 'healthy'}", flush=True)
-        keep = None
-        if args.samples:
-            args.samples.mkdir(parents=True, exist_ok=True)
-            keep = args.samples / f"{fault or 'healthy'}.jsonl.gz"
+        keep = args.samples / f"{fault or 'healthy'}.jsonl.gz" if args.samples else None
         rec = run(fault, args.healthy if fault is None else args.warmup, args.post, keep)
         rec["code"] = code_version()
         runs.append(rec)

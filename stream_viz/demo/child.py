@@ -25,8 +25,8 @@ from stream_viz.demo.faults import CPU_SHARE, ERRLOG_PER_S, FAULTS, LEAK_MB_S, S
 
 LEAK_CAP = 1536 * 2**20
 BURN_PERIOD = 0.1  # s: a partial ``cpu`` fault burns its share of each such period
-# s between looks for fault.json: at 5 Hz the looking thread used ~0.08 % of a core, over the
-# collector's floor for a running thread, so a single-threaded process looked multi-threaded
+# s between looks for fault.json: looking 5 times a second put the thread over the collector's
+# floor for a running thread, so a single-threaded process looked multi-threaded
 FAULT_POLL_S = 1.0
 
 
