@@ -6,6 +6,8 @@ clock. A message's age is only meaningful on the clock it was stamped with, so t
 ticks are kept with their receive times, the simulated time at a message's receive time is read
 between them (or on from the newest at the simulation's recent pace), and each stamped message is
 aged on whichever of the two clocks its stamp is nearer to. Without ``/clock`` nothing changes.
+From when ``/clock`` is subscribed until its first tick is taken (`expect`), a stamp has no age:
+the simulated stamps taken first would otherwise be aged on our clock, decades old.
 """
 
 from __future__ import annotations
@@ -22,11 +24,16 @@ KEEP = 256  # ticks kept (a simulator publishes /clock at 100–1000 Hz: a fract
 class SimClock:
     """The recent ``/clock`` ticks: our receive time and the simulated time of each (ns)."""
 
-    __slots__ = ("recv", "sim")
+    __slots__ = ("expected_until", "recv", "sim")
 
     def __init__(self) -> None:
         self.recv: list[int] = []
         self.sim: list[int] = []
+        self.expected_until = 0  # our time (ns) until which a first tick is awaited
+
+    def expect(self, until: int) -> None:
+        """``/clock`` is subscribed: until our time ``until`` (ns), no age before its first tick."""
+        self.expected_until = until
 
     def tick(self, recv: int, sim: int | None) -> None:
         """A ``/clock`` message with simulated time ``sim`` (ns; None unreadable) received at ``recv``."""
@@ -51,10 +58,13 @@ class SimClock:
         pace = (s[i] - s[i - 1]) / span if span > 0 else 1.0
         return s[i - 1] + round(pace * (recv - r[i - 1]))
 
-    def aging(self) -> Callable[[int, int], int]:
-        """Return what ages a stamp now: `age`, or plain ``recv - stamp`` while no ``/clock``
-        tick was seen (every stamped message goes through it: the common case stays a C call)."""
-        return self.age if self.recv else sub
+    def aging(self, now: int) -> Callable[[int, int], int | None]:
+        """Return what ages a stamp at our time ``now`` (ns): `age`; while no ``/clock`` tick was
+        seen, plain ``recv - stamp`` (every stamped message goes through it: the common case stays
+        a C call), or no age while a first tick is awaited (`expect`)."""
+        if self.recv:
+            return self.age
+        return _unknown if now < self.expected_until else sub
 
     def age(self, recv: int, stamp: int) -> int:
         """Return the age (ns) at ``recv`` of data stamped ``stamp``, on the clock it was stamped
@@ -64,3 +74,7 @@ class SimClock:
             return age
         sim = self.now(recv)
         return sim - stamp if sim is not None and abs(sim - stamp) < abs(age) else age
+
+
+def _unknown(recv: int, stamp: int) -> None:
+    return None

@@ -37,6 +37,7 @@ from stream_viz.records import Event
 
 OBSERVE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
+CLOCK_GRACE_NS = 2_000_000_000  # after /clock is subscribed, how long its first tick is awaited
 NO_RAW = frozenset({"/rosout", "/parameter_events"})  # busy infrastructure topics: no metrics
 # Deserialised by rclpy: the log and the parameter events.
 LOGS = {"/rosout": "rcl_interfaces/msg/Log", "/parameter_events": "rcl_interfaces/msg/ParameterEvent"}
@@ -159,10 +160,14 @@ class TopicMonitor:
             self._failed[topic] = f"cannot subscribe: {e}"
             return
         window = TopicWindow()
+        now = time.time_ns()
         with self._lock:
             self._failed.pop(topic, None)
-            self._watches[topic] = _Watch(sub, time.time_ns(), window, kind, has_header(cls),
+            self._watches[topic] = _Watch(sub, now, window, kind, has_header(cls),
                                           self._sink(topic, kind, window))
+            if kind == "clock":  # drained first: the stamps taken after it are aged on its ticks
+                self.clock.expect(now + CLOCK_GRACE_NS)
+                self._watches = {topic: self._watches.pop(topic), **self._watches}
 
     def _sink(self, topic: str, kind: str, window: TopicWindow) -> Sink | None:
         """What to do with each message taken from ``topic``; None: its window's add (raw)."""
@@ -220,12 +225,12 @@ class TopicMonitor:
         """Take what waits on one subscription: through rcl with gids, else through rclpy."""
         rcl = self.rcl
         if rcl is not None and rcl.available and w.kind != "log":
-            age = self.clock.aging() if w.stamped else None
+            age = self.clock.aging(time.time_ns()) if w.stamped else None
             n = rcl.drain(handle, w.window.add, age, w.sink, payload=w.kind in ("diag", "status"))
             if rcl.available:
                 return n
         raw, take, msg_type, n = w.kind != "log", handle.take_message, w.sub.msg_type, 0
-        add, sink, stamped, age = w.window.add, w.sink, w.stamped, self.clock.aging()
+        add, sink, stamped, age = w.window.add, w.sink, w.stamped, self.clock.aging(time.time_ns())
         while (got := take(msg_type, raw)) is not None:
             msg, info = got
             n += 1

@@ -19,12 +19,23 @@ def half_speed(n: int = 11) -> SimClock:
 def test_without_clock_the_age_is_ours():
     assert SimClock().age(WALL + S, WALL) == S
     assert SimClock().now(WALL) is None
-    assert SimClock().aging()(WALL + S, WALL) == S
+    assert SimClock().aging(WALL)(WALL + S, WALL) == S
 
 
 def test_aging_follows_the_clock_once_it_ticks():
     c = half_speed()
-    assert c.aging() == c.age and c.aging()(WALL + S // 2, 1000 * S + S // 4) == 0
+    assert c.aging(WALL) == c.age and c.aging(WALL)(WALL + S // 2, 1000 * S + S // 4) == 0
+
+
+def test_no_age_while_the_first_tick_is_awaited():
+    # /clock subscribed, nothing taken from it yet: a simulated stamp aged on our clock would be
+    # decades old, so no age until the first tick or the end of the wait (then our clock)
+    c = SimClock()
+    c.expect(WALL + 2 * S)
+    assert c.aging(WALL + S)(WALL + S, 1000 * S) is None
+    assert c.aging(WALL + 2 * S)(WALL + 2 * S, WALL + S) == S
+    c.tick(WALL + S, 1000 * S)
+    assert c.aging(WALL + S) == c.age
 
 
 def test_simulated_time_between_and_after_the_ticks():
