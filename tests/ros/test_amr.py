@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import time
 from contextlib import contextmanager
@@ -234,6 +235,16 @@ def test_a_reliable_subscription_on_a_best_effort_topic_receives_nothing(ros_dom
                        for i in subs)
         wait_for(misconfigured, timeout=10, period=0.5)
         time.sleep(max(0.0, info["t"] + 4.0 - time.time()))
-        G = col.sample().graph
+
+        seen: list = []
+
+        def measured() -> bool:  # a sample where the scan has a rate (a topic re-subscribed has none for 1 s)
+            seen.append(col.sample().graph)
+            return not math.isnan(_rate(seen[-1], "topic:/amr1/scan"))
+        try:
+            wait_for(measured, timeout=6, period=0.5)
+        except TimeoutError:
+            pytest.fail(f"/amr1/scan never measured: {seen[-1].nodes['topic:/amr1/scan']}")
+        G = seen[-1]
         assert _rate(G, "topic:/amr1/amcl_pose") < 0.5
         assert _rate(G, "topic:/amr1/scan") > 5.0  # the publisher goes on; only the reader is deaf

@@ -206,8 +206,18 @@ def test_a_served_viewer_ends_with_a_monitor_killed_by_sigkill():
             return True
 
     assert wait_for(ended, 20), "the served viewer outlived its monitor"
-    check_free("127.0.0.1", web)  # the ports are free for the next run
-    check_free("127.0.0.1", grpc)
+
+    def free() -> bool:
+        try:
+            check_free("127.0.0.1", web)
+            check_free("127.0.0.1", grpc)
+        except OutputError:
+            return False
+        return True
+
+    # the ports are free for the next run (a dead server's sockets may take a moment to go)
+    assert wait_for(free, 10), [(c.pid, c.status, c.laddr) for c in psutil.net_connections("tcp")
+                                if c.laddr and c.laddr.port in (web, grpc)]
 
 
 def test_serve_refuses_a_port_already_taken(tmp_path):
