@@ -385,8 +385,11 @@ def test_a_detector_with_nothing_in_view_is_no_silence_and_its_hang_is(children,
         rhythms = _plugin(mon, "topic_rate").state["rhythms"]
         for topic in ("topic:/a_detector/detections", "topic:/b_detector/detections",
                       "topic:/c_detector/detections"):
-            gaps = rhythms[topic].gaps  # learned as their own rhythm
-            assert rhythms[topic].settled and gaps and all(7.0 <= g <= 10.0 for g in gaps), (topic, gaps)
+            # the 8 s quiets out of view learned as their own rhythm (a shorter hiccup of a loaded
+            # machine may be learned beside them; none longer)
+            gaps = rhythms[topic].gaps
+            assert rhythms[topic].settled and any(7.0 <= g <= 10.0 for g in gaps), (topic, gaps)
+            assert max(gaps) <= 10.0, (topic, gaps)
 
         # /a_detector deadlocks: its executor stops, and that is a silence of its detections
         # (judged on their learned rhythm: within twice the longest gap).
