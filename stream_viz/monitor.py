@@ -122,7 +122,7 @@ class Monitor:
         # keeps, so `analyze` on the file reproduces the live diagnosis.
         alerts = self.store.add_sample(sample, self.shadow.seen, found.alerts, found.problems)
         result = self.engine.update(self.shadow.seen, alerts, found.new_evidence, t=sample.t)
-        self.view.update(sample.t, sample, self.shadow.seen, alerts, result)
+        self.view.update(sample.t, sample, self.shadow.seen, alerts, result, self.shadow.structure)
         self._tell(sample.t, alerts, found.problems, result)
 
     # -- what the run has so far (public: the evaluation reads it) -------------------------------

@@ -27,6 +27,9 @@ class Shadow:
         self.history = History(maxlen=history)
         self.forget_gone_s = forget_gone_s
         self._live: nx.MultiDiGraph | None = None  # the previous live model
+        # Changes whenever the seen graph's members or edges change (which of them are gone
+        # included): what is drawn from its structure alone is built again only then.
+        self.structure = 0
 
     def record(self, G: nx.MultiDiGraph, t: float, diff: GraphDiff | None = None) -> list[str]:
         """Add the live model ``G`` at ``t`` (its members, its θ); return the members forgotten
@@ -45,6 +48,8 @@ class Shadow:
         gone = drop_gone(self.seen, t, self.forget_gone_s)
         if gone:
             self.history.forget(set(self.seen))
+        if diff is None or diff or gone:  # an empty diff: the same live structure, the same gone
+            self.structure += 1
         # The attribute dicts, not a data view: every member, every sample.
         self.history.add_all(t, ((m, a["theta"]) for m, a in G._node.items() if a.get("theta") is not None))
         return gone

@@ -287,21 +287,29 @@ class DrawnCondensed:
         self.layout: Layout | None = None
         self.arrays: Mapping[str, Any] | None = None
         self.key: Any = None
+        self._groups: tuple[Any, list[str], dict[str, str]] | None = None  # (structure, members, groups)
 
     def forget(self) -> None:
         self.arrays, self.key = None, None
 
     def log(self, rec: Any, G: nx.MultiDiGraph, grouping: str, gone: Collection[str],
-            status: Mapping[str, str], root_causes: Sequence[Mapping[str, Any]], key: Any = None) -> bool:
+            status: Mapping[str, str], root_causes: Sequence[Mapping[str, Any]], key: Any = None,
+            structure: int | None = None) -> bool:
         """Log ``/condensed`` for ``G`` if ``key`` (what it is drawn from) changed; return True if
-        anything was logged."""
+        anything was logged. ``structure`` (`stream_viz.viz.recorder.Recorder.system`): while it
+        is the same, the members and their groups (``G``'s structure alone) are not found again."""
         if key is not None and key == self.key and (self.layout is None or self.layout.pending is None):
             return False
-        members = display_members(G)
+        if structure is None or self._groups is None or self._groups[0] != (structure, grouping):
+            members = display_members(G)
+            groups = condense_groups(G, members, grouping)
+            self._groups = None if structure is None else ((structure, grouping), members, groups)
+        else:
+            _, members, groups = self._groups
         # Neighbours of the diagnosis only: with those of every alerted member too, a crash that
         # silences 30 topics downstream drew 100 members in full, unreadable again.
         full = focus_members(G, status, root_causes, gone) | with_neighbours(G, diagnosis_core(root_causes))
-        c = condense(G, condense_groups(G, members, grouping), full & set(members), members)
+        c = condense(G, groups, full & set(members), members)
         self.layout = settle(condensed_graph(G, c), self.layout, grouping="none")
         a = condensed_arrays(G, c, self.layout, gone, status, root_causes)
         fields = changed_fields(self.arrays, a)

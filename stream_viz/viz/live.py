@@ -69,9 +69,11 @@ class LiveView:
         return list(self.rec.parts)
 
     def update(
-        self, t: float, sample: Sample, seen: nx.MultiDiGraph, alerts: list[Alert], result: Any
+        self, t: float, sample: Sample, seen: nx.MultiDiGraph, alerts: list[Alert], result: Any,
+        structure: int | None = None,
     ) -> None:
-        """Log one monitor tick (nothing when there is no viewer and no file to log to)."""
+        """Log one monitor tick (nothing when there is no viewer and no file to log to);
+        ``structure`` as `Recorder.system` takes it."""
         if not self.rec.enabled:
             return
         if self.rec.part_due(t):
@@ -82,7 +84,7 @@ class LiveView:
             self.rec.alerts(alerts)  # before the graph, so alerted members are coloured now
         if sample.events:
             self.rec.changes(sample.events)
-        self.rec.system(seen, t)
+        self.rec.system(seen, t, structure=structure)
         self._batch.add(t, sample.graph)
         self._send_metrics(t)
         # The report form of the result costs O(iterations × members): build it only on change.

@@ -38,7 +38,14 @@ from stream_viz.viz.process_tree import log_process_tree
 from stream_viz.viz.rca import log_rca, log_report
 from stream_viz.viz.screenshot import rerun_executable
 from stream_viz.viz.serve import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, WebViewerServer
-from stream_viz.viz.system import DrawnGraph, drawn_status, signatures, system_view, with_gone
+from stream_viz.viz.system import (
+    DrawnGraph,
+    drawn_status,
+    signatures,
+    structure_parts,
+    system_view,
+    with_gone,
+)
 
 VIEWER_MODES = ("spawn", "serve", "none")
 GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
@@ -207,6 +214,8 @@ class Recorder:
         # The /system arrays last drawn and what they were drawn from: (G, gone, colouring status).
         self._drawn: tuple[nx.MultiDiGraph, frozenset[str], frozenset, dict[str, list]] | None = None
         self._tree_sig: Any = None
+        # (structure, `structure_parts`, the graph) of the last `system` call given a structure
+        self._parts: tuple[int, tuple, nx.MultiDiGraph] | None = None
         # What each timeline shows of /system: the next log sends only what changed.
         self._drawn_time, self._drawn_rca = DrawnGraph(), DrawnGraph()
         self._drawn_hosts = DrawnHosts()  # /hosts/<host>: each computer's part of /system
@@ -347,16 +356,18 @@ class Recorder:
 
     # -- entities -------------------------------------------------------------------------------
     def system(self, G: nx.MultiDiGraph, t: float | None = None, gone: Collection[str] = (),
-               force: bool = False) -> bool:
+               force: bool = False, structure: int | None = None) -> bool:
         """Log ``/system`` (and ``/process_tree``) if the graph, gone set or alert status changed,
         and ``/condensed`` (large systems) if that or the diagnosis changed.
 
-        Returns True if ``/system`` was logged.
+        ``structure``: a number that changes whenever ``G``'s members or edges do
+        (`stream_viz.model.shadow.Shadow.structure`); while it is the same, ``G``'s structure is
+        not read again. Returns True if ``/system`` was logged.
         """
         if t is not None:
             self.set_time(t)
             self._t = t
-        logged = self._system(G, t, gone, force)
+        logged = self._system(G, t, gone, force, structure)
         self._condense(G)
         return logged
 
@@ -371,15 +382,24 @@ class Recorder:
             self._send_layout()
         causes = tuple((rc["member"], tuple(rc.get("trajectory") or ())) for rc in self._causes[:3])
         key = (self._system_sig, frozenset(self.status.items()), causes)
-        self._condensed.log(self.rec, G, self.grouping, self._gone, self.status, self._causes, key)
+        structure = self._parts[0] if self._parts is not None and self._parts[2] is G else None
+        self._condensed.log(self.rec, G, self.grouping, self._gone, self.status, self._causes, key,
+                            structure)
 
-    def _system(self, G: nx.MultiDiGraph, t: float | None, gone: Collection[str], force: bool) -> bool:
+    def _system(self, G: nx.MultiDiGraph, t: float | None, gone: Collection[str], force: bool,
+                structure: int | None = None) -> bool:
         gone_all = frozenset(gone) | {m for m, a in G._node.items() if a.get("gone")}  # dicts: every sample
         self._gone = gone_all
         if t is not None:
             self._lanes(self.health.set_gone(t, gone_all), t)
         colouring = drawn_status(self.status, gone_all)
-        sig, tree_sig = signatures(G, gone_all, colouring)
+        if structure is None:
+            self._parts = None
+        elif self._parts is None or self._parts[0] != structure:
+            self._parts = (structure, structure_parts(G), G)
+        else:
+            self._parts = (structure, self._parts[1], G)
+        sig, tree_sig = signatures(G, gone_all, colouring, self._parts[1] if self._parts else None)
         if tree_sig != self._tree_sig or force:
             log_process_tree(self.rec, G)
             self._tree_sig = tree_sig

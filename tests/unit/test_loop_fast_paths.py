@@ -214,3 +214,59 @@ def test_shadow_with_the_samples_diffs_equals_without():
         assert _layout_of(with_diff.seen) == _layout_of(without.seen)
         prev = G
     assert sorted(with_diff.history) == sorted(without.history)
+
+
+def _gone_of(G: nx.MultiDiGraph) -> frozenset:
+    return frozenset(m for m, a in G.nodes(data=True) if a.get("gone")) | frozenset(
+        (u, v, k) for u, v, k, a in G.edges(keys=True, data=True) if a.get("gone"))
+
+
+def test_shadow_structure_changes_exactly_when_the_seen_structure_does():
+    # The show step reads the seen graph's structure again only when `Shadow.structure` changed:
+    # an unchanged number must mean the same members, edges, labels and gone ones.
+    from stream_viz.model.diff import diff
+    from stream_viz.model.shadow import Shadow
+    from stream_viz.viz.system import structure_parts
+
+    rng = random.Random(11)
+    members = [f"node:/n{i}" for i in range(8)]
+    pool = [(rng.choice(members), rng.choice(members), rng.randrange(2)) for _ in range(20)]
+    sh, prev, before = Shadow(forget_gone_s=3.0), new_graph(), None
+    changes = same = 0
+    for step in range(80):
+        if step % 7:  # the steady state: the same structure again, in a new graph as every sample
+            G = _graph(sorted(prev.edges(keys=True)))
+        else:
+            G = _graph([e for e in pool if rng.random() < 0.8])
+        sh.record(G, float(step), diff(prev, G))
+        number = sh.structure
+        now = (structure_parts(sh.seen), _gone_of(sh.seen))
+        if before is not None and number == before[0]:
+            assert now == before[1], step
+            same += 1
+        elif before is not None:
+            changes += 1
+        before, prev = (number, now), G
+    assert same > 40 and changes > 5, (same, changes)
+
+
+def test_shadow_structure_literal():
+    from stream_viz.model.diff import diff
+    from stream_viz.model.shadow import Shadow
+
+    sh = Shadow(forget_gone_s=5.0)
+    one, two = _graph([(A, B, 0)]), _graph([(A, B, 0)])
+    sh.record(one, 0.0, diff(new_graph(), one))
+    first = sh.structure
+    sh.record(two, 1.0, diff(one, two))  # the same structure again
+    assert sh.structure == first
+    lost = _graph([])
+    lost.add_node(A)
+    sh.record(lost, 2.0, diff(two, lost))  # B and the edge gone
+    assert sh.structure == first + 1
+    again = _graph([])
+    again.add_node(A)
+    sh.record(again, 3.0, diff(lost, again))  # still gone: no change
+    assert sh.structure == first + 1
+    sh.record(again, 9.0, diff(again, again))  # B forgotten after 5 s
+    assert B not in sh.seen and sh.structure == first + 2

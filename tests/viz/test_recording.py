@@ -40,6 +40,23 @@ def robot(rate: float = 10.0):
     return G
 
 
+def test_a_structure_number_reads_the_graph_again_only_when_it_changes(tmp_path):
+    # The monitor passes `Shadow.structure`: the same number, the same members and edges, so
+    # only the colours and gone members are compared; a new number reads the structure again.
+    rrd = tmp_path / "run.rrd"
+    with Recorder(save=rrd) as r:
+        assert r.system(robot(), t=T0, structure=1)
+        assert not r.system(robot(), t=T0 + 1, structure=1)  # a new graph, the same structure
+        r.alerts([Alert("topic:/image", "topic_rate", T0 + 2, "error", "rate fell to 3 Hz")])
+        assert r.system(robot(), t=T0 + 2, structure=1)  # a colour changed
+        G = robot()
+        add_member(G, "node:/logger")
+        add_flow_edge(G, "topic:/objects", "node:/logger", "sub")
+        assert r.system(G, t=T0 + 3, structure=2)
+    last = shown(rows(rrd)[paths.SYSTEM])
+    assert "node:/logger" in last["GraphNodes:node_ids"]
+
+
 def test_graph_metrics_alerts_and_blueprint_in_file(tmp_path):
     rrd = tmp_path / "run.rrd"
     with Recorder(save=rrd) as r:
