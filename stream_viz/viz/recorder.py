@@ -42,7 +42,6 @@ from stream_viz.viz.system import (
     DrawnGraph,
     drawn_status,
     signatures,
-    structure_parts,
     system_view,
     with_gone,
 )
@@ -214,8 +213,8 @@ class Recorder:
         # The /system arrays last drawn and what they were drawn from: (G, gone, colouring status).
         self._drawn: tuple[nx.MultiDiGraph, frozenset[str], frozenset, dict[str, list]] | None = None
         self._tree_sig: Any = None
-        # (structure, `structure_parts`, the graph) of the last `system` call given a structure
-        self._parts: tuple[int, tuple, nx.MultiDiGraph] | None = None
+        # (structure, the graph) of the last `system` call given a structure number
+        self._structure: tuple[int, nx.MultiDiGraph] | None = None
         # What each timeline shows of /system: the next log sends only what changed.
         self._drawn_time, self._drawn_rca = DrawnGraph(), DrawnGraph()
         self._drawn_hosts = DrawnHosts()  # /hosts/<host>: each computer's part of /system
@@ -382,7 +381,7 @@ class Recorder:
             self._send_layout()
         causes = tuple((rc["member"], tuple(rc.get("trajectory") or ())) for rc in self._causes[:3])
         key = (self._system_sig, frozenset(self.status.items()), causes)
-        structure = self._parts[0] if self._parts is not None and self._parts[2] is G else None
+        structure = self._structure[0] if self._structure is not None and self._structure[1] is G else None
         self._condensed.log(self.rec, G, self.grouping, self._gone, self.status, self._causes, key,
                             structure)
 
@@ -394,12 +393,11 @@ class Recorder:
             self._lanes(self.health.set_gone(t, gone_all), t)
         colouring = drawn_status(self.status, gone_all)
         if structure is None:
-            self._parts = None
-        elif self._parts is None or self._parts[0] != structure:
-            self._parts = (structure, structure_parts(G), G)
-        else:
-            self._parts = (structure, self._parts[1], G)
-        sig, tree_sig = signatures(G, gone_all, colouring, self._parts[1] if self._parts else None)
+            self._structure = None
+            sig, tree_sig = signatures(G, gone_all, colouring)
+        else:  # the number stands for the members, edges and labels: nothing of them kept or read
+            self._structure = (structure, G)
+            sig, tree_sig = (structure, gone_all, colouring), (structure, gone_all)
         if tree_sig != self._tree_sig or force:
             log_process_tree(self.rec, G)
             self._tree_sig = tree_sig

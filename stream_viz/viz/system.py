@@ -76,9 +76,9 @@ def drawn_status(status: Mapping[str, str], gone: Collection[str] = ()) -> froze
                      if m not in gone and kind_of(m) not in ("process", "host", "root"))
 
 
-def structure_parts(G: nx.MultiDiGraph) -> tuple[frozenset, frozenset, frozenset, frozenset]:
-    """Return what ``/system`` and ``/process_tree`` are drawn from of ``G``'s structure alone:
-    members, flow edges ``(u, v, kind)``, labels ``(member, label)`` and tree edges ``(u, v, key)``.
+def signatures(G: nx.MultiDiGraph, gone: frozenset[str], colouring: frozenset) -> tuple[tuple, tuple]:
+    """Return what ``/system`` and ``/process_tree`` are drawn from, comparable between samples:
+    members, flow edges, ``gone``, ``colouring`` (`drawn_status`) and labels; tree edges and ``gone``.
     One pass over the adjacency dicts, not networkx's views, and no list of the edges: a large
     graph is compared every sample, and what is allocated here is walked by the garbage collector."""
     flow, tree = set(), set()
@@ -90,16 +90,7 @@ def structure_parts(G: nx.MultiDiGraph) -> tuple[frozenset, frozenset, frozenset
                 else:
                     tree.add((u, v, key))
     labels = frozenset((m, a.get("label")) for m, a in G._node.items())
-    return frozenset(G._node), frozenset(flow), labels, frozenset(tree)
-
-
-def signatures(G: nx.MultiDiGraph, gone: frozenset[str], colouring: frozenset,
-               parts: tuple[frozenset, ...] | None = None) -> tuple[tuple, tuple]:
-    """Return what ``/system`` and ``/process_tree`` are drawn from, comparable between samples:
-    members, flow edges, ``gone``, ``colouring`` (`drawn_status`) and labels; tree edges and ``gone``.
-    ``parts``: `structure_parts` of ``G``, when the caller kept them for an unchanged structure."""
-    members, flow, labels, tree = structure_parts(G) if parts is None else parts
-    return (members, flow, gone, colouring, labels), (tree, gone)
+    return (frozenset(G._node), frozenset(flow), gone, colouring, labels), (frozenset(tree), gone)
 
 
 def group_boxes(layout: Layout) -> dict[str, list[Pos]]:

@@ -226,7 +226,6 @@ def test_shadow_structure_changes_exactly_when_the_seen_structure_does():
     # an unchanged number must mean the same members, edges, labels and gone ones.
     from stream_viz.model.diff import diff
     from stream_viz.model.shadow import Shadow
-    from stream_viz.viz.system import structure_parts
 
     rng = random.Random(11)
     members = [f"node:/n{i}" for i in range(8)]
@@ -240,7 +239,7 @@ def test_shadow_structure_changes_exactly_when_the_seen_structure_does():
             G = _graph([e for e in pool if rng.random() < 0.8])
         sh.record(G, float(step), diff(prev, G))
         number = sh.structure
-        now = (structure_parts(sh.seen), _gone_of(sh.seen))
+        now = (signatures(sh.seen, frozenset(), frozenset()), _gone_of(sh.seen))
         if before is not None and number == before[0]:
             assert now == before[1], step
             same += 1
