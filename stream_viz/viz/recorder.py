@@ -38,13 +38,7 @@ from stream_viz.viz.process_tree import log_process_tree
 from stream_viz.viz.rca import log_rca, log_report
 from stream_viz.viz.screenshot import rerun_executable
 from stream_viz.viz.serve import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, WebViewerServer
-from stream_viz.viz.system import (
-    DrawnGraph,
-    drawn_status,
-    signatures,
-    system_view,
-    with_gone,
-)
+from stream_viz.viz.system import DrawnGraph, drawn_status, signatures, system_view, with_gone
 
 VIEWER_MODES = ("spawn", "serve", "none")
 GRPC_SCHEMES = ("rerun://", "rerun+http://", "rerun+https://")
