@@ -204,7 +204,7 @@ class TopicMonitor:
         """Take every waiting message of every watched topic now; adapt the drain period."""
         peak = 0
         with self._lock:
-            now = time.monotonic()
+            now, wall = time.monotonic(), time.time_ns()  # one clock read a drain, not one a topic
             elapsed, self._last_drain = now - self._last_drain, now
             for w in self._watches.values():
                 try:
@@ -212,7 +212,7 @@ class TopicMonitor:
                     # is what topic metrics cost on a busy system.
                     handle = w.sub.handle
                     with handle:
-                        taken = self._take(handle, w)
+                        taken = self._take(handle, w, wall)
                 except Exception:  # a destroyed handle or a bad message: skip this topic this round
                     taken = 0
                 self.taken += taken
@@ -221,16 +221,17 @@ class TopicMonitor:
             self.period_s = drain_period(peak, elapsed, OBSERVE_QOS.depth, self.min_period_s,
                                          self.max_period_s)
 
-    def _take(self, handle: Any, w: _Watch) -> int:
-        """Take what waits on one subscription: through rcl with gids, else through rclpy."""
+    def _take(self, handle: Any, w: _Watch, wall: int) -> int:
+        """Take what waits on one subscription: through rcl with gids, else through rclpy
+        (``wall``: our time now, ns, for the message age's clock)."""
         rcl = self.rcl
         if rcl is not None and rcl.available and w.kind != "log":
-            age = self.clock.aging(time.time_ns()) if w.stamped else None
+            age = self.clock.aging(wall) if w.stamped else None
             n = rcl.drain(handle, w.window.add, age, w.sink, payload=w.kind in ("diag", "status"))
             if rcl.available:
                 return n
         raw, take, msg_type, n = w.kind != "log", handle.take_message, w.sub.msg_type, 0
-        add, sink, stamped, age = w.window.add, w.sink, w.stamped, self.clock.aging(time.time_ns())
+        add, sink, stamped, age = w.window.add, w.sink, w.stamped, self.clock.aging(wall)
         while (got := take(msg_type, raw)) is not None:
             msg, info = got
             n += 1
