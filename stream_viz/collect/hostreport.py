@@ -100,7 +100,7 @@ def decode(rows: list[StatusRow], before: HostReport | None = None) -> HostRepor
         return None
     report = HostReport(rows[0].hardware_id, int(head["host_id"]), int(head.get("seq", 0)),
                         float(head.get("period_s", 1.0)))
-    report.machine = _metrics(head.get("machine", ""), set(SCHEMAS["host"]))
+    report.machine = _metrics(head.get("machine", ""), {*SCHEMAS["host"], "cpus"})
     names = set(SCHEMAS["process"])
     for row in rows[1:]:
         kv = dict(row.values)

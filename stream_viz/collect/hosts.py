@@ -1,9 +1,9 @@
 """Several computers, one model: the agents' reports merged into the monitor's sample.
 
 Which host a node is on comes from its participant's GUID prefix (the Fast DDS host id, bytes
-2–3), never from names. Once a node of another host or an agent's report is seen, the process
-tree gets a host level: ``root → host:<name> → process tree → node``. This computer's processes
-keep their ids (``process:<pid>``); another host's are ``process:<host>/<pid>`` (PIDs of
+2–3), never from names. The process tree has a host level, on one computer too (a saturated
+computer is a member the RCA can name): ``root → host:<name> → process tree → node``. This
+computer's processes keep their ids (``process:<pid>``); another host's are ``process:<host>/<pid>`` (PIDs of
 different computers collide). Nodes and processes carry ``host``. A remote node's process comes
 from its host's agent; without one (or with an agent silent for longer than ``stale_s``) the
 node hangs under its host with ``pid_status`` ``unknown`` and is listed as unreadable ("process
@@ -64,7 +64,7 @@ def remote_id(host: str, pid: int) -> str:
     return make_id("process", f"{host}/{pid}")
 
 
-def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, str],
+def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int | None, str],
                 received: dict[int, Received], now: float, names: dict[int, str] | None = None,
                 first_seen: dict[int, float] | None = None,
                 machine: Mapping[str, float] | None = None) -> dict[str, str]:
@@ -76,8 +76,8 @@ def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, st
         The model as `build_model` made it (this host's processes only).
     pids : dict
         Node fqn → `PidInfo` (``prefix`` says the host; status ``remote`` for another host's).
-    own : (int, str)
-        This host's Fast DDS host id and name.
+    own : (int or None, str)
+        This host's Fast DDS host id (None: not known, every node is taken as this host's) and name.
     received : dict
         Host id → the agent's latest `Received` report.
     now : float
@@ -99,9 +99,9 @@ def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, st
     own_id, own_name = own
     node_host = {fqn: host_of_prefix(p.prefix) for fqn, p in pids.items()
                  if p.prefix and make_id("node", fqn) in G}
-    remote = {h for h in node_host.values() if h != own_id} | {h for h in received if h != own_id}
-    if not remote:
-        return {}  # one computer: the model stays as it always was
+    # Without its own host id the monitor cannot tell another computer's nodes from its own.
+    remote = set() if own_id is None else (
+        {h for h in node_host.values() if h != own_id} | {h for h in received if h != own_id})
     _host_member(G, own_name, own_id, "local", machine or {})
     tops = [m for m, k in G.nodes(data="kind") if k == "process"
             and not predecessors(G, m, layer=PROCESS_TREE)]
@@ -109,7 +109,7 @@ def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, st
         if k == "process":
             G.nodes[m]["host"] = own_name
     for fqn, h in node_host.items():
-        if h == own_id:
+        if h == own_id or own_id is None:
             G.nodes[make_id("node", fqn)]["host"] = own_name
     if ROOT in G:
         G.remove_edges_from([(ROOT, t, PROCESS_TREE) for t in list(G.successors(ROOT))])
@@ -146,11 +146,13 @@ def merge_hosts(G: nx.MultiDiGraph, pids: dict[str, PidInfo], own: tuple[int, st
     return unknown
 
 
-def _host_member(G: nx.MultiDiGraph, name: str, host_id: int, agent: str,
+def _host_member(G: nx.MultiDiGraph, name: str, host_id: int | None, agent: str,
                  machine: Mapping[str, float], **attrs: Any) -> None:
     values = {k: v for k, v in machine.items() if k in SCHEMAS["host"]}
-    add_member(G, make_id("host", name), theta=make_theta("host", values), host_id=f"{host_id:04x}",
-               agent=agent, **attrs)
+    if "cpus" in machine:
+        attrs["cpus"] = int(machine["cpus"])
+    add_member(G, make_id("host", name), theta=make_theta("host", values), agent=agent,
+               host_id="?" if host_id is None else f"{host_id:04x}", **attrs)
 
 
 def _add_processes(G: nx.MultiDiGraph, host: str, report: HostReport, why: str) -> dict[str, str]:
@@ -276,7 +278,7 @@ class HostReports:
         self.received: dict[int, Received] = {}
         self.names: dict[int, str] = {}
         self.first_seen: dict[int, float] = {}
-        self.machine = MachineSampler()  # this computer's host θ, once several hosts are seen
+        self.machine = MachineSampler()  # this computer's host θ
         self._pids: dict[str, tuple[str, int]] = {}  # remote node -> (host, pid) last sample
         self._type = DiagnosticArray
         self._sub = node.create_subscription(DiagnosticArray, AGENT_TOPIC, lambda m: None, QOS)
@@ -316,9 +318,7 @@ class HostReports:
         events = []
         for _, (before, after) in sorted(new.items()):
             events += remote_exits(t, after.host, before, after, node_prefix)
-        if self.own[0] is None:
-            return events, {}
-        unknown = merge_hosts(G, pids, (self.own[0], self.own[1]), self.received, t, self.names,
+        unknown = merge_hosts(G, pids, self.own, self.received, t, self.names,
                               self.first_seen, self.machine.sample())
         now = remote_pids(G, self.own[1])
         events += remote_restarts(t, self._pids, now)

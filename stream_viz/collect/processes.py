@@ -126,19 +126,55 @@ class ProcSample:
 
 
 class MachineSampler:
-    """The whole computer: CPU in use (% of all its cores) and memory in use (%), a host's θ.
+    """The whole computer: CPU in use (% of all its cores), memory in use (%) and CPU pressure
+    (% of the time some task was ready to run and waited for a CPU), a host's θ.
 
     What a process's own metrics cannot say: a computer saturated by something outside the robot
-    (or by all its processes together) slows every node on it.
+    (or by all its processes together) slows every node on it. Pressure tells a computer that is
+    merely full (every core busy, nobody waiting) from one that starves its tasks; it is Linux's
+    PSI (``/proc/pressure/cpu``), unknown (NaN) where the kernel has none.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, pressure: str = "/proc/pressure/cpu") -> None:
         psutil.cpu_percent(None)  # the first call only starts the interval
+        self._pressure = pressure
+        self._stalled = (time.monotonic(), _read_pressure(pressure))
 
     def sample(self) -> dict[str, float]:
-        """CPU since the last call and memory now, under the host θ names."""
+        """CPU and pressure since the last call and memory now, under the host θ names, and the
+        number of CPUs (``cpus``, an attribute of the host)."""
+        now, stalled = time.monotonic(), _read_pressure(self._pressure)
+        (then, before), self._stalled = self._stalled, (now, stalled)
         return {"machine_cpu_percent": psutil.cpu_percent(None),
-                "machine_mem_percent": psutil.virtual_memory().percent}
+                "machine_mem_percent": psutil.virtual_memory().percent,
+                "cpu_pressure_percent": pressure_percent(before, stalled, now - then),
+                "cpus": float(psutil.cpu_count() or 1)}
+
+
+def _read_pressure(path: str) -> int | None:
+    try:
+        with open(path) as f:
+            return parse_pressure(f.read())
+    except OSError:
+        return None
+
+
+def parse_pressure(text: str) -> int | None:
+    """Return the ``some`` line's ``total`` (µs any task waited for a CPU) of a PSI file's ``text``."""
+    for line in text.splitlines():
+        kind, _, fields = line.partition(" ")
+        if kind == "some":
+            for f in fields.split():
+                if f.startswith("total="):
+                    return int(f[6:])
+    return None
+
+
+def pressure_percent(before: int | None, after: int | None, seconds: float) -> float:
+    """Return the share of ``seconds`` (%) that some task waited, from two PSI totals (µs)."""
+    if before is None or after is None or seconds <= 0 or after < before:
+        return float("nan")
+    return min(100.0, (after - before) / 1e4 / seconds)
 
 
 class ProcessSampler:

@@ -24,7 +24,8 @@ SCHEMAS: dict[str, tuple[str, ...]] = {
     "service": ("servers", "clients", "calls_per_s", "response_ms", "waiting", "wait_s"),
     "action": ("servers", "clients"),
     "host": ("cpu_percent", "rss_mb", "threads", "ctx_switches_per_s", "open_files",
-             "io_read_kBps", "io_write_kBps", "machine_cpu_percent", "machine_mem_percent"),
+             "io_read_kBps", "io_write_kBps", "machine_cpu_percent", "machine_mem_percent",
+             "cpu_pressure_percent"),
     "root": ("cpu_percent", "rss_mb", "threads", "ctx_switches_per_s", "open_files",
              "io_read_kBps", "io_write_kBps"),
 }

@@ -25,7 +25,7 @@ OWN_PROCESS_PLUGINS = ("process_resources",)  # a process's own load: the host i
 
 
 def host_of(G: nx.MultiDiGraph, member: str) -> str | None:
-    """Return the host member (``host:<name>``) ``member`` runs on, or None (one computer)."""
+    """Return the host member (``host:<name>``) ``member`` runs on, or None (not known)."""
     host = G.nodes[member].get("host") if member in G else None
     return make_id("host", host) if host and make_id("host", host) in G else None
 

@@ -23,8 +23,10 @@ FIELDS = ("ids", "labels", "colors", "radii", "positions")
 
 
 def hosts_of(G: nx.MultiDiGraph) -> list[str]:
-    """Return the names of the model's hosts, sorted; empty on one computer (no host members)."""
-    return sorted(name_of(m) for m, k in G.nodes(data="kind") if k == "host")
+    """Return the names of the model's hosts, sorted; empty on one computer (its one host member
+    would only repeat the whole system graph)."""
+    hosts = sorted(name_of(m) for m, k in G.nodes(data="kind") if k == "host")
+    return hosts if len(hosts) > 1 else []
 
 
 def host_arrays(G: nx.MultiDiGraph, a: Mapping[str, list], host: str) -> dict[str, list]:

@@ -19,9 +19,9 @@ from stream_viz.model.ids import kind_of, name_of
 from stream_viz.model.theta import SCHEMAS
 from stream_viz.viz import paths, style
 
-METRIC_KINDS = ("process", "topic", "host")  # a host's θ: only with several computers
+METRIC_KINDS = ("process", "topic", "host")
 VISIBLE = {"topic": ("rate_hz",), "process": ("cpu_percent", "rss_mb"),
-           "host": ("machine_cpu_percent", "machine_mem_percent")}
+           "host": ("machine_cpu_percent", "machine_mem_percent", "cpu_pressure_percent")}
 
 
 def _t_graph(sample: Any) -> tuple[float, nx.MultiDiGraph]:

@@ -6,10 +6,11 @@ import math
 
 from stream_viz.collect.hostreport import HOST_STATUS, HostReport, decode, encode, host_of_prefix
 from stream_viz.collect.hosts import Received, merge_hosts, remote_exits, remote_pids, remote_restarts
+from stream_viz.collect.processes import parse_pressure, pressure_percent
 from stream_viz.collect.readings import PidInfo, ProcessReading
 from stream_viz.model.graph import PROCESS_TREE, add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.model.ids import pid_of
-from stream_viz.model.queries import nodes_of_process, process_of_node, tree
+from stream_viz.model.queries import nodes_of_process, process_of_node, successors, tree
 from stream_viz.model.theta import make_theta, theta_dict
 from stream_viz.rca.engine import analyze
 from stream_viz.rca.settings import RcaSettings
@@ -105,14 +106,29 @@ def test_a_silent_agent_marks_its_members_unknown_and_keeps_everything_else():
     assert theta_dict("process", G.nodes["process:10"]["theta"])["cpu_percent"] == 1.0
 
 
-def test_one_host_leaves_the_model_as_it_was():
+def test_one_computer_is_a_host_member_with_its_own_theta():
     G, pids = _local_graph()
     pids = {"/planner": pids["/planner"]}
     G.remove_nodes_from(["node:/cam", "node:/lidar"])
-    before = (sorted(G.nodes(data="kind")), sorted(G.edges(keys=True)))
-    assert merge_hosts(G, pids, (OWN, "a"), {}, now=1.0) == {}
-    assert (sorted(G.nodes(data="kind")), sorted(G.edges(keys=True))) == before
-    assert "host" not in G.nodes["node:/planner"]
+    machine = {"machine_cpu_percent": 97.0, "cpu_pressure_percent": 40.0, "cpus": 2.0}
+    assert merge_hosts(G, pids, (OWN, "a"), {}, now=1.0, machine=machine) == {}
+    assert sorted(G.nodes(data="kind")) == [("host:a", "host"), ("node:/planner", "node"),
+                                            ("process:1", "process"), ("process:10", "process"),
+                                            ("root", "root")]
+    assert successors(G, "root", layer=PROCESS_TREE) == ["host:a"]
+    assert successors(G, "host:a", layer=PROCESS_TREE) == ["process:1"]
+    assert G.nodes["node:/planner"]["host"] == "a" and G.nodes["process:10"]["host"] == "a"
+    host = G.nodes["host:a"]
+    assert (host["agent"], host["cpus"], host["host_id"]) == ("local", 2, f"{OWN:04x}")
+    theta = theta_dict("host", host["theta"])
+    assert (theta["machine_cpu_percent"], theta["cpu_pressure_percent"]) == (97.0, 40.0)
+
+
+def test_without_its_own_host_id_the_monitor_takes_every_node_as_its_own():
+    G, pids = _local_graph()
+    assert merge_hosts(G, pids, (None, "a"), {}, now=50.0) == {}
+    assert [m for m, k in G.nodes(data="kind") if k == "host"] == ["host:a"]
+    assert G.nodes["host:a"]["host_id"] == "?" and G.nodes["node:/cam"]["host"] == "a"
 
 
 def test_remote_exit_is_an_error_while_dds_still_lists_the_node():
@@ -234,13 +250,15 @@ def test_the_hosts_own_theta_comes_in_the_report_and_from_this_computer():
     assert G.nodes["host:b"]["silent_s"] == 10.0
 
 
-def _hosts_model(cpu_b: float = 20.0, agent_b: str = "reporting"):
-    """host a: process:10 → node:/planner (subscribes /cam/out); host b: process:b/7 → node:/cam,
-    process:b/8 → node:/imu (publish /cam/out, /imu/out)."""
+def _hosts_model(cpu_b: float = 20.0, agent_b: str = "reporting", pressure_b: float = math.nan):
+    """host a: process:10 → node:/planner (subscribes /cam/out); host b (2 CPUs): process:b/7 →
+    node:/cam, process:b/8 → node:/imu (publish /cam/out, /imu/out)."""
     G = new_graph()
     add_member(G, "root", theta=make_theta("root", {}))
-    for h, agent, cpu in (("a", "local", 10.0), ("b", agent_b, cpu_b)):
-        add_member(G, f"host:{h}", theta=make_theta("host", {"machine_cpu_percent": cpu}), agent=agent)
+    for h, agent, cpu, waited in (("a", "local", 10.0, 0.0), ("b", agent_b, cpu_b, pressure_b)):
+        add_member(G, f"host:{h}", theta=make_theta("host", {"machine_cpu_percent": cpu,
+                                                             "cpu_pressure_percent": waited}),
+                   agent=agent, cpus=2)
         add_tree_edge(G, "root", f"host:{h}")
     for proc, node, host in (("process:10", "node:/planner", "a"), ("process:b/7", "node:/cam", "b"),
                              ("process:b/8", "node:/imu", "b")):
@@ -272,6 +290,28 @@ def test_host_state_alerts_on_a_saturated_host_and_on_a_silent_agent():
     (a,) = drive("host_state", [(1.0, G, [])], full=True)
     assert (a.member, a.severity, a.data["symptom"]) == ("host:b", "warn", "agent_silent")
     assert "silent for 4 s" in a.message
+
+
+def test_full_cpu_is_saturation_only_while_tasks_wait_for_it():
+    def frames(waited):
+        return [(float(t), _hosts_model(cpu_b=99.0 if t >= 5 else 20.0, pressure_b=waited), [])
+                for t in range(20)]
+
+    assert drive("host_state", frames(5.0)) == []  # every core busy, nobody waiting
+    got = drive("host_state", frames(60.0), full=True)
+    assert [a.t for a in got] == [float(t) for t in range(15, 20)]
+    assert "tasks waited for a CPU 60 % of the time" in got[0].message
+    # 2 CPUs at 99 %, the robot's two processes 5 % each: 1.88 CPUs used outside them
+    assert "outside the robot's processes: 1.9 of 2 CPUs" in got[0].message
+
+
+def test_cpu_pressure_is_the_share_of_time_some_task_waited():
+    text = ("some avg10=1.00 avg60=0.50 avg300=0.10 total=5256010360\n"
+            "full avg10=0.00 avg60=0.00 avg300=0.00 total=0\n")
+    assert parse_pressure(text) == 5256010360 and parse_pressure("") is None
+    assert pressure_percent(1_000_000, 1_500_000, 2.0) == 25.0  # 0.5 s waited in 2 s
+    assert math.isnan(pressure_percent(None, 1, 1.0)) and math.isnan(pressure_percent(5, 1, 1.0))
+    assert pressure_percent(0, 10_000_000, 1.0) == 100.0  # capped: totals read a little apart
 
 
 def _rank(G, alerts):
