@@ -9,7 +9,8 @@ joins 15 s after the start, exits cleanly (code 0) 45 s later and its launcher s
 10 s after that. Writes ``OUT/runs.jsonl`` (per run: the fault, its truth, every alert, the live
 ranking with its scores, strict = the node, process = any node of its process) and
 ``OUT/summary.json`` (AC@1/AC@3 strict and process level, as in `bench.eval.metrics`; alerts in
-the healthy run and before each injection).
+the healthy run and before each injection). ``outside_load`` is a fault of the computer, not of
+the robot: CPU hogs outside ROS (three a CPU); its root cause is the host member.
 """
 
 from __future__ import annotations
@@ -39,7 +40,10 @@ NODES = {
     "hmi": ("/station/hmi",),
 }
 # fault -> (how, target node, its process): "file" writes the node's fault file, "kill" SIGKILLs
-# the process, "cpu" starts the process's CPU burner
+# the process, "cpu" starts the process's CPU burner, "outside" starts CPU hogs that are no part
+# of the robot (the computer is the cause: its target is HOST)
+HOST = "the computer"
+HOGS_PER_CPU = 3
 FAULTS = {
     "crash_perception": ("kill", "/station/camera", "perception"),
     "crash_arm": ("kill", "/arm/gripper_driver", "arm_drivers"),
@@ -50,6 +54,7 @@ FAULTS = {
     "slow_detector": ("file:slow_service", "/station/detector", "perception"),
     "cpu_planning": ("cpu", "/arm/motion_planner", "planning"),
     "hang_aggregator": ("file:hang", "/station/diagnostic_aggregator", "monitoring"),
+    "outside_load": ("outside", HOST, ""),
 }
 HMI_JOIN, HMI_RUN, HMI_AGAIN = 15.0, 45.0, 10.0  # joins before a fault at 30 s
 
@@ -61,6 +66,7 @@ class Station:
         self.fault_dir, self.logs = fault_dir, logs
         self.procs: dict[str, subprocess.Popen] = {}
         self.pids: dict[int, str] = {}  # every pid a process ran as
+        self.hogs: list[subprocess.Popen] = []  # CPU hogs outside the robot
         self.stop = threading.Event()
 
     def spawn(self, process: str, run_for: float = 0.0) -> subprocess.Popen:
@@ -90,6 +96,9 @@ class Station:
 
     def end(self) -> None:
         self.stop.set()
+        for p in self.hogs:
+            p.kill()
+            p.wait(5)
         for p in self.procs.values():
             if p.poll() is None:
                 os.killpg(p.pid, signal.SIGINT)
@@ -106,6 +115,9 @@ class Station:
             os.killpg(self.procs[process].pid, signal.SIGKILL)
         elif how == "cpu":
             (self.fault_dir / f"{process}.cpu").write_text("1")
+        elif how == "outside":  # each in a session of its own: the kernel's autogroups share alike
+            self.hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=True)
+                         for _ in range(HOGS_PER_CPU * (os.cpu_count() or 1))]
         else:
             (self.fault_dir / target.rsplit("/", 1)[1]).write_text(how.split(":", 1)[1])
 
@@ -148,12 +160,12 @@ def run(fault: str | None, seconds_before: float, post: float, samples: Path | N
     if fault:
         _, target, process = FAULTS[fault]
         blocks = to_blocks(ranked, expand)
-        record["truth"] = {"strict": target, "process": sorted(NODES[process])}
+        record["truth"] = {"strict": target, "process": sorted(NODES.get(process, (target,)))}
         record["before"] = [a for a in record["alerts"] if a["t"] < injected_at - t0 - 1.0] if injected_at \
             else record["alerts"]
         record["first_alert_s"] = min((a.t - injected_at for a in alerts if a.t >= injected_at - 1.0),
                                       default=None) if injected_at else None
-        for level, truth in (("strict", {target}), ("process", set(NODES[process]))):
+        for level, truth in (("strict", {target}), ("process", set(NODES.get(process, (target,))))):
             record[level] = {f"AC@{k}": hit_at(blocks, truth, k) for k in (1, 3)}
     return record
 
@@ -172,6 +184,7 @@ def _expand(G, pids: dict[int, str]) -> dict[str, list[str]]:
             out[m] = [p.removeprefix("node:") for p in servers(G, m) if p.removeprefix("node:") in nodes]
     for pid, process in pids.items():
         out[f"process:{pid}"] = list(NODES[process])
+    out.update({h: [HOST] for h in G.nodes if h.startswith("host:")})  # one computer
     return out
 
 
