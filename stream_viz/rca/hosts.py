@@ -22,6 +22,7 @@ from stream_viz.rca.causal import publishers
 from stream_viz.rca.symptoms import Symptoms
 
 OWN_PROCESS_PLUGINS = ("process_resources",)  # a process's own load: the host is its victim
+VICTIM = 0.5  # an explained node keeps this share of its score: still ranked, below its host
 
 
 def host_of(G: nx.MultiDiGraph, member: str) -> str | None:
@@ -62,19 +63,25 @@ def explains(G: nx.MultiDiGraph, host: str, s: Symptoms, tolerance: float) -> bo
 def lift_hosts(G: nx.MultiDiGraph, causes: Sequence[Any], s: Symptoms, tolerance: float) -> list[Any]:
     """Return ``causes`` (ranked `RootCause` objects) with each host that `explains` its nodes
     ranked just above the first of them, with that node's score and evidence (its own symptom
-    and plugins, ``host``, ``explains_nodes``); its trajectory is the node's, then the host."""
+    and plugins, ``host``, ``explains_nodes``); its trajectory is the node's, then the host. The
+    nodes it explains keep `VICTIM` of their score (``explained_by``: the host), so that none ties
+    with it, and the list is sorted again by score (stable)."""
     if not any(m.startswith("host:") for m in s.onset):
         return list(causes)
     out: list[Any] = []
     seen: set[str] = set()
+    by: dict[str, str] = {}  # explained node -> its host
     for rc in causes:
         host = host_of(G, rc.member)
         if host is not None and host not in seen:
             seen.add(host)
             if explains(G, host, s, tolerance):
                 on = sorted(n for n in nodes_of_process(G, host) if n in {c.member for c in causes})
+                by.update(dict.fromkeys(on, host))
                 out.append(replace(rc, member=host, trajectory=[*rc.trajectory, host], evidence={
                     **rc.evidence, "symptoms": [host], "plugins": sorted(s.plugins[host]),
                     "host": host, "explains_nodes": on}))
+        if rc.member in by:
+            rc = replace(rc, score=rc.score * VICTIM, evidence={**rc.evidence, "explained_by": by[rc.member]})
         out.append(rc)
-    return out
+    return sorted(out, key=lambda rc: -rc.score)

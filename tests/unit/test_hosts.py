@@ -337,6 +337,10 @@ def test_a_saturated_host_explains_its_slow_nodes_unless_one_of_its_processes_is
            for t in (15.0, 16.0)]
     slow = [Alert("topic:/cam/out", "topic_rate", t, "warn", "rate down") for t in (8.0, 9.0, 15.0, 16.0)]
     assert _rank(G, hot + slow)[:2] == ["host:b", "node:/cam"]  # saturated since 5 s: before 8 s
+    host, cam = analyze(G, hot + slow, RcaSettings()).root_causes[:2]
+    assert abs(cam.score - host.score * 0.5) < 1e-6  # the explained node: below, never tied
+    assert cam.evidence["explained_by"] == "host:b"
+    assert host.evidence["explains_nodes"] == ["node:/cam", "node:/imu"]
     hog = [Alert("node:/imu", "process_resources", t, "warn", "cpu 190 %",
                  {"process": "process:b/8", "symptoms": ["cpu"]}) for t in (6.0, 7.0, 8.0)]
     assert "host:b" not in _rank(G, hot + slow + hog)[:1]
