@@ -3,11 +3,11 @@
 Which host a node is on comes from its participant's GUID prefix (the Fast DDS host id, bytes
 2–3), never from names. The process tree has a host level, on one computer too (a saturated
 computer is a member the RCA can name): ``root → host:<name> → process tree → node``. This
-computer's processes keep their ids (``process:<pid>``); another host's are ``process:<host>/<pid>`` (PIDs of
-different computers collide). Nodes and processes carry ``host``. A remote node's process comes
-from its host's agent; without one (or with an agent silent for longer than ``stale_s``) the
-node hangs under its host with ``pid_status`` ``unknown`` and is listed as unreadable ("process
-unknown: no agent on host X"), never guessed.
+computer's processes keep their ids (``process:<pid>``); another host's are
+``process:<host>/<pid>`` (PIDs of different computers collide). Nodes and processes carry
+``host``. A remote node's process comes from its host's agent; without one (or with an agent
+silent for longer than ``stale_s``) the node hangs under its host with ``pid_status``
+``unknown`` and is listed as unreadable ("process unknown: no agent on host X"), never guessed.
 
 Time: a report is dated by when the monitor received it, never by the agent's clock, and the
 agent's rates are measured on its own monotonic clock; so clock offsets between computers do
