@@ -1,0 +1,1 @@
+"""A fourth robot in plain rclpy, on simulation time: a two-robot delivery fleet in a simulator."""
