@@ -6,6 +6,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.detect.startup import STARTUP_S, bring_up_note, hold_back, starting
 from stream_viz.records import SEVERITY_RANK as RANK
 from stream_viz.records import Alert
 
@@ -13,11 +14,15 @@ from stream_viz.records import Alert
 class Rosout(Plugin):
     """One alert per logging member and sample: its worst level (≥ ``min_level``), the count and
     the first line. Alerts whether or not the member is watched unless ``watched_only``.
+
+    Lines a node logs in its process's first ``startup_s`` are its bring-up (waiting for a peer
+    that is not up yet): no alert; a later alert of the node counts them.
     """
 
     name = "rosout"
     kinds = ("node",)
-    settings: ClassVar[dict[str, Any]] = {"min_level": "error", "watched_only": False}
+    settings: ClassVar[dict[str, Any]] = {"min_level": "error", "watched_only": False,
+                                          "startup_s": STARTUP_S}
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         s = ctx.settings
@@ -28,9 +33,13 @@ class Rosout(Plugin):
                 continue
             if s["watched_only"] and e.member not in ctx.watch:
                 continue
+            if starting(ctx, e.member, e.t, s["startup_s"]):
+                hold_back(ctx, e.member)
+                continue
             seen.setdefault(e.member, []).append(e)
         for member, evs in sorted(seen.items()):
             worst = max(evs, key=lambda e: RANK[e.level])
             more = f" (+{len(evs) - 1} more)" if len(evs) > 1 else ""
+            more += bring_up_note(ctx, member)
             yield ctx.alert(member, worst.level, f"logged {worst.level.upper()}: {evs[0].text}{more}",
                             symptom="log", lines=len(evs))

@@ -20,6 +20,7 @@ from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, rise
+from stream_viz.detect.startup import STARTUP_S, starting
 from stream_viz.model.ids import name_of
 from stream_viz.records import SEVERITY_RANK as RANK
 from stream_viz.records import Alert
@@ -31,7 +32,8 @@ class Services(Plugin):
     * ``waiting`` (warn): an observed call has been open ≥ ``max(min_wait_s, wait_factor × the
       service's usual response time)``; or (at the line's level) the client logged (≥
       ``log_level``, ERROR: a WARN about a service not ready yet is the usual bring-up) a line
-      naming the service or its server;
+      naming the service or its server, after the client's first ``startup_s`` (its bring-up,
+      when it waits for servers still coming up);
     * ``slow_response`` (warn): the service's mean response time rose above its own baseline by
       ``max(k·σ, min_rise_ms)`` for ``confirm`` samples;
     * ``server_gone`` (warn): the service had a server and has none while clients remain.
@@ -50,6 +52,7 @@ class Services(Plugin):
         "wait_factor": 3.0,
         "min_rise_ms": 200.0,
         "log_level": "error",
+        "startup_s": STARTUP_S,
         "server_gone": True,
     }
 
@@ -134,6 +137,8 @@ def _logged(ctx: PluginContext) -> Iterator[Alert]:
         named_nodes = set(e.data.get("nodes", ()))
         if not named_services and not named_nodes:
             continue
+        if starting(ctx, e.member, e.t, ctx.settings["startup_s"]):
+            continue  # its bring-up: rosout counts the line
         for service in _called(ctx):
             if e.member not in ctx.clients(service):
                 continue
