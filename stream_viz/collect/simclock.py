@@ -5,14 +5,16 @@ may run slower or faster than ours, or pause), while others in the same system k
 clock. A message's age is only meaningful on the clock it was stamped with, so the ``/clock``
 ticks are kept with their receive times, the simulated time at a message's receive time is read
 between them (or on from the newest at the simulation's recent pace), and each stamped message is
-aged on whichever of the two clocks its stamp is nearer to. Without ``/clock`` nothing changes.
+aged on whichever of the two clocks its stamp is nearer to. The simulation's pace (its real-time
+factor) is ``/clock``'s θ ``sim_pace``: what runs on simulated time slows with it on our clock.
+Without ``/clock`` nothing changes.
 From when ``/clock`` is subscribed until its first tick is taken (`expect`), a stamp has no age:
 the simulated stamps taken first would otherwise be aged on our clock, decades old.
 """
 
 from __future__ import annotations
 
-from bisect import bisect_right
+from bisect import bisect_left, bisect_right
 from collections.abc import Callable
 from operator import sub
 
@@ -57,6 +59,16 @@ class SimClock:
         span = r[i] - r[i - 1]
         pace = (s[i] - s[i - 1]) / span if span > 0 else 1.0
         return s[i - 1] + round(pace * (recv - r[i - 1]))
+
+    def pace(self, now: int, span: int) -> float | None:
+        """Return the simulation's pace (simulated s per s of ours) over the ticks of our last
+        ``span`` ns before ``now``: 1 in real time, under 1 when it lags, 0 while paused with its
+        clock still ticking; None with fewer than two ticks in that span (no clock, or stopped)."""
+        r, s = self.recv, self.sim
+        i = bisect_left(r, now - span)
+        if len(r) - i < 2 or r[-1] <= r[i]:
+            return None
+        return (s[-1] - s[i]) / (r[-1] - r[i])
 
     def aging(self, now: int) -> Callable[[int, int], int | None]:
         """Return what ages a stamp at our time ``now`` (ns): `age`; while no ``/clock`` tick was

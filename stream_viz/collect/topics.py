@@ -286,6 +286,8 @@ class TopicMonitor:
                 gap = w.window.take_gap()
                 if m and gap > 0:
                     m["gap_s"] = gap  # a quiet that began and ended between two samples
+                if m and w.kind == "clock" and (pace := self.clock.pace(now, self.window_ns)) is not None:
+                    m["sim_pace"] = pace
                 out[t] = TopicStats(True, "", m, w.window.publisher_rates(now, w.created_ns, self.window_ns))
         if not self.metrics:
             for t in publishers:
