@@ -24,6 +24,8 @@ FORGET_S = 600.0  # as long as the monitor keeps a vanished member by default (f
 SINGLE_RUN_S = 0.5  # a run of messages this short is one answer (a few messages at most)
 STOP_CONFIRM = 2  # samples in a row a withholding node's executor must work less
 ANSWERS_HZ = 1.0  # a server's topic at most this fast while publishing can be its answers
+CLOCK = "topic:/clock"  # simulated time (`stream_viz.collect.simclock`)
+PAUSED = 0.05  # the simulation's pace under this share of its usual: paused
 
 
 class TopicRate(Plugin):
@@ -279,15 +281,22 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
 
 def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[str, list[float]]) -> bool:
     """True when a quiet has a healthy cause: no publisher (an orphan is graph_anomalies' case),
-    only transient-local publishers, or a publisher's change of state (a lifecycle transition, a
-    goal of its action ending) within ``transition_grace_s`` of the last message."""
+    only transient-local publishers, or a change of state (a lifecycle transition, a goal of its
+    action ending) of a publisher or of a node feeding one, within ``transition_grace_s`` of the
+    last message."""
     if ctx.value(topic, "publishers") == 0:
+        return True
+    if _pace(ctx, topic) < PAUSED:  # the simulation paused: its time, and what runs on it, stands
         return True
     if not ctx.settings["judge_latched"] and latched(ctx.attr(topic, "qos")):
         return True
     grace = ctx.settings["transition_grace_s"]
     last = r.newest or ctx.t
-    near = (x for p in ctx.publishers(topic) for x in transitions.get(p, ()))
+    pubs = ctx.publishers(topic)
+    # A node that follows another's goal (a controller driving the path of its planner's goal)
+    # stops with it: the changes of the nodes feeding a publisher count too.
+    feeding = {u for p in pubs for i in ctx.subscribed_topics(p) if i != topic for u in ctx.publishers(i)}
+    near = (x for p in feeding.union(pubs) for x in transitions.get(p, ()))
     return any(last - grace <= x <= last + grace for x in near)
 
 
@@ -526,15 +535,34 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     now_rate = recent if recent == recent else rate
     med, sigma, _ = base
     quieting = quiet is not None and quiet >= _base_limit(s, med)
+    pace = _pace(ctx, topic)
+    expect = med * pace  # on simulated time, the rate follows the simulation's pace
     # An empty window is a quiet (judged by `_silence`), not a lower rate.
-    low = not quieting and 0 < now_rate < s["drop_ratio"] * med and med - now_rate >= s["drop_k"] * sigma
+    low = (not quieting and 0 < now_rate < s["drop_ratio"] * expect
+           and expect - now_rate >= s["drop_k"] * sigma)
     low = low and not _lost_on_the_way(ctx, topic, rate, med)
     # A drop lasts longer than any healthy pause of the topic (its recent rate counts a pause).
     samples, lasted = streak(ctx.state, (topic, "drop"), low), held(ctx.state, (topic, "drop"), low, ctx.t)
     if samples < s["confirm"] or lasted < r.longest:
         return None
-    return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {med:.3g} Hz",
-                     symptom="rate_drop", rate_hz=now_rate, baseline_hz=med)
+    sim = f" (the simulation at {pace:.2g}× its usual pace)" if pace != 1.0 else ""
+    return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {med:.3g} Hz{sim}",
+                     symptom="rate_drop", rate_hz=now_rate, baseline_hz=med, sim_pace_ratio=pace)
+
+
+def _pace(ctx: PluginContext, topic: str) -> float:
+    """The simulation's pace now over its usual pace (``/clock``'s ``sim_pace``) when every
+    publisher of ``topic`` runs on simulated time (it subscribes ``/clock``: ``use_sim_time``);
+    1 otherwise. Their timers tick on simulated time, so on our clock their rates follow the
+    simulation's real-time factor: a simulator slowed by a heavy scene is no drop."""
+    pubs = ctx.publishers(topic)
+    if not pubs or topic == CLOCK or not all(CLOCK in ctx.subscribed_topics(p) for p in pubs):
+        return 1.0
+    now = ctx.value(CLOCK, "sim_pace")
+    base = cached_baseline(ctx, CLOCK, "sim_pace")
+    if not now >= 0 or base is None or not base[0] > 0:
+        return 1.0
+    return now / base[0]
 
 
 def _note_changes(ctx: PluginContext, changed: dict[str, float], relearn: dict[str, float],

@@ -61,3 +61,15 @@ def test_a_restarted_simulation_starts_its_clock_over_and_memory_is_bounded():
     for k in range(3 * KEEP):
         c.tick(WALL + 3 * S + k, 6 * S + k)
     assert KEEP <= len(c.recv) <= 2 * KEEP and len(c.recv) == len(c.sim)
+
+
+def test_pace_is_simulated_seconds_per_second_over_the_span():
+    c = half_speed()  # 11 ticks over 1 s of ours
+    assert c.pace(WALL + S, 2 * S) == 0.5
+    assert c.pace(WALL + S, S // 2) == 0.5  # the last 0.5 s: 6 ticks
+    assert c.pace(WALL + 5 * S, S) is None  # no tick in the last second: the clock stopped
+    assert SimClock().pace(WALL, S) is None
+    paused = SimClock()
+    for k in range(5):
+        paused.tick(WALL + k * S // 10, 1000 * S)
+    assert paused.pace(WALL + S // 2, S) == 0.0
