@@ -38,7 +38,8 @@ class Diagnostics(Plugin):
     A WARN a status shows in its first ``learn_s`` seconds, and keeps, is its normal (a GPS
     without a fix indoors, a frequency check set too tight, an optional device unplugged: robots
     run with standing warnings): no alert while it stays WARN; a status that was OK then warns is
-    news, as is any ERROR or STALE (``learn_s`` 0: every WARN alerts).
+    news, as is any ERROR or STALE (``learn_s`` 0: every WARN alerts). A status that warned and
+    went back to OK by itself warns again without an alert: its warning comes and goes.
 
     Event plugins alert whether or not the member is watched (``watched_only`` to change it):
     a reported fault is evidence, not an attribute to screen.
@@ -86,7 +87,19 @@ def _standing(ctx: PluginContext, e: Event, level: str, learn_s: float) -> bool:
     if level == "warn" and not warned and e.t - since < learn_s:
         first[name] = (since, True)
         return True
-    return warned
+    return warned or _recurring(ctx, name, level)
+
+
+def _recurring(ctx: PluginContext, name: str, level: str) -> bool:
+    """True for a WARN of a status that warned before and went back to OK by itself: its warning
+    comes and goes (a battery dipping under load, a busy link), a pattern of its own, shown once."""
+    runs = ctx.state.setdefault("warn_runs", {})  # status name -> (warning now, recovered before)
+    warning, recovered = runs.get(name, (False, False))
+    if level == "warn":
+        runs[name] = (True, recovered)
+        return recovered
+    runs[name] = (False, recovered or (warning and level == "ok"))
+    return False
 
 
 def _mapped(ctx: PluginContext, e: Event) -> tuple[str, str]:

@@ -53,12 +53,14 @@ def map_status(name: str, hardware_id: str, index: NodeNames, publisher: str | N
                hardware: Mapping[str, str] | None = None) -> tuple[str | None, str]:
     """Return ``(node fqn or None, mapped_by)`` for a status.
 
-    ``mapped_by`` is ``name`` (the status name's node part names a node), ``hardware_id`` (its
+    ``mapped_by`` is ``name`` (the status name's node part names a node, or is its fully
+    qualified name with ``_`` for ``/``: `NodeNames.flattened`), ``hardware_id`` (its
     hardware id is a node's name, or hardware that node declared: ``hardware`` maps a hardware id
     to a node), ``publisher`` (the node that published it) or ``none``.
     """
     ns = namespace_of(publisher)
-    node = index.resolve(status_head(name), ns)
+    head = status_head(name)
+    node = index.resolve(head, ns) or index.flattened(head)
     if node is not None:
         return node, "name"
     hw = hardware_id.strip()

@@ -42,8 +42,17 @@ class NodeNames:
     def __init__(self, nodes: Iterable[str]) -> None:
         self.fqns = frozenset(nodes)
         self.by_base: dict[str, list[str]] = {}
+        self.by_flat: dict[str, list[str]] = {}
         for fqn in sorted(self.fqns):
             self.by_base.setdefault(fqn.rsplit("/", 1)[-1], []).append(fqn)
+            self.by_flat.setdefault(fqn.strip("/").replace("/", "_"), []).append(fqn)
+
+    def flattened(self, name: str) -> str | None:
+        """Return the one node whose fully qualified name, its ``/`` as ``_``, is ``name``
+        (``r1_localizer`` → ``/r1/localizer``: a namespaced node's name as updaters and logs
+        often spell it), or None."""
+        found = self.by_flat.get(name.strip().strip("/"), [])
+        return found[0] if len(found) == 1 else None
 
     def resolve(self, name: str, namespace: str = "/", bare: bool = True, tails: bool = True) -> str | None:
         """Return the node ``name`` refers to, or None.

@@ -269,6 +269,9 @@ NODES = NodeNames({"/amr/front_lidar", "/amr/base_driver", "/my_node", "/robot/m
     ("my_node: motor", "", None, ("/my_node", "name")),  # in the root namespace
     ("/AMR/Sensors/Lidar/front_lidar: scan rate", "", None, ("/amr/front_lidar", "name")),  # aggregator path
     ("/AMR/Sensors/Lidar/ amr front_lidar: scan rate", "", None, ("/amr/front_lidar", "name")),
+    # by name spelt flat: the namespace joined with "_" (one such node)
+    ("amr_base_driver: motors", "", "/agg", ("/amr/base_driver", "name")),
+    ("robot_my_node: motor", "", "/agg", ("/robot/my_node", "name")),
     # by hardware id: a node's name
     ("motor controller", "/amr/base_driver", "/agg", ("/amr/base_driver", "hardware_id")),
     ("motor controller", "imu", "/agg", ("/imu", "hardware_id")),

@@ -72,6 +72,42 @@ def test_topic_rate_drop():
     assert drive("topic_rate", frames) == [(t, "topic:/img", "warn") for t in (31.0, 32.0, 33.0)]
 
 
+def _on_sim_time(G, pace, subscribes=True):
+    """``G`` with a simulator publishing /clock at ``pace``; the camera on simulated time when
+    it ``subscribes`` to /clock (as ``use_sim_time`` makes a node do)."""
+    add_member(G, "node:/sim", alive=True)
+    add_member(G, "topic:/clock", theta=make_theta("topic", {"rate_hz": 100.0, "sim_pace": pace,
+                                                              "publishers": 1, "subscribers": 1}))
+    add_flow_edge(G, "node:/sim", "topic:/clock", "pub")
+    if subscribes:
+        add_flow_edge(G, "topic:/clock", "node:/camera", "sub")
+    return G
+
+
+def test_topic_rate_on_simulated_time_follows_the_simulations_pace():
+    # the simulator slows from 0.9 to 0.3 of real time at 30 s: a camera on simulated time
+    # publishes at a third of its rate on our clock (no drop); one on our clock that drops so does.
+    def frames(subscribes, pace_after=0.3):
+        return [(float(t), _on_sim_time(model(rate=noisy(10.0) if t < 30 else 3.0),
+                                        0.9 if t < 30 else pace_after, subscribes), [])
+                for t in range(36)]
+
+    assert drive("topic_rate", frames(True), watch=["topic:/img"]) == []
+    dropped = [(float(t), "topic:/img", "warn") for t in range(31, 36)]
+    assert drive("topic_rate", frames(False), watch=["topic:/img"]) == dropped
+    assert drive("topic_rate", frames(True, pace_after=0.9), watch=["topic:/img"]) == dropped
+
+
+def test_topic_rate_a_paused_simulation_silences_no_topic_on_its_time():
+    def frames(subscribes):
+        return [(float(t), _on_sim_time(model(rate=noisy(10.0) if t < 30 else 0.0,
+                                              age=0.05 if t < 30 else t - 29.9), 0.9 if t < 30 else 0.0,
+                                        subscribes), []) for t in range(40)]
+
+    assert drive("topic_rate", frames(True), watch=["topic:/img"]) == []
+    assert drive("topic_rate", frames(False), watch=["topic:/img"]) != []
+
+
 def test_topic_rate_messages_sent_and_lost_on_the_way_are_no_drop():
     # 10 Hz published; the monitor receives 3/s and the sequence numbers skip 7/s: the publisher
     # sent them (lost at a loaded monitor, on a busy link). 1 gap/s of 7 missing is a drop.
@@ -925,6 +961,19 @@ def test_diagnostics_a_standing_warning_is_the_status_normal_a_new_one_is_news()
     assert len(drive("diagnostics", frames, settings={"learn_s": 0.0})) == 40 + 10
 
 
+def test_diagnostics_a_warning_that_came_and_went_by_itself_is_shown_once():
+    G = model()
+
+    def frame(t, level):
+        return (float(t), G, [Event(float(t), "diag", "node:/camera", "info", f"battery: {level}",
+                                    {"name": "battery", "level": level})])
+
+    levels = [0] * 20 + [1] * 10 + [0] * 20 + [1] * 10 + [2] * 5
+    alerts = drive("diagnostics", [frame(t, lvl) for t, lvl in enumerate(levels)])
+    assert [t for t, _, sev in alerts if sev == "warn"] == [float(t) for t in range(20, 30)]
+    assert [t for t, _, sev in alerts if sev == "error"] == [float(t) for t in range(60, 65)]
+
+
 def test_rosout_levels():
     G = model()
     ev = [Event(1.0, "log", "node:/camera", "warn", "meh"),
@@ -936,6 +985,22 @@ def test_rosout_levels():
     assert drive("rosout", [(1.0, G, ev[:1])]) == []
     assert drive("rosout", [(1.0, G, ev[:1])], settings={"min_level": "warn"}) == [
         (1.0, "node:/camera", "warn")]
+
+
+def test_rosout_lines_of_a_nodes_bring_up_are_counted_not_alerted():
+    # the camera's process started at t=100: its ERRORs at 101-105 s are its bring-up (a peer not
+    # up yet); one at 115 s alerts and counts them; the detector's process is of unknown start.
+    def frame(t, member="node:/camera"):
+        G = model()
+        G.nodes["process:100"]["create_time"] = 100.0
+        return (t, G, [Event(t, "log", member, "error", "service /plan not available")])
+
+    frames = [frame(float(t)) for t in range(101, 106)] + [frame(115.0), frame(101.0, "node:/detector")]
+    alerts = drive("rosout", frames, full=True)
+    assert [(a.t, a.member) for a in alerts] == [(115.0, "node:/camera"), (101.0, "node:/detector")]
+    assert alerts[0].message.endswith("; 5 during its bring-up")
+    assert drive("rosout", frames[:5], settings={"startup_s": 0.0}) == [
+        (float(t), "node:/camera", "error") for t in range(101, 106)]
 
 
 # --------------------------------------------------------------------------- graph_anomalies
