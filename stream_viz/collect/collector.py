@@ -38,6 +38,8 @@ from stream_viz.records import Event, Sample
 
 __all__ = ["Collector", "ObserverNode", "build_model", "end_node", "new_node"]
 
+EXIT_RECHECK_S = 0.25  # after a process ended with its nodes listed: a clean goodbye arrives by then
+
 
 class _NoPublisher:
     """Stands in for rclpy's ``/parameter_events`` publisher: the events of our own parameters
@@ -214,9 +216,11 @@ class Collector:
     def _process_events(self, t: float, exited: dict[int, ProcessReading],
                         node_pids: dict[str, int | None]) -> list[Event]:
         out = []
+        listed_at_read = {n for n, p in node_pids.items() if p in exited}
+        still = self._still_listed(listed_at_read) if listed_at_read else set()
         for pid, r in sorted(exited.items()):
             had = sorted({n for n, p in self._prev_pids.items() if p == pid})
-            listed = sorted(n for n in had if node_pids.get(n) == pid)
+            listed = sorted(n for n in had if node_pids.get(n) == pid and n in still)
             # Nodes still in the DDS graph after their process ended: it did not shut down cleanly.
             level = "error" if listed else ("warn" if had else "info")
             nodes = [make_id("node", n) for n in had]
@@ -226,6 +230,20 @@ class Collector:
             for m in [*nodes, make_id("process", pid)]:
                 out.append(Event(t, "exit", m, level, text, data))
         return out
+
+    def _still_listed(self, names: set[str]) -> set[str]:
+        """Return those of ``names`` that DDS still lists a moment after their process ended.
+
+        The graph is read before the processes are: a process that destroyed its nodes and ended
+        in between (or whose goodbye was still on its way) is seen ended with its nodes listed, as
+        a killed one is. A killed process's nodes stay listed until their lease ends (seconds); a
+        clean one's are gone a moment later."""
+        time.sleep(EXIT_RECHECK_S)
+        try:
+            now = {node_fqn(ns, n) for n, ns in self.node.get_node_names_and_namespaces()}
+        except Exception:  # the graph unreadable now: keep what the read said
+            return names
+        return names & now
 
     def _restarts(self, t: float, node_pids: dict[str, int | None]) -> list[Event]:
         out = []
