@@ -8,8 +8,9 @@ between them (or on from the newest at the simulation's recent pace), and each s
 aged on whichever of the two clocks its stamp is nearer to. The simulation's pace (its real-time
 factor) is ``/clock``'s θ ``sim_pace``: what runs on simulated time slows with it on our clock.
 Without ``/clock`` nothing changes.
-From when ``/clock`` is subscribed until its first tick is taken (`expect`), a stamp has no age:
-the simulated stamps taken first would otherwise be aged on our clock, decades old.
+From when ``/clock`` is subscribed until its first tick is taken (`expect`), and in the monitor's
+first seconds (``/clock`` may be discovered after the topics stamped with its time), a stamp has
+no age: the simulated stamps taken first would otherwise be aged on our clock, decades old.
 """
 
 from __future__ import annotations
@@ -34,8 +35,9 @@ class SimClock:
         self.expected_until = 0  # our time (ns) until which a first tick is awaited
 
     def expect(self, until: int) -> None:
-        """``/clock`` is subscribed: until our time ``until`` (ns), no age before its first tick."""
-        self.expected_until = until
+        """``/clock`` is subscribed, or may be soon: until our time ``until`` (ns), no age before
+        its first tick."""
+        self.expected_until = max(self.expected_until, until)
 
     def tick(self, recv: int, sim: int | None) -> None:
         """A ``/clock`` message with simulated time ``sim`` (ns; None unreadable) received at ``recv``."""

@@ -38,6 +38,7 @@ from stream_viz.records import Event
 OBSERVE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
 CLOCK_GRACE_NS = 2_000_000_000  # after /clock is subscribed, how long its first tick is awaited
+FIRST_LOOK_NS = 5_000_000_000  # from the start, how long a /clock not discovered yet is awaited
 NO_RAW = frozenset({"/rosout", "/parameter_events"})  # busy infrastructure topics: no metrics
 # Deserialised by rclpy: the log and the parameter events.
 LOGS = {"/rosout": "rcl_interfaces/msg/Log", "/parameter_events": "rcl_interfaces/msg/ParameterEvent"}
@@ -112,6 +113,8 @@ class TopicMonitor:
         for topic, type_name in LOGS.items():
             self._subscribe(topic, type_name)
         self._subscribe("/diagnostics", DIAG_TYPE)
+        # /clock may be discovered a sample or two after the topics stamped with its time
+        self.clock.expect(time.time_ns() + FIRST_LOOK_NS)
         self._thread = threading.Thread(target=self._run, name="stream-viz-topics", daemon=True)
         self._thread.start()
 
