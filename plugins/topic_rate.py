@@ -26,6 +26,7 @@ STOP_CONFIRM = 2  # samples in a row a withholding node's executor must work les
 ANSWERS_HZ = 1.0  # a server's topic at most this fast while publishing can be its answers
 CLOCK = "topic:/clock"  # simulated time (`stream_viz.collect.simclock`)
 PAUSED = 0.05  # the simulation's pace under this share of its usual: paused
+STOPPING_PERIODS = 3.0  # a quiet this many usual periods long: the topic is stopping, not slower
 
 
 class TopicRate(Plugin):
@@ -112,7 +113,7 @@ class TopicRate(Plugin):
         followed = _reconfigured(ctx, followed, rhythms)
         for topic, r, rate, base, quiet in followed:
             alert = (_silence(ctx, topic, r, quiet, base, transitions, rhythms)
-                     or _drop(ctx, topic, r, quiet, rate, base))
+                     or _drop(ctx, topic, r, quiet, rate, base, transitions))
             expected = _below_expected(ctx, topic, rate)  # its streak counts every sample
             alert = alert or expected  # one alert per topic and sample
             if alert is not None:
@@ -523,11 +524,16 @@ def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
 
 
 def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: float,
-          base: Baseline) -> Alert | None:
+          base: Baseline, transitions: dict[str, list[float]]) -> Alert | None:
     """The recent rate below ``drop_ratio`` × the baseline (and ``drop_k`` σ) for ``confirm``
-    samples, on a continuous topic that is not quiet (a quiet is a silence or not: `_silence`)."""
+    samples, on a continuous topic that is not quiet (a quiet is a silence or not: `_silence`),
+    nor stopping for a healthy cause (its recent rate falls as it stops: a goal ended)."""
     s = ctx.settings
     if base is None or base[0] < s["min_baseline_hz"] or not r.settled or r.gaps:
+        return None
+    stopping = quiet is not None and quiet >= STOPPING_PERIODS / base[0]
+    if stopping and _healthy_quiet(ctx, topic, r, transitions):
+        streak(ctx.state, (topic, "drop"), False)
         return None
     if r.longest >= _base_limit(s, _ref_hz(r, base)):  # quiets no continuous topic shows: sparse bursts
         return None
@@ -545,7 +551,7 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     samples, lasted = streak(ctx.state, (topic, "drop"), low), held(ctx.state, (topic, "drop"), low, ctx.t)
     if samples < s["confirm"] or lasted < r.longest:
         return None
-    sim = f" (the simulation at {pace:.2g}× its usual pace)" if pace != 1.0 else ""
+    sim = f" (the simulation at {pace:.2g}× its usual pace)" if abs(pace - 1.0) > 0.1 else ""
     return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {med:.3g} Hz{sim}",
                      symptom="rate_drop", rate_hz=now_rate, baseline_hz=med, sim_pace_ratio=pace)
 
