@@ -140,6 +140,60 @@ def test_message_age_on_simulated_time_is_no_clock_skew(children, tmp_path, run_
     assert not [x for x in run.alerts if x.data.get("symptom") == "clock_skew"], run.alerts
 
 
+SLOWING = """
+import os, sys, time
+import rclpy
+from rclpy.parameter import Parameter
+from rclpy.executors import SingleThreadedExecutor
+from builtin_interfaces.msg import Time
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Imu
+flag = sys.argv[1]
+rclpy.init()
+# A simulator in real time that slows to 0.3 of it when the flag appears (a heavy scene); a driver
+# on simulated time at 20 Hz of it; a bridge on our clock at 20 Hz, which drops to 4 Hz then.
+sim = rclpy.create_node('simulator')
+clock = sim.create_publisher(Clock, '/clock', 10)
+st = {'ns': 0, 'k': 0}
+def tick():
+    st['ns'] += int(0.01e9 * (0.3 if os.path.exists(flag) else 1.0))
+    clock.publish(Clock(clock=Time(sec=st['ns'] // 10**9, nanosec=st['ns'] % 10**9)))
+sim.create_timer(0.01, tick)
+drv = rclpy.create_node('imu_driver', parameter_overrides=[Parameter('use_sim_time', value=True)])
+imu = drv.create_publisher(Imu, '/imu', 10)
+drv.create_timer(0.05, lambda: imu.publish(Imu()))
+bridge = rclpy.create_node('bridge')
+wall = bridge.create_publisher(Imu, '/wall_imu', 10)
+def bridged():
+    st['k'] += 1
+    if not os.path.exists(flag) or st['k'] % 5 == 0:
+        wall.publish(Imu())
+bridge.create_timer(0.05, bridged)
+ex = SingleThreadedExecutor()
+for n in (sim, drv, bridge):
+    ex.add_node(n)
+ex.spin()
+"""
+
+
+def test_a_slowed_simulation_is_no_rate_drop_of_what_runs_on_its_time(children, tmp_path, run_of):
+    # The simulator slows to 0.3 of real time: the driver on its time publishes at 6 Hz on our
+    # clock (its 20 Hz of simulated time, healthy); the bridge on our clock dropping to 4 Hz is a drop.
+    flag = tmp_path / "slow"
+    children.python(SLOWING, str(flag), name="sim")
+    run = run_of(["topic_rate"], {"topic_rate": {"warmup_s": 4.0, "refresh_s": 2.0}})
+    _ready(run, "topic:/imu", "topic:/wall_imu", "topic:/clock")
+    assert ("topic:/clock", "node:/imu_driver") in run.G.edges()  # use_sim_time subscribes /clock
+    wait_for(lambda: (run.step(), _theta(run, "topic:/clock")["sim_pace"] > 0.8)[1],
+             timeout=20, period=PERIOD)
+    a = _sick_after_healthy(run, flag, "topic_rate", "topic:/wall_imu", healthy_s=8.0, symptom="rate_drop")
+    run.observe(4.0)
+    assert 0.2 <= _theta(run, "topic:/clock")["sim_pace"] <= 0.4, _theta(run, "topic:/clock")
+    assert _theta(run, "topic:/imu")["rate_hz"] < 9.0, _theta(run, "topic:/imu")  # slowed on our clock
+    assert not [x for x in run.alerts if x.member == "topic:/imu"], run.alerts
+    assert a.data["sim_pace_ratio"] == 1.0  # the bridge is on our clock
+
+
 def _spin(nodes: str) -> str:
     """The end of a child script: spin ``nodes`` (a Python tuple's items) on one executor."""
     return f"""
