@@ -90,8 +90,9 @@ class Part(Node):
 
     def _check_fault(self) -> None:
         if self.fault is None and self.fault_file.exists():
-            self.fault = self.fault_file.read_text().strip()
-            self.get_logger().info(f"fault {self.fault}")
+            self.fault = self.fault_file.read_text().strip() or None  # empty: still being written
+            if self.fault:
+                self.get_logger().info(f"fault {self.fault}")
         if self.fault == "errlog":
             self.get_logger().error("failed to compute velocity command: transform timed out")
 

@@ -54,7 +54,7 @@ class Station(Node):
 
     def _check_fault(self) -> None:
         if self.fault is None and self.fault_file.exists():
-            self.fault = self.fault_file.read_text().strip()
+            self.fault = self.fault_file.read_text().strip() or None  # empty: still being written
             self.get_logger().info(f"fault {self.fault}")
         if self.fault == "errlog":
             self.get_logger().error("lost connection to device: read timeout")
