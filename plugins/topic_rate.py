@@ -12,6 +12,7 @@ from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, exceeds, held, robust, streak
 from stream_viz.detect.process import SETTINGS as PROCESS_SETTINGS
 from stream_viz.detect.rhythm import SAME_MESSAGE_S, Rhythm, follow, newest_message, quiet_limit
+from stream_viz.model.ids import name_of
 from stream_viz.model.qos import qos_policy
 from stream_viz.records import Alert
 
@@ -26,6 +27,7 @@ STOP_CONFIRM = 2  # samples in a row a withholding node's executor must work les
 ANSWERS_HZ = 1.0  # a server's topic at most this fast while publishing can be its answers
 CLOCK = "topic:/clock"  # simulated time (`stream_viz.collect.simclock`)
 PAUSED = 0.05  # the simulation's pace under this share of its usual: paused
+STEADY_SAMPLES = 15  # a publisher that sent in this many samples in a row sends continuously
 STOPPING_PERIODS = 3.0  # a quiet this many usual periods long: the topic is stopping, not slower
 
 
@@ -115,7 +117,8 @@ class TopicRate(Plugin):
             alert = (_silence(ctx, topic, r, quiet, base, transitions, rhythms)
                      or _drop(ctx, topic, r, quiet, rate, base, transitions))
             expected = _below_expected(ctx, topic, rate)  # its streak counts every sample
-            alert = alert or expected  # one alert per topic and sample
+            stopped = _publisher_stopped(ctx, topic, transitions)  # its run counts every sample
+            alert = alert or expected or stopped  # one alert per topic and sample
             if alert is not None:
                 alerting.add(topic)
                 yield alert
@@ -611,6 +614,47 @@ def _note_frozen(ctx: PluginContext, pending: list[tuple[float, str, set[str], b
     for k, (at, node, names, frozen) in enumerate(pending):
         if not frozen and alerting & set(ctx.published_topics(node)):
             pending[k] = (at, node, names, True)
+
+
+def _publisher_stopped(ctx: PluginContext, topic: str, transitions: dict[str, list[float]]) -> Alert | None:
+    """One publisher of a topic others go on publishing sent nothing in the collector's window
+    after sending in each of its last ``STEADY_SAMPLES`` samples (``publisher_rates``: whose
+    messages they were). The topic's rate hides it (``/tf`` from four nodes loses a quarter);
+    the others still flowing, the stop is that publisher's. Not when the node changed state,
+    or a node feeding it did, around its stop (`_healthy_quiet`), nor for a node gone from the
+    graph (``member_gone``'s), nor while the simulation its publishers run on is paused."""
+    rates = ctx.attr(topic, "publisher_rates") or {}
+    runs = ctx.state.setdefault("publisher_runs", {})  # (topic, node) -> (samples sending, stopped at)
+    stopped = []
+    for node, hz in rates.items():
+        sending, since = runs.get((topic, node), (0, None))
+        if hz > 0:
+            runs[topic, node] = (sending + 1, None)
+            continue
+        since = ctx.t if since is None else since
+        runs[topic, node] = (sending, since)
+        if sending >= STEADY_SAMPLES and ctx.attr(node, "alive", True):
+            stopped.append((node, since))
+    others = sum(hz for hz in rates.values() if hz > 0)
+    if not stopped or not others or _pace(ctx, topic) < PAUSED:
+        return None
+    window = ctx.settings["rate_window_s"]  # its last message came within the window before
+    stopped = [(n, at) for n, at in stopped if not _changed_state(ctx, n, at - window, at, transitions)]
+    if not stopped:
+        return None
+    names = ", ".join(name_of(n) for n, _ in stopped)
+    return ctx.alert(topic, "warn", f"{names} stopped publishing it ({others:.3g} Hz from the others)",
+                     symptom="publisher_stopped", publishers=[n for n, _ in stopped])
+
+
+def _changed_state(ctx: PluginContext, node: str, since: float, until: float,
+                   transitions: dict[str, list[float]]) -> bool:
+    """True when ``node``, or a node feeding it, changed state from ``transition_grace_s`` before
+    ``since`` to as long after ``until`` (a lifecycle transition, a goal ended)."""
+    grace = ctx.settings["transition_grace_s"]
+    feeding = {u for i in ctx.subscribed_topics(node) for u in ctx.publishers(i)}
+    near = (x for p in feeding | {node} for x in transitions.get(p, ()))
+    return any(since - grace <= x <= until + grace for x in near)
 
 
 def _lost_on_the_way(ctx: PluginContext, topic: str, rate: float, med: float) -> bool:

@@ -108,6 +108,34 @@ def test_topic_rate_a_paused_simulation_silences_no_topic_on_its_time():
     assert drive("topic_rate", frames(False), watch=["topic:/img"]) != []
 
 
+def _two_publishers(a_hz, b_hz):
+    """/camera and /lidar both publish /img (a /tf-like topic); their rates by publisher."""
+    G = model(rate=a_hz + b_hz)
+    add_member(G, "node:/lidar", alive=True)
+    add_flow_edge(G, "node:/lidar", "topic:/img", "pub")
+    G.nodes["topic:/img"]["publisher_rates"] = {"node:/camera": a_hz, "node:/lidar": b_hz}
+    return G
+
+
+def test_topic_rate_one_of_two_publishers_stopping_is_its_symptom():
+    # /lidar stops at 30 s, /camera goes on: the topic's rate halves (no drop at 0.5), the stop
+    # is /lidar's. A publisher that never sent steadily (/camera's first 20 s at 0) is no stop.
+    frames = [(float(t), _two_publishers(10.0, 10.0 if t < 30 else 0.0), []) for t in range(34)]
+    alerts = drive("topic_rate", frames, full=True)
+    assert [(a.t, a.member) for a in alerts] == [(float(t), "topic:/img") for t in range(30, 34)]
+    assert alerts[0].data["publishers"] == ["node:/lidar"]
+    assert "/lidar stopped publishing" in alerts[0].message
+    late = [(float(t), _two_publishers(0.0 if t < 20 else 10.0, 10.0), []) for t in range(34)]
+    assert drive("topic_rate", late) == []
+
+
+def test_topic_rate_a_publisher_stopping_as_its_goal_ends_is_healthy():
+    goal = [Event(29.0, "goal", "node:/lidar", "info", "goal 1 of /scan_area succeeded", {})]
+    frames = [(float(t), _two_publishers(10.0, 10.0 if t < 30 else 0.0), goal if t == 29 else [])
+              for t in range(34)]
+    assert drive("topic_rate", frames) == []
+
+
 def test_topic_rate_messages_sent_and_lost_on_the_way_are_no_drop():
     # 10 Hz published; the monitor receives 3/s and the sequence numbers skip 7/s: the publisher
     # sent them (lost at a loaded monitor, on a busy link). 1 gap/s of 7 missing is a drop.
