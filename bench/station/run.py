@@ -2,231 +2,70 @@
 
 ``python -m bench.station.run [--healthy S] [--warmup S] [--post S] [--faults a,b] [--out DIR]``
 
-Each run starts the station's processes (`bench.station.robot`) on a ROS_DOMAIN_ID of its own,
-the in-process monitor with the default configuration, and, for a fault, injects it ``--warmup``
-s after every process is ready (the monitor is not told) and monitors ``--post`` s more. The HMI
-joins 15 s after the start, exits cleanly (code 0) 45 s later and its launcher starts it again
-10 s after that. Writes ``OUT/runs.jsonl`` (per run: the fault, its truth, every alert, the live
-ranking with its scores, strict = the node, process = any node of its process) and
-``OUT/summary.json`` (AC@1/AC@3 strict and process level, as in `bench.eval.metrics`; alerts in
-the healthy run and before each injection). ``outside_load`` is a fault of the computer, not of
-the robot: CPU hogs outside ROS (three a CPU); its root cause is the host member.
+The station's processes (`bench.station.robot`) under the in-process monitor, as every
+hand-written robot runs (`bench.handwritten`: the runs, their scores, the files written). The
+HMI joins 15 s after the start, exits cleanly (code 0) 45 s later and its launcher starts it
+again 10 s after that. ``outside_load`` is a fault of the computer, not of the robot: CPU hogs
+outside ROS (three a CPU); its root cause is the host member.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
-import signal
 import subprocess
 import sys
-import tempfile
-import threading
-import time
-from pathlib import Path
 
-from bench.eval.metrics import hit_at, tie_blocks, to_blocks
-from bench.eval.provenance import code_version
-from stream_viz.testing import own_domain
+from bench.handwritten import HOST, Design, Robot, main
 
-# process -> its nodes (fully qualified)
-NODES = {
-    "arm_drivers": ("/arm/joint_state_broadcaster", "/arm/gripper_driver", "/arm/ft_sensor"),
-    "perception": ("/station/camera", "/station/detector"),
-    "planning": ("/arm/motion_planner",),
-    "executive": ("/station/task_executive",),
-    "monitoring": ("/station/diagnostic_aggregator",),
-    "hmi": ("/station/hmi",),
-}
-# fault -> (how, target node, its process): "file" writes the node's fault file, "kill" SIGKILLs
-# the process, "cpu" starts the process's CPU burner, "outside" starts CPU hogs that are no part
-# of the robot (the computer is the cause: its target is HOST)
-HOST = "the computer"
 HOGS_PER_CPU = 3
-FAULTS = {
-    "crash_perception": ("kill", "/station/camera", "perception"),
-    "crash_arm": ("kill", "/arm/gripper_driver", "arm_drivers"),
-    "hang_gripper": ("file:hang", "/arm/gripper_driver", "arm_drivers"),
-    "degrade_ft": ("file:degrade", "/arm/ft_sensor", "arm_drivers"),
-    "delay_camera": ("file:delay", "/station/camera", "perception"),
-    "errlog_gripper": ("file:errlog", "/arm/gripper_driver", "arm_drivers"),
-    "slow_detector": ("file:slow_service", "/station/detector", "perception"),
-    "cpu_planning": ("cpu", "/arm/motion_planner", "planning"),
-    "hang_aggregator": ("file:hang", "/station/diagnostic_aggregator", "monitoring"),
-    "outside_load": ("outside", HOST, ""),
-}
-HMI_JOIN, HMI_RUN, HMI_AGAIN = 15.0, 45.0, 10.0  # joins before a fault at 30 s
+DESIGN = Design(
+    module="bench.station.robot",
+    nodes={  # process -> its nodes (fully qualified)
+        "arm_drivers": ("/arm/joint_state_broadcaster", "/arm/gripper_driver", "/arm/ft_sensor"),
+        "perception": ("/station/camera", "/station/detector"),
+        "planning": ("/arm/motion_planner",),
+        "executive": ("/station/task_executive",),
+        "monitoring": ("/station/diagnostic_aggregator",),
+        "hmi": ("/station/hmi",),
+    },
+    faults={  # "outside": CPU hogs that are no part of the robot (the computer is the cause)
+        "crash_perception": ("kill", "/station/camera", "perception"),
+        "crash_arm": ("kill", "/arm/gripper_driver", "arm_drivers"),
+        "hang_gripper": ("file:hang", "/arm/gripper_driver", "arm_drivers"),
+        "degrade_ft": ("file:degrade", "/arm/ft_sensor", "arm_drivers"),
+        "delay_camera": ("file:delay", "/station/camera", "perception"),
+        "errlog_gripper": ("file:errlog", "/arm/gripper_driver", "arm_drivers"),
+        "slow_detector": ("file:slow_service", "/station/detector", "perception"),
+        "cpu_planning": ("cpu", "/arm/motion_planner", "planning"),
+        "hang_aggregator": ("file:hang", "/station/diagnostic_aggregator", "monitoring"),
+        "outside_load": ("outside", HOST, ""),
+    },
+    operator="hmi", join_s=15.0, run_s=45.0, again_s=10.0,  # joins before a fault at 30 s
+)
+NODES, FAULTS = DESIGN.nodes, DESIGN.faults
 
 
-class Station:
-    """The station's processes; the HMI started, ended and started again by a launcher thread."""
+class Station(Robot):
+    """The station; its ``outside_load`` starts CPU hogs outside the robot."""
 
-    def __init__(self, fault_dir: Path, logs: Path) -> None:
-        self.fault_dir, self.logs = fault_dir, logs
-        self.procs: dict[str, subprocess.Popen] = {}
-        self.pids: dict[int, str] = {}  # every pid a process ran as
-        self.hogs: list[subprocess.Popen] = []  # CPU hogs outside the robot
-        self.stop = threading.Event()
-
-    def spawn(self, process: str, run_for: float = 0.0) -> subprocess.Popen:
-        log = open(self.logs / f"{process}.log", "a")
-        cmd = [sys.executable, "-m", "bench.station.robot", process, str(self.fault_dir), str(run_for)]
-        p = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
-                             cwd=Path(__file__).resolve().parents[2])
-        self.procs[process] = p
-        self.pids[p.pid] = process
-        return p
-
-    def start(self) -> None:
-        for process in NODES:
-            if process != "hmi":
-                self.spawn(process)
-        threading.Thread(target=self._hmi, daemon=True).start()
-
-    def _hmi(self) -> None:
-        if self.stop.wait(HMI_JOIN):
-            return
-        while not self.stop.is_set():
-            p = self.spawn("hmi", HMI_RUN)
-            while p.poll() is None and not self.stop.wait(0.2):
-                pass
-            if self.stop.wait(HMI_AGAIN):
-                return
-
-    def end(self) -> None:
-        self.stop.set()
-        for p in self.hogs:
-            p.kill()
-            p.wait(5)
-        for p in self.procs.values():
-            if p.poll() is None:
-                os.killpg(p.pid, signal.SIGINT)
-        for p in self.procs.values():
-            try:
-                p.wait(5)
-            except subprocess.TimeoutExpired:
-                os.killpg(p.pid, signal.SIGKILL)
-                p.wait(5)
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.hogs: list[subprocess.Popen] = []
 
     def inject(self, fault: str) -> None:
-        how, target, process = FAULTS[fault]
-        if how == "kill":
-            os.killpg(self.procs[process].pid, signal.SIGKILL)
-        elif how == "cpu":
-            (self.fault_dir / f"{process}.cpu").write_text("1")
-        elif how == "outside":  # each in a session of its own: the kernel's autogroups share alike
+        if DESIGN.faults[fault][0] == "outside":  # each in a session of its own: autogroups share alike
             self.hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"], start_new_session=True)
                          for _ in range(HOGS_PER_CPU * (os.cpu_count() or 1))]
         else:
-            (self.fault_dir / target.rsplit("/", 1)[1]).write_text(how.split(":", 1)[1])
+            super().inject(fault)
 
-
-def run(fault: str | None, seconds_before: float, post: float, samples: Path | None = None) -> dict:
-    """One run: the station, the monitor, ``fault`` injected ``seconds_before`` s after the start;
-    every sample written to ``samples`` when given (`stream-viz replay` reads it)."""
-    from stream_viz.config import load_config
-    from stream_viz.monitor import Monitor
-
-    tmp = Path(tempfile.mkdtemp(prefix="station_"))
-    (tmp / "faults").mkdir()
-    station = Station(tmp / "faults", tmp)
-    mon = Monitor(load_config(None), db=tmp / "alerts.sqlite", viewer="none",
-                  domain_id=int(os.environ["ROS_DOMAIN_ID"]), samples=samples)
-    injected_at = None
-    try:
-        station.start()
-        t0 = time.time()
-        stop = threading.Event()
-        if fault:
-            def inject() -> None:
-                nonlocal injected_at
-                if not stop.wait(seconds_before):
-                    station.inject(fault)
-                    injected_at = time.time()
-            threading.Thread(target=inject, daemon=True).start()
-        mon.run(seconds_before + (post if fault else 0.0), stop)
-        stop.set()
-        alerts = mon.store.alerts()
-        expand = _expand(mon.seen, station.pids)
-    finally:
-        report = mon.close()
-        station.end()
-    ranked = tie_blocks((rc["member"], rc["score"]) for rc in report["root_causes"])
-    record = {"fault": fault, "t_start": t0, "injected_at": injected_at,
-              "alerts": [{"t": round(a.t - t0, 2), "member": a.member, "plugin": a.plugin,
-                          "severity": a.severity, "message": a.message} for a in alerts],
-              "ranking": [list(b) if isinstance(b, tuple) else b for b in ranked][:10]}
-    if fault:
-        _, target, process = FAULTS[fault]
-        blocks = to_blocks(ranked, expand)
-        record["truth"] = {"strict": target, "process": sorted(NODES.get(process, (target,)))}
-        record["before"] = [a for a in record["alerts"] if a["t"] < injected_at - t0 - 1.0] if injected_at \
-            else record["alerts"]
-        record["first_alert_s"] = min((a.t - injected_at for a in alerts if a.t >= injected_at - 1.0),
-                                      default=None) if injected_at else None
-        for level, truth in (("strict", {target}), ("process", set(NODES.get(process, (target,))))):
-            record[level] = {f"AC@{k}": hit_at(blocks, truth, k) for k in (1, 3)}
-    return record
-
-
-def _expand(G, pids: dict[int, str]) -> dict[str, list[str]]:
-    """Member → the station nodes it stands for: a node itself, a topic its publishers, a service
-    its servers, a process (every pid a process ran as) its nodes; from the monitor's model ``G``."""
-    from stream_viz.model.queries import publishers, servers
-
-    nodes = {n for ns in NODES.values() for n in ns}
-    out: dict[str, list[str]] = {f"node:{n}": [n] for n in nodes}
-    for m in G.nodes:
-        if m.startswith("topic:"):
-            out[m] = [p.removeprefix("node:") for p in publishers(G, m) if p.removeprefix("node:") in nodes]
-        elif m.startswith("service:"):
-            out[m] = [p.removeprefix("node:") for p in servers(G, m) if p.removeprefix("node:") in nodes]
-    for pid, process in pids.items():
-        out[f"process:{pid}"] = list(NODES[process])
-    out.update({h: [HOST] for h in G.nodes if h.startswith("host:")})  # one computer
-    return out
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--healthy", type=float, default=600.0, help="s of the healthy run (0: none)")
-    ap.add_argument("--warmup", type=float, default=30.0,
-                    help="s from the start to the injection (30: the executive at work, idle from ~50 s)")
-    ap.add_argument("--post", type=float, default=30.0, help="s monitored after the injection")
-    ap.add_argument("--faults", default=",".join(FAULTS), help="comma list (none: no fault runs)")
-    ap.add_argument("--out", type=Path, default=Path("bench/out/station"))
-    ap.add_argument("--samples", type=Path, help="keep each run's samples here (<run>.jsonl.gz)")
-    args = ap.parse_args(argv)
-    own_domain()
-    args.out.mkdir(parents=True, exist_ok=True)
-    if args.samples:
-        args.samples.mkdir(parents=True, exist_ok=True)
-    runs = []
-    faults = [f for f in args.faults.split(",") if f and f != "none"]
-    plan = ([None] if args.healthy > 0 else []) + faults
-    for fault in plan:
-        print(f"run {fault or 'healthy'}", flush=True)
-        keep = args.samples / f"{fault or 'healthy'}.jsonl.gz" if args.samples else None
-        rec = run(fault, args.healthy if fault is None else args.warmup, args.post, keep)
-        rec["code"] = code_version()
-        runs.append(rec)
-        with open(args.out / "runs.jsonl", "a") as f:
-            f.write(json.dumps(rec) + "\n")
-        print(f"  alerts {len(rec['alerts'])}  strict {rec.get('strict')}  process {rec.get('process')}",
-              flush=True)
-    faulty = [r for r in runs if r["fault"]]
-    summary = {
-        "healthy_alerts": sum(len(r["alerts"]) for r in runs if not r["fault"]),
-        "alerts_before_injection": sum(len(r["before"]) for r in faulty),
-        **{f"{lvl} AC@{k}": round(sum(r[lvl][f"AC@{k}"] for r in faulty) / len(faulty), 3)
-           for lvl in ("strict", "process") for k in (1, 3) if faulty},
-        "runs": len(runs),
-    }
-    (args.out / "summary.json").write_text(json.dumps(summary, indent=1))
-    print(json.dumps(summary))
-    return 0
+    def end(self) -> None:
+        for p in self.hogs:
+            p.kill()
+            p.wait(5)
+        super().end()
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(None, __doc__, "station", Station, DESIGN, 30.0,
+                  "s from the start to the injection (30: the executive at work, idle from ~50 s)"))
