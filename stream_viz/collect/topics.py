@@ -38,6 +38,7 @@ from stream_viz.records import Event
 OBSERVE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
 CLOCK_GRACE_NS = 2_000_000_000  # after /clock is subscribed, how long its first tick is awaited
+PACE_SPAN_NS = 1_000_000_000  # the simulation's pace over the last second: as prompt as a recent rate
 FIRST_LOOK_NS = 5_000_000_000  # from the start, how long a /clock not discovered yet is awaited
 NO_RAW = frozenset({"/rosout", "/parameter_events"})  # busy infrastructure topics: no metrics
 # Deserialised by rclpy: the log and the parameter events.
@@ -289,7 +290,7 @@ class TopicMonitor:
                 gap = w.window.take_gap()
                 if m and gap > 0:
                     m["gap_s"] = gap  # a quiet that began and ended between two samples
-                if m and w.kind == "clock" and (pace := self.clock.pace(now, self.window_ns)) is not None:
+                if m and w.kind == "clock" and (pace := self.clock.pace(now, PACE_SPAN_NS)) is not None:
                     m["sim_pace"] = pace
                 out[t] = TopicStats(True, "", m, w.window.publisher_rates(now, w.created_ns, self.window_ns))
         if not self.metrics:
