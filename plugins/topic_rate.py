@@ -294,14 +294,8 @@ def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[
         return True
     if not ctx.settings["judge_latched"] and latched(ctx.attr(topic, "qos")):
         return True
-    grace = ctx.settings["transition_grace_s"]
     last = r.newest or ctx.t
-    pubs = ctx.publishers(topic)
-    # A node that follows another's goal (a controller driving the path of its planner's goal)
-    # stops with it: the changes of the nodes feeding a publisher count too.
-    feeding = {u for p in pubs for i in ctx.subscribed_topics(p) if i != topic for u in ctx.publishers(i)}
-    near = (x for p in feeding.union(pubs) for x in transitions.get(p, ()))
-    return any(last - grace <= x <= last + grace for x in near)
+    return _changed_state(ctx, ctx.publishers(topic), last, last, transitions, topic)
 
 
 def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm],
@@ -564,8 +558,10 @@ def _pace(ctx: PluginContext, topic: str) -> float:
     publisher of ``topic`` runs on simulated time (it subscribes ``/clock``: ``use_sim_time``);
     1 otherwise. Their timers tick on simulated time, so on our clock their rates follow the
     simulation's real-time factor: a simulator slowed by a heavy scene is no drop."""
+    if topic == CLOCK or CLOCK not in ctx.graph:  # no simulation: no graph walk per topic
+        return 1.0
     pubs = ctx.publishers(topic)
-    if not pubs or topic == CLOCK or not all(CLOCK in ctx.subscribed_topics(p) for p in pubs):
+    if not pubs or not all(CLOCK in ctx.subscribed_topics(p) for p in pubs):
         return 1.0
     now = ctx.value(CLOCK, "sim_pace")
     base = cached_baseline(ctx, CLOCK, "sim_pace")
@@ -639,7 +635,8 @@ def _publisher_stopped(ctx: PluginContext, topic: str, transitions: dict[str, li
     if not stopped or not others or _pace(ctx, topic) < PAUSED:
         return None
     window = ctx.settings["rate_window_s"]  # its last message came within the window before
-    stopped = [(n, at) for n, at in stopped if not _changed_state(ctx, n, at - window, at, transitions)]
+    stopped = [(n, at) for n, at in stopped
+               if not _changed_state(ctx, [n], at - window, at, transitions, topic)]
     if not stopped:
         return None
     names = ", ".join(name_of(n) for n, _ in stopped)
@@ -647,13 +644,15 @@ def _publisher_stopped(ctx: PluginContext, topic: str, transitions: dict[str, li
                      symptom="publisher_stopped", publishers=[n for n, _ in stopped])
 
 
-def _changed_state(ctx: PluginContext, node: str, since: float, until: float,
-                   transitions: dict[str, list[float]]) -> bool:
-    """True when ``node``, or a node feeding it, changed state from ``transition_grace_s`` before
-    ``since`` to as long after ``until`` (a lifecycle transition, a goal ended)."""
+def _changed_state(ctx: PluginContext, nodes: list[str], since: float, until: float,
+                   transitions: dict[str, list[float]], topic: str) -> bool:
+    """True when one of ``nodes`` (publishers of ``topic``), or a node feeding one through another
+    topic, changed state from ``transition_grace_s`` before ``since`` to as long after ``until``
+    (a lifecycle transition, a goal ended). A node that follows another's goal (a controller
+    driving the path of its planner's goal) stops with it."""
     grace = ctx.settings["transition_grace_s"]
-    feeding = {u for i in ctx.subscribed_topics(node) for u in ctx.publishers(i)}
-    near = (x for p in feeding | {node} for x in transitions.get(p, ()))
+    feeding = {u for p in nodes for i in ctx.subscribed_topics(p) if i != topic for u in ctx.publishers(i)}
+    near = (x for p in feeding.union(nodes) for x in transitions.get(p, ()))
     return any(since - grace <= x <= until + grace for x in near)
 
 
