@@ -5,10 +5,12 @@ from __future__ import annotations
 import json as _json
 import math
 import time
+from collections.abc import Callable
 
 import networkx as nx
 
 from stream_viz.model.graph import flow_edges, members_of_kind
+from stream_viz.model.ids import node_fqn
 from stream_viz.model.queries import tree
 from stream_viz.model.serialize import to_data
 from stream_viz.model.theta import theta_dict
@@ -87,13 +89,42 @@ def _tree_lines(G: nx.MultiDiGraph, T: nx.DiGraph, v: str, depth: int, lines: li
         _tree_lines(G, T, c, depth + 1, lines)
 
 
+DISCOVERY_QUIET_S = 1.0  # the node set unchanged this long ends discovery
+DISCOVERY_EXTRA_S = 4.0  # past the settle time, more than one DDS announcement period (3 s)
+
+
+def discover(read_names: Callable[[], frozenset[str]], min_s: float, *, quiet_s: float = DISCOVERY_QUIET_S,
+             max_s: float | None = None, period_s: float = 0.1,
+             clock: Callable[[], float] = time.monotonic,
+             sleep: Callable[[float], None] = time.sleep) -> frozenset[str]:
+    """Wait until discovery has settled and return the node names seen.
+
+    Discovery ends after ``min_s`` once the names have been the same, and not empty, for
+    ``quiet_s``; at the latest after ``max_s`` (``min_s + DISCOVERY_EXTRA_S``). A participant whose
+    first announcements were lost is heard at its next periodic one, so a fixed wait can miss a
+    whole running system on a loaded machine.
+    """
+    max_s = min_s + DISCOVERY_EXTRA_S if max_s is None else max_s
+    start = clock()
+    names, since = read_names(), start
+    while (now := clock()) - start < max_s:
+        if now - start >= min_s and names and now - since >= quiet_s:
+            break
+        sleep(period_s)
+        seen = read_names()
+        if seen != names:
+            names, since = seen, clock()
+    return names
+
+
 def snapshot_main(json: bool, settle_s: float) -> str:
-    """Observe the current ROS_DOMAIN_ID for ``settle_s`` seconds and return the snapshot text/JSON."""
+    """Observe the current ROS_DOMAIN_ID until discovery settles and return the snapshot text/JSON."""
     from stream_viz.collect.collector import Collector
 
     half = max(settle_s, 0.0) / 2
     with Collector() as c:
-        time.sleep(half)  # discovery
+        discover(lambda: frozenset(node_fqn(ns, n) for n, ns in c.node.get_node_names_and_namespaces()
+                                   if node_fqn(ns, n) != c.own), half)
         c.sample()  # subscribes to the topics, primes cpu % and the per-second rates
         time.sleep(half)
         sample = c.sample()
