@@ -31,9 +31,9 @@ class Services(Plugin):
 
     * ``waiting`` (warn): an observed call has been open ≥ ``max(min_wait_s, wait_factor × the
       service's usual response time)``; or (at the line's level) the client logged (≥
-      ``log_level``, ERROR: a WARN about a service not ready yet is the usual bring-up) a line
-      naming the service or its server, after the client's first ``startup_s`` (its bring-up,
-      when it waits for servers still coming up);
+      ``log_level``, WARN) a line naming the service or its server, after the client's first
+      ``startup_s`` (its bring-up, when it waits for servers still coming up: the WARNs about a
+      service not ready yet);
     * ``slow_response`` (warn): the service's mean response time rose above its own baseline by
       ``max(k·σ, min_rise_ms)`` for ``confirm`` samples;
     * ``server_gone`` (warn): the service had a server and has none while clients remain.
@@ -51,7 +51,7 @@ class Services(Plugin):
         "min_wait_s": 2.0,
         "wait_factor": 3.0,
         "min_rise_ms": 200.0,
-        "log_level": "error",
+        "log_level": "warn",
         "startup_s": STARTUP_S,
         "server_gone": True,
     }
@@ -129,7 +129,7 @@ def _slow(ctx: PluginContext, service: str, servers: list[str], clients: list[st
 def _logged(ctx: PluginContext) -> Iterator[Alert]:
     """A client's log line naming one of its services, or a server of one: it waits on it."""
     floor = RANK.get(ctx.settings["log_level"], RANK["warn"])
-    seen: set[tuple[str, str]] = set()
+    worst: dict[tuple[str, str], tuple[Any, str | None]] = {}  # the worst line per client and service
     for e in ctx.events:
         if e.kind != "log" or RANK.get(e.level, -1) < floor:
             continue
@@ -146,13 +146,13 @@ def _logged(ctx: PluginContext) -> Iterator[Alert]:
             hit = [n for n in servers if n in named_nodes]
             if service not in named_services and not hit:
                 continue
-            if (e.member, service) in seen:
-                continue
-            seen.add((e.member, service))
-            server = hit[0] if hit else (servers[0] if len(servers) == 1 else None)
-            # As strong as the complaint: the server it names carries it (RCA `named`).
-            level = e.level if e.level in RANK else "warn"
-            yield ctx.alert(e.member, level, f"logged about {name_of(service)}: {e.text}",
-                            symptom="waiting", via="log", service=service, server=server,
-                            client=e.member)
+            had = worst.get((e.member, service))
+            if had is None or RANK.get(e.level, 0) > RANK.get(had[0].level, 0):
+                only = servers[0] if len(servers) == 1 else None
+                worst[(e.member, service)] = (e, hit[0] if hit else only)
+    for (client, service), (e, server) in worst.items():
+        # As strong as the complaint: the server it names carries it (RCA `named`).
+        level = e.level if e.level in RANK else "warn"
+        yield ctx.alert(client, level, f"logged about {name_of(service)}: {e.text}",
+                        symptom="waiting", via="log", service=service, server=server, client=client)
 

@@ -22,7 +22,7 @@ from stream_viz.collect.diagnostics import DiagnosticsReader
 from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.goals import GoalTracker
 from stream_viz.collect.hosts import HostReports
-from stream_viz.collect.naming import NodeNames
+from stream_viz.collect.naming import NodeNames, recently_left
 from stream_viz.collect.params import param_event
 from stream_viz.collect.pidmap import PidResolver
 from stream_viz.collect.processes import ProcessSampler
@@ -130,6 +130,7 @@ class Collector:
         self.calls = ServiceCalls(window_s=window_s)
         self._prev = new_graph()
         self._prev_pids: dict[str, int | None] = {}
+        self._left: dict[str, float] = {}  # node fqn → when it left the graph
         self._dead: dict[int, ProcessReading] = {}
         self._closed = False
 
@@ -190,7 +191,9 @@ class Collector:
         # A message from a publisher gid we do not know: a new endpoint of an unchanged node set.
         self.qos.invalidate({tp for tp, st in stats.items()
                              if any(g not in reading.publisher_gids.get(tp, {}) for g in st.by_publisher)})
-        index = NodeNames(reading.nodes)
+        # An aggregator's "r2_localizer: ERROR" after the crash is about the node that left.
+        self._left = recently_left(self._left, self._prev_pids, reading.nodes, t)
+        index = NodeNames(reading.nodes, self._left)
         events += self._message_events(t, reading, index)
         services, calls = self._service_calls(reading)
         G = build_model(reading, pids, processes, stats, services, calls)

@@ -171,7 +171,7 @@ class DiagnosticsReader:
                     continue  # a copy of what /diagnostics told us
             else:
                 node, by = map_status(st.name.rsplit("/", 1)[-1], st.hardware_id, index, None, hardware)
-            if level == STALE and node not in index.fqns:
+            if level == STALE and node not in index.live:
                 continue  # its node left the graph: that absence is the evidence, not this echo
             out.append(_event(st, t, node, by, AGG_TOPIC, None))
         return out

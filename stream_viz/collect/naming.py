@@ -11,12 +11,14 @@ ambiguous.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable
+from collections.abc import Container, Iterable, Mapping
 
 _SEP = re.compile(r"[/\s]+")
 # A ROS-name-like token in free text: an optional ~ or leading /, then name tokens joined by /.
 _NAME = re.compile(r"(?<![\w/~])~?/?[A-Za-z_]\w*(?:/[A-Za-z_]\w*)*")
+_WORD = re.compile(r"[A-Za-z0-9]+")  # the words of a line, as namespaces are spelt in it ("r1:")
 MIN_BASE = 3  # a bare word shorter than this is not taken for a node's base name
+LEFT_NAMES_S = 60.0  # a node that left is still named in /diagnostics and logs this long (a crash)
 
 
 def tokens(name: str) -> list[str]:
@@ -37,10 +39,14 @@ class NodeNames:
     ----------
     nodes : iterable of str
         Fully qualified node names.
+    left : iterable of str
+        Nodes that left the graph lately: still resolved (a status or a log line about a crashed
+        node), not in ``live``.
     """
 
-    def __init__(self, nodes: Iterable[str]) -> None:
-        self.fqns = frozenset(nodes)
+    def __init__(self, nodes: Iterable[str], left: Iterable[str] = ()) -> None:
+        self.live = frozenset(nodes)
+        self.fqns = self.live | frozenset(left)
         self.by_base: dict[str, list[str]] = {}
         self.by_flat: dict[str, list[str]] = {}
         for fqn in sorted(self.fqns):
@@ -54,14 +60,17 @@ class NodeNames:
         found = self.by_flat.get(name.strip().strip("/"), [])
         return found[0] if len(found) == 1 else None
 
-    def resolve(self, name: str, namespace: str = "/", bare: bool = True, tails: bool = True) -> str | None:
+    def resolve(self, name: str, namespace: str = "/", bare: bool = True, tails: bool = True,
+                words: frozenset[str] = frozenset()) -> str | None:
         """Return the node ``name`` refers to, or None.
 
         In order: the name as a fully qualified name and relative to ``namespace`` (the namespace
         first for a relative name, as ROS resolves it); with ``tails``,
         the longest tail of its tokens as a fully qualified name (an aggregator's
         ``/Robot/Sensors/lidar`` → ``/lidar``) or under ``namespace``; with ``bare``, the last
-        token as the base name of exactly one node (of several, the one under ``namespace``).
+        token as the base name of exactly one node (of several, the one under ``namespace``, else
+        the one whose namespace has a token among ``words``, lower case: a fleet manager's
+        "r1: goal not acknowledged by the planner" is about ``/r1/planner``).
         """
         toks = tokens(name)
         if not toks:
@@ -83,7 +92,10 @@ class NodeNames:
         if len(found) == 1:
             return found[0]
         inside = [f for f in found if f.rsplit("/", 1)[0] == namespace.rstrip("/")]
-        return inside[0] if len(inside) == 1 else None
+        if len(inside) == 1 or not words:
+            return inside[0] if len(inside) == 1 else None
+        told = [f for f in found if words & {t.lower() for t in tokens(f)[:-1]}]
+        return told[0] if len(told) == 1 else None
 
 
 def status_head(name: str) -> str:
@@ -104,6 +116,7 @@ def named_in_text(text: str, index: NodeNames, services: Iterable[str], namespac
     srv = set(services)
     found_nodes: set[str] = set()
     found_services: set[str] = set()
+    words = frozenset(w.lower() for w in _WORD.findall(text))
     for m in _NAME.finditer(text):
         word = m.group(0)
         if word.startswith("~"):
@@ -119,7 +132,19 @@ def named_in_text(text: str, index: NodeNames, services: Iterable[str], namespac
         if word.startswith(("~", "/")):  # private or absolute: that name exactly
             n = cands[0] if cands[0] in index.fqns else None
         else:
-            n = index.resolve(word, namespace, tails=False)
+            n = index.resolve(word, namespace, tails=False, words=words)
         if n is not None and n != node:
             found_nodes.add(n)
     return sorted(found_nodes), sorted(found_services)
+
+
+def recently_left(left: Mapping[str, float], before: Iterable[str], now: Container[str], t: float,
+                  keep_s: float = LEFT_NAMES_S) -> dict[str, float]:
+    """Return the nodes that left the graph within ``keep_s`` before ``t``, with when they left.
+
+    ``left`` is the previous answer, ``before`` the nodes of the previous sample, ``now`` those
+    of this one (a node that is back is not left).
+    """
+    out = {n: t0 for n, t0 in left.items() if n not in now and t - t0 < keep_s}
+    out.update({n: t for n in before if n not in now and n not in out})
+    return out

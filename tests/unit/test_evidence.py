@@ -34,7 +34,7 @@ from stream_viz.collect.cdr import (
     service_event_info,
 )
 from stream_viz.collect.diagnostics import DiagnosticsReader, aggregator_groups, map_status
-from stream_viz.collect.naming import NodeNames, named_in_text
+from stream_viz.collect.naming import NodeNames, named_in_text, recently_left
 from stream_viz.collect.params import param_event
 from stream_viz.collect.rosgraph import INFINITE_NS, qos_dict
 from stream_viz.collect.services import ServiceCalls, party
@@ -344,6 +344,28 @@ def test_aggregator_copies_are_not_counted_twice_and_its_news_is():
     # a STALE item whose node left the graph: no echo of the absence
     gone = NodeNames(NODES.fqns - {"/amr/front_lidar"})
     assert reader.events("/diagnostics_agg", agg(3), 60.0, "/amr/diagnostic_aggregator", gone) == []
+    # ... also while its name is still known (it left lately)
+    left = NodeNames(NODES.fqns - {"/amr/front_lidar"}, left={"/amr/front_lidar"})
+    assert reader.events("/diagnostics_agg", agg(3), 60.0, "/amr/diagnostic_aggregator", left) == []
+
+
+def test_a_status_about_a_node_that_left_is_mapped_to_it_not_to_its_publisher():
+    live = {"/tools/diag", "/r1/localizer"}
+    status = DiagnosticArray(status=[_status("r2_localizer: pose", 2, "", "no pose for 5 s")])
+    (ev,) = DiagnosticsReader().events("/diagnostics", status, 1.0, "/tools/diag",
+                                       NodeNames(live, left={"/r2/localizer"}))
+    assert (ev.member, ev.data["mapped_by"]) == ("node:/r2/localizer", "name")
+    (ev,) = DiagnosticsReader().events("/diagnostics", status, 1.0, "/tools/diag", NodeNames(live))
+    assert (ev.member, ev.data["mapped_by"]) == ("node:/tools/diag", "publisher")
+
+
+def test_recently_left_keeps_a_node_that_left_for_a_while():
+    left = recently_left({}, {"/a", "/b", "/c"}, {"/a", "/c"}, 10.0, keep_s=60.0)
+    assert left == {"/b": 10.0}
+    left = recently_left(left, {"/a", "/c"}, {"/a"}, 20.0, keep_s=60.0)
+    assert left == {"/b": 10.0, "/c": 20.0}
+    assert recently_left(left, {"/a"}, {"/a", "/b"}, 30.0, keep_s=60.0) == {"/c": 20.0}  # /b is back
+    assert recently_left(left, {"/a"}, {"/a"}, 75.0, keep_s=60.0) == {"/c": 20.0}  # /b forgotten
 
 
 def test_diagnostics_plugin_says_how_each_alert_was_mapped():
@@ -435,6 +457,17 @@ def _service_model(servers=("/planner",), calls=None, response_ms=100.0):
     return G
 
 
+def test_an_ambiguous_base_name_is_told_apart_by_a_namespace_in_the_line():
+    index = NodeNames({"/r1/planner", "/r2/planner", "/fleet/manager"})
+    line = "r1: delivery 4 not acknowledged by the planner after 10 s"
+    assert named_in_text(line, index, set(), "/fleet", "/fleet/manager") == (["/r1/planner"], [])
+    assert named_in_text("R2 planner did not answer", index, set(), "/fleet", "/fleet/manager") == (
+        ["/r2/planner"], [])
+    # no namespace in the line, or both: still ambiguous, nobody named
+    assert named_in_text("the planner did not answer", index, set(), "/fleet", "/fleet/manager") == ([], [])
+    assert named_in_text("r1 and r2: planner slow", index, set(), "/fleet", "/fleet/manager") == ([], [])
+
+
 def test_services_waiting_client_names_the_server():
     quiet = [(float(t), _service_model(calls=[]), []) for t in range(15)]
     waiting = [{"client": "node:/bt", "server": "node:/planner", "waited_s": 2.5},
@@ -501,15 +534,20 @@ def test_services_client_log_naming_its_service_or_server():
             Event(1.0, "log", "node:/bt", "error", "planner timed out", {"nodes": ["node:/planner"]}),
             Event(1.0, "log", "node:/camera", "error", "service /plan not available",  # not its client
                   {"services": ["service:/plan"]})]
-    alerts = drive_alerts("services", [(1.0, G, logs)])
+    alerts = drive_alerts("services", [(1.0, G, logs[1:])])
     assert [(a.member, a.severity, a.data["via"], a.data["server"], a.data["service"], a.message)
             for a in alerts] == [
         ("node:/bt", "error", "log", "node:/planner", "service:/plan",
          "logged about /plan: planner timed out")]
-    # a WARN (a service not ready yet at bring-up) counts only when asked for, as a warning
-    warned = drive_alerts("services", [(1.0, G, logs[:1])], settings={"log_level": "warn"})
+    # a WARN counts, as a warning; one alert per client and service and sample, at its worst line
+    warned = drive_alerts("services", [(1.0, G, logs[:1])])
     assert [(a.member, a.severity, a.data["server"]) for a in warned] == [
         ("node:/bt", "warn", "node:/planner")]
+    assert [(a.severity, a.data["server"]) for a in drive_alerts("services", [(1.0, G, logs)])] == [
+        ("error", "node:/planner")]
+    # at an ERROR floor the WARN is not read
+    strict = drive_alerts("services", [(1.0, G, logs[:1])], settings={"log_level": "error"})
+    assert strict == []
 
 
 # --------------------------------------------------------------------------- message age
