@@ -313,6 +313,52 @@ def test_a_standing_diagnostics_warning_is_normal_and_a_new_one_is_not(children,
     assert [st["name"] for st in found[0].data["statuses"]] == ["gps_driver: battery"]
 
 
+LEAVING = """
+import os, sys, time
+import rclpy
+flag = sys.argv[1]
+rclpy.init()
+n = rclpy.create_node('localizer', namespace='/r2')
+while not os.path.exists(flag):
+    rclpy.spin_once(n, timeout_sec=0.1)
+n.destroy_node()  # it leaves the graph at once, then its process fails
+rclpy.shutdown()
+sys.exit(1)
+"""
+
+REPORTER = """
+import os, sys, time
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+flag = sys.argv[1]
+rclpy.init()
+n = rclpy.create_node('diag', namespace='/tools')
+pub = n.create_publisher(DiagnosticArray, '/diagnostics', 10)
+def tick():  # an updater-style name of a namespaced node, flat; ERROR 3 s after it left
+    lost = os.path.exists(flag) and time.time() - os.path.getmtime(flag) > 3.0
+    pub.publish(DiagnosticArray(status=[DiagnosticStatus(
+        level=DiagnosticStatus.ERROR if lost else DiagnosticStatus.OK, name='r2_localizer: pose',
+        message='no pose' if lost else 'ok')]))
+n.create_timer(0.5, tick)
+""" + _spin("n")
+
+
+def test_a_status_about_a_node_that_left_is_charged_to_it_not_its_publisher(children, tmp_path, run_of):
+    flag = tmp_path / "gone"
+    children.python(LEAVING, str(flag), name="localizer")
+    children.python(REPORTER, str(flag), name="reporter")
+    run = run_of(["diagnostics"])
+    _ready(run, "node:/r2/localizer", "node:/tools/diag")
+    run.observe(2.0)
+    flag.write_text("1")
+    wait_for(lambda: (run.step(), "node:/r2/localizer" not in run.G)[1], timeout=15, period=PERIOD)
+    found = run.until(lambda a: a.plugin == "diagnostics", 15.0)
+    assert found, "no diagnostics alert"
+    assert (found[0].member, found[0].severity, found[0].data["mapped_by"]) == (
+        "node:/r2/localizer", "error", "name")
+    assert not any(a.member == "node:/tools/diag" for a in run.alerts)
+
+
 SERVER = """
 import os, sys, time
 import rclpy
