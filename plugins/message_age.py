@@ -28,6 +28,11 @@ class MessageAge(Plugin):
       publisher's clock runs ahead, another host's or a simulated one) or above ``implausible_s``
       (stamps not from this clock at all: simulated time, an unset or unsynchronised clock), for
       ``confirm`` samples. No stale check on such a topic: its ages say nothing about delay.
+
+    A skew the topic shows within ``learn_s`` of its first stamped message, and keeps, is its
+    normal (a device that stamps with its own clock, a recording's old stamps): no alert, and a
+    plausible standing skew (stamps ahead) is checked for staleness against its own baseline, the
+    offset cancelling out. A topic whose stamps were on time and then skew is news.
     """
 
     name = "message_age"
@@ -43,6 +48,7 @@ class MessageAge(Plugin):
         "max_age_ms": 0.0,
         "skew_ms": 20.0,
         "implausible_s": 3600.0,
+        "learn_s": 10.0,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -55,11 +61,16 @@ class MessageAge(Plugin):
                 continue
             newest = ctx.value(topic, "age_s")
             fresh = math.isnan(newest) or newest < since  # a message since the last sample
-            skewed = age < -s["skew_ms"] or age > s["implausible_s"] * 1000.0
-            if streak(ctx.state, (topic, "skew"), skewed, fresh) >= s["confirm"]:
+            ahead, implausible = age < -s["skew_ms"], age > s["implausible_s"] * 1000.0
+            skew = "ahead" if ahead else "implausible" if implausible else None
+            if _standing(ctx, topic, skew, s["learn_s"]):
+                if skew == "ahead":
+                    yield from self._stale(ctx, topic, age, fresh, alerting)
+                continue
+            if streak(ctx.state, (topic, "skew"), skew is not None, fresh) >= s["confirm"]:
                 yield _skew(ctx, topic, age)
                 continue
-            if skewed:
+            if skew is not None:
                 continue
             yield from self._stale(ctx, topic, age, fresh, alerting)
 
@@ -80,6 +91,16 @@ class MessageAge(Plugin):
         yield ctx.alert(topic, "warn", f"stale data: messages arrive {age:.0f} ms after their header "
                         f"stamp{usual}", symptom="stale", value_ms=age,
                         baseline_ms=None if risen is None else risen[1])
+
+
+def _standing(ctx: PluginContext, topic: str, skew: str | None, learn_s: float) -> bool:
+    """Whether ``skew`` (None: none now) is the topic's standing skew: shown within ``learn_s`` of
+    its first stamped message (the first kind shown then is its normal; none then: none is)."""
+    first = ctx.state.setdefault("first", {}).setdefault(topic, ctx.t)
+    normal = ctx.state.setdefault("normal_skew", {})
+    if skew is not None and ctx.t - first <= learn_s:
+        normal.setdefault(topic, skew)
+    return skew is not None and normal.get(topic) == skew
 
 
 def _skew(ctx: PluginContext, topic: str, age: float) -> Alert:

@@ -77,6 +77,38 @@ def test_message_age_of_stamps_lagging_300ms(children, tmp_path, run_of):
     assert 280.0 <= sick["stamp_age_ms"] <= 400.0 and sick["latency_ms"] < 50.0, sick
 
 
+DEVICE_CLOCK = """
+import os, sys
+import rclpy
+from rclpy.duration import Duration
+from sensor_msgs.msg import LaserScan
+flag = sys.argv[1]
+rclpy.init()
+n = rclpy.create_node('lidar_driver')
+pub = n.create_publisher(LaserScan, '/scan', 10)
+def tick():  # stamped by the device's own clock, 400 ms ahead; 300 ms late data after the flag
+    m = LaserScan()
+    lag = Duration(seconds=0.3) if os.path.exists(flag) else Duration()
+    m.header.stamp = (n.get_clock().now() + Duration(seconds=0.4) - lag).to_msg()
+    pub.publish(m)
+n.create_timer(0.05, tick)
+rclpy.spin(n)
+"""
+
+
+def test_a_device_clock_ahead_from_the_start_is_normal_and_its_late_data_is_not(children, tmp_path,
+                                                                               run_of):
+    flag = tmp_path / "lag"
+    children.python(DEVICE_CLOCK, str(flag), name="lidar")
+    run = run_of(["message_age"])
+    _ready(run, "topic:/scan")
+    run.observe(14.0)  # past learn_s (10 s) from its first stamped message
+    assert run.alerts == [] and _theta(run, "topic:/scan")["stamp_age_ms"] < -300.0
+    flag.write_text("1")
+    found = run.until(lambda a: a.plugin == "message_age", 15.0)
+    assert found and found[0].data["symptom"] == "stale", run.alerts
+
+
 SIMULATED = """
 import os, sys, time
 import rclpy

@@ -585,14 +585,29 @@ def test_message_age_stale_against_its_own_baseline():
 
 
 def test_message_age_skewed_or_implausible_clocks_are_said_so_not_called_latency():
-    ahead = [_aged(-250.0, t) for t in range(4)]
+    on_time = [_aged(2.0, t) for t in range(12)]  # past learn_s (10 s): its stamps are on time
+    ahead = on_time + [_aged(-250.0, t) for t in range(12, 16)]
     alerts = drive_alerts("message_age", ahead)
-    assert [(a.t, a.data["symptom"]) for a in alerts] == [(2.0, "clock_skew"), (3.0, "clock_skew")]
+    assert [(a.t, a.data["symptom"]) for a in alerts] == [(14.0, "clock_skew"), (15.0, "clock_skew")]
     assert "ahead of this host's clock" in alerts[0].message and "not a latency" in alerts[0].message
-    sim = [_aged(1.7e12, t) for t in range(4)]  # stamps from a simulated clock that started at 0
+    sim = on_time + [_aged(1.7e12, t) for t in range(12, 16)]  # stamps from a simulated clock at 0
     alerts = drive_alerts("message_age", sim)
     assert alerts and all(a.data["symptom"] == "clock_skew" for a in alerts)
     assert "not from the wall clock" in alerts[0].message
+
+
+def test_a_skew_from_the_start_is_the_topics_normal_and_its_staleness_is_still_seen():
+    # a device stamping with its own clock, 400 ms ahead of ours from its first message
+    device = [_aged(-400.0 + (t % 3), t) for t in range(30)]
+    assert drive("message_age", device) == []
+    # its data then lags 300 ms behind its own normal: stale, the offset cancelling out
+    alerts = drive_alerts("message_age", device + [_aged(-100.0, t) for t in range(30, 36)])
+    assert alerts and {a.data["symptom"] for a in alerts} == {"stale"}
+    # a recording's stamps, hours old from the start: no alert, no staleness judged
+    assert drive("message_age", [_aged(3.6e7 + t, t) for t in range(30)]) == []
+    # stamps on time at first, then hours old: news
+    late = [_aged(2.0, t) for t in range(12)] + [_aged(3.6e7, t) for t in range(12, 16)]
+    assert {a.data["symptom"] for a in drive_alerts("message_age", late)} == {"clock_skew"}
 
 
 def test_snapshot_text_says_who_sends_on_a_multi_publisher_topic():
