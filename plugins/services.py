@@ -18,6 +18,8 @@ import math
 from collections.abc import Iterator
 from typing import Any, ClassVar
 
+import numpy as np
+
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, rise
 from stream_viz.detect.startup import STARTUP_S, starting
@@ -30,10 +32,11 @@ class Services(Plugin):
     """Alerts on the clients of a service (or the service, when its waiting client is unknown):
 
     * ``waiting`` (warn): an observed call has been open ≥ ``max(min_wait_s, wait_factor × the
-      service's usual response time)``; or (at the line's level) the client logged (≥
-      ``log_level``, WARN) a line naming the service or its server, after the client's first
-      ``startup_s`` (its bring-up, when it waits for servers still coming up: the WARNs about a
-      service not ready yet);
+      service's usual response time)`` (its baseline; before one is learnt, the longest it has
+      taken; before any answer, ``first_wait_s``: some services take seconds); or (at the
+      line's level) the client logged (≥ ``log_level``, WARN) a line naming the service or its
+      server, after the client's first ``startup_s`` (its bring-up, when it waits for servers
+      still coming up: the WARNs about a service not ready yet);
     * ``slow_response`` (warn): the service's mean response time rose above its own baseline by
       ``max(k·σ, min_rise_ms)`` for ``confirm`` samples;
     * ``server_gone`` (warn): the service had a server and has none while clients remain.
@@ -49,6 +52,7 @@ class Services(Plugin):
         "k": 6.0,
         "confirm": 2,
         "min_wait_s": 2.0,
+        "first_wait_s": 30.0,
         "wait_factor": 3.0,
         "min_rise_ms": 200.0,
         "log_level": "warn",
@@ -91,9 +95,9 @@ def _waiting(ctx: PluginContext, service: str, servers: list[str]) -> Iterator[A
         waiting.discard(service)
         return
     base = cached_baseline(ctx, service, "response_ms", frozen=service in waiting)
-    usual_ms = base[0] if base is not None and not math.isnan(base[0]) else float("nan")
-    limit = s["min_wait_s"] if math.isnan(usual_ms) else max(s["min_wait_s"],
-                                                             s["wait_factor"] * usual_ms / 1e3)
+    usual_ms = base[0] if base is not None and not math.isnan(base[0]) else _longest_ms(ctx, service)
+    limit = s["first_wait_s"] if math.isnan(usual_ms) else max(s["min_wait_s"],
+                                                               s["wait_factor"] * usual_ms / 1e3)
     longest: dict[str, dict[str, Any]] = {}
     for call in calls:
         waited = call.get("waited_s", 0.0)
@@ -110,6 +114,14 @@ def _waiting(ctx: PluginContext, service: str, servers: list[str]) -> Iterator[A
                         f"{name_of(server) if server else 'an unknown server'}{usual}",
                         symptom="waiting", via="introspection", service=service, server=server,
                         client=call.get("client"), waited_s=call["waited_s"])
+
+
+def _longest_ms(ctx: PluginContext, service: str) -> float:
+    """The longest mean response time the service has shown (NaN: none answered yet): its usual
+    time until a baseline is learnt (a service called twice a minute takes minutes to learn)."""
+    _, values = ctx.past(service, "response_ms")
+    values = values[~np.isnan(values)]
+    return float(values.max()) if len(values) else float("nan")
 
 
 def _slow(ctx: PluginContext, service: str, servers: list[str], clients: list[str],

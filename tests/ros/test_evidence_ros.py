@@ -439,6 +439,23 @@ def test_services_waiting_client_names_the_slow_server(children, tmp_path, run_o
     assert 0 < _theta(run, "service:/plan")["wait_s"] < 7.0
 
 
+def test_a_service_slow_from_its_first_call_is_not_waited_on(children, tmp_path, run_of):
+    flag = tmp_path / "slow"
+    flag.write_text("1")  # it answers in 6 s from the start: its normal
+    children.python(SERVER, str(flag), name="planner")
+    children.python(CLIENT, name="bt")
+    run = run_of(["services"])
+    _ready(run, "node:/planner", "node:/bt_navigator", "service:/plan")
+    wait_for(lambda: (run.step(), _theta(run, "service:/plan")["waiting"] > 0)[1], timeout=20, period=PERIOD)
+    answered, end = [], time.monotonic() + 16.0  # two calls of 6 s, the first before any answer
+    while time.monotonic() < end:
+        run.step()
+        answered.append(_theta(run, "service:/plan")["response_ms"])
+        time.sleep(PERIOD)
+    assert max(x for x in answered if not math.isnan(x)) > 5000.0  # it was measured answering slowly
+    assert [a for a in run.alerts if a.plugin == "services"] == []
+
+
 ACTION_SERVER = """
 import rclpy
 from rclpy.action import ActionServer

@@ -485,8 +485,25 @@ def test_services_waiting_client_names_the_server():
                                             [])]) == []
     # the client is unknown (several in one process): on the service, the server still named
     anon = [{"client": None, "server": None, "waited_s": 3.0}]
-    (a,) = drive_alerts("services", [(1.0, _service_model(calls=anon), [])])
+    (a,) = drive_alerts("services", [*quiet, (15.0, _service_model(calls=anon), [])])
     assert (a.member, a.data["server"], a.data["client"]) == ("service:/plan", "node:/planner", None)
+
+
+def test_services_a_call_is_judged_by_the_longest_answer_until_a_baseline_is_learnt():
+    # a service called rarely: one answer of 6 s seen, far too few for a baseline
+    once = [(0.0, _service_model(calls=[], response_ms=6000.0), [])]
+    once += [(float(t), _service_model(calls=[], response_ms=float("nan")), []) for t in range(1, 5)]
+
+    def waited(s, frames):
+        call = [{"client": "node:/bt", "server": "node:/planner", "waited_s": s}]
+        return drive_alerts("services", [*frames, (5.0, _service_model(calls=call, response_ms=float("nan")),
+                                                   [])])
+    assert waited(10.0, once) == []  # within 3 × 6 s
+    assert [a.data["waited_s"] for a in waited(19.0, once)] == [19.0]
+    # never answered yet: some services take seconds, a call is waiting after first_wait_s (30 s)
+    none = [(float(t), _service_model(calls=[], response_ms=float("nan")), []) for t in range(5)]
+    assert waited(10.0, none) == []
+    assert [a.data["waited_s"] for a in waited(31.0, none)] == [31.0]
 
 
 def test_services_slow_responses_against_their_own_baseline():
