@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, held, streak
+from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, forget_baseline, held, streak
 from stream_viz.records import Alert
 
 
@@ -28,6 +28,10 @@ class MessageAge(Plugin):
       publisher's clock runs ahead, another host's or a simulated one) or above ``implausible_s``
       (stamps not from this clock at all: simulated time, an unset or unsynchronised clock), for
       ``confirm`` samples. No stale check on such a topic: its ages say nothing about delay.
+
+    A topic whose stamps went back (a ``stamp_reset`` event: a recording that looped, a
+    simulation reset) learns its age afresh from then on: its data are as old as its new time
+    makes them, which is no delay.
 
     A skew the topic shows within ``learn_s`` of its first stamped message, and keeps, is its
     normal (a device that stamps with its own clock, a recording's old stamps): no alert, and a
@@ -55,6 +59,13 @@ class MessageAge(Plugin):
         s = ctx.settings
         alerting = ctx.state.setdefault("alerting", set())
         since = ctx.since_last_call()
+        restarted = ctx.state.setdefault("restarted", {})  # topic -> when its stamps went back
+        for e in ctx.events:
+            if e.kind == "stamp_reset":
+                restarted[e.member] = e.t
+                alerting.discard((e.member, "stamp_age_ms"))
+                held(ctx.state, e.member, False, ctx.t)
+                forget_baseline(ctx, e.member, "stamp_age_ms")
         for topic in ctx.watched():
             age = ctx.value(topic, "stamp_age_ms")
             if math.isnan(age):
@@ -65,19 +76,20 @@ class MessageAge(Plugin):
             skew = "ahead" if ahead else "implausible" if implausible else None
             if _standing(ctx, topic, skew, s["learn_s"]):
                 if skew == "ahead":
-                    yield from self._stale(ctx, topic, age, fresh, alerting)
+                    yield from self._stale(ctx, topic, age, fresh, alerting, restarted.get(topic))
                 continue
             if streak(ctx.state, (topic, "skew"), skew is not None, fresh) >= s["confirm"]:
                 yield _skew(ctx, topic, age)
                 continue
             if skew is not None:
                 continue
-            yield from self._stale(ctx, topic, age, fresh, alerting)
+            yield from self._stale(ctx, topic, age, fresh, alerting, restarted.get(topic))
 
     @staticmethod
-    def _stale(ctx: PluginContext, topic: str, age: float, fresh: bool, alerting: set) -> Iterator[Alert]:
+    def _stale(ctx: PluginContext, topic: str, age: float, fresh: bool, alerting: set,
+               restarted: float | None) -> Iterator[Alert]:
         s = ctx.settings
-        seen = excess(ctx, topic, "stamp_age_ms", s["min_rise_ms"], alerting)
+        seen = excess(ctx, topic, "stamp_age_ms", s["min_rise_ms"], alerting, since=restarted)
         if seen is not None:
             value, med, risen = seen
             seen = (value, med, risen and value - med >= s["rise_ratio"] * abs(med))

@@ -21,7 +21,8 @@ class Event:
 
     ``kind`` is one of ``log`` (a /rosout line), ``diag`` (one /diagnostics status),
     ``exit`` (a process ended), ``restart`` (a node's process changed pid), ``goal`` (an action
-    goal ended), ``param`` (a node's parameters changed), ``observe_error`` (something could not
+    goal ended), ``param`` (a node's parameters changed), ``stamp_reset`` (a topic's header stamps
+    went back: a recording looped, a simulation reset), ``observe_error`` (something could not
     be read). ``member`` is the member it concerns (``node:/x`` …);
     ``level`` is one of `SEVERITIES`; ``data`` holds the rest (logger name, status name …).
     """

@@ -26,7 +26,7 @@ from stream_viz.collect.naming import NodeNames, recently_left
 from stream_viz.collect.params import param_event
 from stream_viz.collect.pidmap import PidResolver
 from stream_viz.collect.processes import ProcessSampler
-from stream_viz.collect.readings import GraphReading, PidInfo, ProcessReading
+from stream_viz.collect.readings import GraphReading, PidInfo, ProcessReading, TopicStats
 from stream_viz.collect.rosgraph import GidCache, QosCache, read_graph
 from stream_viz.collect.services import ServiceCalls, ServiceStats, party
 from stream_viz.collect.topics import DIAGNOSTICS, TopicMonitor, log_event
@@ -188,6 +188,7 @@ class Collector:
             processes[pid] = ProcessReading(pid, None, alive=False)
         pub_counts = {tp: len(eps) for tp, eps in reading.publishers.items()}
         stats = self.topics.stats(pub_counts)
+        events += stamp_reset_events(stats)
         # A message from a publisher gid we do not know: a new endpoint of an unchanged node set.
         self.qos.invalidate({tp for tp, st in stats.items()
                              if any(g not in reading.publisher_gids.get(tp, {}) for g in st.by_publisher)})
@@ -337,6 +338,19 @@ class Collector:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def stamp_reset_events(stats: dict[str, TopicStats]) -> list[Event]:
+    """One ``stamp_reset`` event per topic whose header stamps went back since the last sample."""
+    out = []
+    for topic, st in sorted(stats.items()):
+        if st.stamp_resets:
+            recv, back = max(st.stamp_resets, key=lambda r: r[1])
+            out.append(Event(recv / 1e9, "stamp_reset", make_id("topic", topic), "info",
+                             f"header stamps went back {back / 1e9:.1f} s: the stream restarted its time "
+                             "(a recording looped, a simulation reset)",
+                             {"back_s": back / 1e9, "resets": len(st.stamp_resets)}))
+    return out
 
 
 def _node_id(fqn: str | None) -> str | None:

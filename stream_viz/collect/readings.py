@@ -83,3 +83,4 @@ class TopicStats:
     reason: str = ""
     metrics: dict[str, float] = field(default_factory=dict)
     by_publisher: dict[bytes, float] = field(default_factory=dict)  # publisher gid -> messages/s
+    stamp_resets: list[tuple[int, int]] = field(default_factory=list)  # (received ns, back ns)

@@ -292,7 +292,8 @@ class TopicMonitor:
                     m["gap_s"] = gap  # a quiet that began and ended between two samples
                 if m and w.kind == "clock" and (pace := self.clock.pace(now, PACE_SPAN_NS)) is not None:
                     m["sim_pace"] = pace
-                out[t] = TopicStats(True, "", m, w.window.publisher_rates(now, w.created_ns, self.window_ns))
+                out[t] = TopicStats(True, "", m, w.window.publisher_rates(now, w.created_ns, self.window_ns),
+                                    w.window.take_resets())
         if not self.metrics:
             for t in publishers:
                 out.setdefault(t, TopicStats(False, "topic metrics are off"))

@@ -18,14 +18,15 @@ import numpy as np
 RECENT = 5  # intervals behind `rate_recent_hz`
 # (received ns, source ns, size, sequence number, publisher gid, received − header.stamp ns)
 Record = tuple[int, int, int, int | None, bytes | None, int | None]
+RESET_NS = 1_000_000_000  # stamps going back further than this: a restarted time, not reordering
 WARMUP_S = 1.0  # a fresh subscription has seen too little to call a rate (0 would read as silence)
 
 
 class TopicWindow:
     """Records of one topic, oldest first, and the running sums its metrics need."""
 
-    __slots__ = ("buf", "by_gid", "gap_ns", "gaps", "n_age", "no_seq", "s_age", "s_d", "s_d2", "s_recv",
-                 "s_size", "s_src")
+    __slots__ = ("buf", "by_gid", "gap_ns", "gaps", "last_stamp", "n_age", "no_seq", "resets", "s_age", "s_d",
+                 "s_d2", "s_recv", "s_size", "s_src")
 
     def __init__(self) -> None:
         self.buf: deque[Record] = deque()
@@ -36,6 +37,8 @@ class TopicWindow:
         self.s_age = self.n_age = 0  # sum and count of the message ages (records that have one)
         self.by_gid: Counter[bytes] = Counter()  # records per publisher gid (those that have one)
         self.gap_ns = 0  # the longest interval between records added since `take_gap`
+        self.last_stamp: dict[bytes | None, int] = {}  # the newest header stamp per publisher
+        self.resets: list[tuple[int, int]] = []  # (received ns, how far back ns) since `take_resets`
 
     def add(self, recv: int, src: int, size: int, seq: int | None, gid: bytes | None = None,
             age: int | None = None) -> None:
@@ -54,6 +57,12 @@ class TopicWindow:
                 self.gap_ns = g
             if seq is not None and last[3] is not None and seq > last[3] + 1:
                 self.gaps += seq - last[3] - 1
+        if age is not None:  # a publisher's stamps going back: its stream restarted its time
+            stamp = recv - age
+            prev = self.last_stamp.get(gid)
+            if prev is not None and prev - stamp > RESET_NS:
+                self.resets.append((recv, prev - stamp))
+            self.last_stamp[gid] = stamp
         self.buf.append((recv, src, size, seq, gid, age))
         self.s_recv += recv
         self.s_src += src
@@ -120,6 +129,13 @@ class TopicWindow:
         if n_publishers == 1 and self.no_seq == 0:
             m["drops_per_s"] = self.gaps / span
         return m
+
+    def take_resets(self) -> list[tuple[int, int]]:
+        """Return the stamp resets (received ns, how far back ns) added since the last call: a
+        publisher whose ``header.stamp`` went back by more than ``RESET_NS`` (a recording that
+        looped, a simulation reset), and start over."""
+        out, self.resets = self.resets, []
+        return out
 
     def take_gap(self) -> float:
         """Return the longest interval (s) between consecutive records added since the last call,

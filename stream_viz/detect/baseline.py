@@ -96,6 +96,12 @@ def cached_baseline(ctx: Any, member: str, attr: str, *, frozen: bool = False,
     return med, sigma, n
 
 
+def forget_baseline(ctx: Any, member: str, attr: str) -> None:
+    """Drop the cached baseline of ``member``'s ``attr`` (`cached_baseline`): its normal changed
+    and is learnt again from ``since``, not read from the cache until its next refresh."""
+    ctx.state.get("_baselines", {}).pop((member, attr), None)
+
+
 def streak(state: dict[str, Any], key: Any, condition: bool, fresh: bool = True) -> int:
     """Count consecutive calls with ``condition`` true for ``key`` (0 once it is false).
 

@@ -109,6 +109,39 @@ def test_a_device_clock_ahead_from_the_start_is_normal_and_its_late_data_is_not(
     assert found and found[0].data["symptom"] == "stale", run.alerts
 
 
+LOOPING = """
+import time
+import rclpy
+from builtin_interfaces.msg import Time
+from sensor_msgs.msg import Imu
+rclpy.init()
+n = rclpy.create_node('log_player')
+pub = n.create_publisher(Imu, '/mocap', 10)
+t0, loop = time.time(), 7.0
+def tick():  # a recording played in loops of 7 s: its stamps go back to the first loop's each time
+    m = Imu()
+    ns = int((t0 + (time.time() - t0) % loop) * 1e9)
+    m.header.stamp = Time(sec=ns // 10**9, nanosec=ns % 10**9)
+    pub.publish(m)
+n.create_timer(0.05, tick)
+rclpy.spin(n)
+"""
+
+
+def test_a_looping_recording_is_no_stale_data(children, run_of):
+    children.python(LOOPING, name="player")
+    run = run_of(["message_age"])
+    _ready(run, "topic:/mocap")
+    resets, end = [], time.monotonic() + 24.0  # three loops, each 7 s older than the last
+    while time.monotonic() < end:
+        resets += [e for e in run.step().events if e.kind == "stamp_reset"]
+        time.sleep(PERIOD)
+    assert len(resets) >= 2 and all(e.member == "topic:/mocap" for e in resets), resets
+    assert all(6.0 < e.data["back_s"] < 8.0 for e in resets), resets
+    assert _theta(run, "topic:/mocap")["stamp_age_ms"] > 5000.0  # its data are old, and that is its time
+    assert run.alerts == []
+
+
 SIMULATED = """
 import os, sys, time
 import rclpy

@@ -627,6 +627,31 @@ def test_a_skew_from_the_start_is_the_topics_normal_and_its_staleness_is_still_s
     assert {a.data["symptom"] for a in drive_alerts("message_age", late)} == {"clock_skew"}
 
 
+def test_a_stamp_reset_restarts_what_a_topics_age_is_judged_against():
+    # a recording looped: its stamps went back 47 s, its data are 47 s older from then on
+    looped = [_aged(100.0 + (t % 3), t) for t in range(30)]
+    looped += [_aged(47100.0 + (t % 3), t) for t in range(30, 50)]
+    reset = Event(29.5, "stamp_reset", "topic:/img", "info", "header stamps went back 47.0 s",
+                  {"back_s": 47.0})
+    frames = [(t, G, [reset] if t == 30.0 else ev) for t, G, ev in looped]
+    assert drive("message_age", frames) == []
+    # the same jump without a reset of its stamps (they went on, the data lag): stale
+    assert {a.data["symptom"] for a in drive_alerts("message_age", looped)} == {"stale"}
+
+
+def test_window_tells_stamps_going_back_per_publisher():
+    from stream_viz.collect.window import TopicWindow
+
+    s, w = 1_000_000_000, TopicWindow()
+    for k in range(5):  # two publishers, 0.5 s apart in their clocks: no reset
+        w.add(k * s, k * s, 10, None, b"a", 0)
+        w.add(k * s + 1, k * s + 1, 10, None, b"b", s // 2)
+    assert w.take_resets() == []
+    w.add(5 * s, 5 * s, 10, None, b"a", 48 * s)  # publisher a's stamp went back 47 s (4 s to -43 s)
+    w.add(5 * s + 1, 5 * s + 1, 10, None, b"b", s // 2)
+    assert w.take_resets() == [(5 * s, 47 * s)] and w.take_resets() == []
+
+
 def test_snapshot_text_says_who_sends_on_a_multi_publisher_topic():
     from stream_viz.collect.snapshot import _member_line
 
