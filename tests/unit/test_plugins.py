@@ -129,6 +129,19 @@ def test_topic_rate_one_of_two_publishers_stopping_is_its_symptom():
     assert drive("topic_rate", late) == []
 
 
+def test_topic_rate_a_publisher_in_bursts_is_no_stop():
+    # a joystick held 6 s every 40 s beside an autonomy node at 10 Hz: its runs never reach 15
+    # samples in a row (they do not add up), and once it has resumed by itself it publishes in
+    # bursts: even a long hold (100-120 s) ending is no stop
+    def held(t):
+        return 20.0 if 10 <= (t % 40) < 16 or 100 <= t < 120 else 0.0
+    frames = [(float(t), _two_publishers(10.0, held(t)), []) for t in range(130)]
+    assert drive("topic_rate", frames) == []
+    # the same long run ending with no burst before it: a stop
+    frames = [(float(t), _two_publishers(10.0, 20.0 if t < 30 else 0.0), []) for t in range(34)]
+    assert drive("topic_rate", frames) != []
+
+
 def test_topic_rate_a_publisher_stopping_as_its_goal_ends_is_healthy():
     goal = [Event(29.0, "goal", "node:/lidar", "info", "goal 1 of /scan_area succeeded", {})]
     frames = [(float(t), _two_publishers(10.0, 10.0 if t < 30 else 0.0), goal if t == 29 else [])
