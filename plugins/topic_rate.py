@@ -9,7 +9,15 @@ from typing import Any, ClassVar
 import numpy as np
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import BASELINE_SETTINGS, cached_baseline, exceeds, held, robust, streak
+from stream_viz.detect.baseline import (
+    BASELINE_SETTINGS,
+    cached_baseline,
+    exceeds,
+    forget_baseline,
+    held,
+    robust,
+    streak,
+)
 from stream_viz.detect.process import SETTINGS as PROCESS_SETTINGS
 from stream_viz.detect.rhythm import SAME_MESSAGE_S, Rhythm, follow, newest_message, quiet_limit
 from stream_viz.model.ids import name_of
@@ -205,7 +213,7 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
                 fresh = Rhythm()
                 rhythms[topic], relearn[topic], causes[topic] = fresh, at, at
                 deferred.pop(topic, None)
-                ctx.state.get("_baselines", {}).pop((topic, "rate_hz"), None)
+                forget_baseline(ctx, topic, "rate_hz")
                 for table in ("_streaks", "_held"):
                     ctx.state.setdefault(table, {}).pop((topic, "drop"), None)
                 out[k] = (topic, fresh, rate, None, _follow(ctx, fresh, topic, rate, None))

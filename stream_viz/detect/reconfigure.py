@@ -15,6 +15,7 @@ from collections.abc import Iterable
 from typing import Any
 
 from stream_viz.detect.api import reads_settings
+from stream_viz.detect.baseline import forget_baseline
 
 RECONFIGURE_SETTINGS: dict[str, float] = {"reconfigure_s": 10.0}
 FORGET_S = 3600.0  # a baseline window (samples) is far shorter: the change is out of it by then
@@ -64,6 +65,6 @@ def reconfigured(ctx: Any, member: str, attr: str, nodes: Iterable[str],
     if not prompt or relearn.get(key, -float("inf")) >= at:
         return False
     relearn[key] = at
-    ctx.state.get("_baselines", {}).pop(key, None)
+    forget_baseline(ctx, member, attr)
     began.pop(key, None)
     return True
