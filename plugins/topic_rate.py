@@ -101,6 +101,9 @@ class TopicRate(Plugin):
         alerting = ctx.state.setdefault("alerting", set())
         ctx.state["interval"] = ctx.since_last_call()  # what this sample's process metrics cover
         rhythms: dict[str, Rhythm] = ctx.state.setdefault("rhythms", {})
+        for e in ctx.events:  # its stream restarted its time (a recording looped): the quiet that
+            if e.kind == "stamp_reset" and e.member in rhythms:  # ends now was its loop's end
+                rhythms[e.member].departed = False
         watched = list(ctx.watched())
         # Every topic's rhythm is followed, so one the RCA starts watching later is judged at once.
         topics = ctx.structural(lambda: set(ctx.members("topic")), key="topics")

@@ -110,17 +110,20 @@ def test_a_device_clock_ahead_from_the_start_is_normal_and_its_late_data_is_not(
 
 
 LOOPING = """
-import time
+import sys, time
 import rclpy
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import Imu
 rclpy.init()
 n = rclpy.create_node('log_player')
 pub = n.create_publisher(Imu, '/mocap', 10)
-t0, loop = time.time(), 7.0
-def tick():  # a recording played in loops of 7 s: its stamps go back to the first loop's each time
+t0, loop, pause = time.time(), float(sys.argv[1]), float(sys.argv[2])
+def tick():  # a recording played in loops: its stamps go back to the first loop's each time
+    into = (time.time() - t0) % loop
+    if into > loop - pause:
+        return  # the player's pause at the end of a loop
     m = Imu()
-    ns = int((t0 + (time.time() - t0) % loop) * 1e9)
+    ns = int((t0 + into) * 1e9)
     m.header.stamp = Time(sec=ns // 10**9, nanosec=ns % 10**9)
     pub.publish(m)
 n.create_timer(0.05, tick)
@@ -129,7 +132,7 @@ rclpy.spin(n)
 
 
 def test_a_looping_recording_is_no_stale_data(children, run_of):
-    children.python(LOOPING, name="player")
+    children.python(LOOPING, "7", "0", name="player")
     run = run_of(["message_age"])
     _ready(run, "topic:/mocap")
     resets, end = [], time.monotonic() + 24.0  # three loops, each 7 s older than the last
@@ -140,6 +143,22 @@ def test_a_looping_recording_is_no_stale_data(children, run_of):
     assert all(6.0 < e.data["back_s"] < 8.0 for e in resets), resets
     assert _theta(run, "topic:/mocap")["stamp_age_ms"] > 5000.0  # its data are old, and that is its time
     assert run.alerts == []
+
+
+def test_a_recordings_pause_between_loops_is_a_silence_once(children, run_of):
+    children.python(LOOPING, "14", "2.5", name="player")  # 11.5 s of 10 Hz, then 2.5 s of nothing
+    run = run_of(["topic_rate", "message_age"])
+    _ready(run, "topic:/mocap")
+    resets, end = [], time.monotonic() + 46.0  # three pauses
+    while time.monotonic() < end:
+        resets += [e.t for e in run.step().events if e.kind == "stamp_reset"]
+        time.sleep(PERIOD)
+    assert len(resets) >= 3, resets
+    silences = [a.t for a in run.alerts if a.plugin == "topic_rate"]
+    # the first pause of a continuous topic is a departure; ended by its stamps going back, it is
+    # learned as the stream's loop, and the next pauses are within its rhythm
+    assert silences and max(silences) < resets[0] + 1.0, (silences, resets)
+    assert [a for a in run.alerts if a.plugin == "message_age"] == []
 
 
 SIMULATED = """

@@ -240,6 +240,22 @@ def test_topic_rate_bursty_topic_is_quiet_when_healthy_and_silent_when_hung_past
     assert round(alerts[0].data["limit_s"], 2) == 13.2 and "longest healthy gap 6.6 s" in alerts[0].message
 
 
+def test_topic_rate_a_loops_pause_ended_by_its_stamps_going_back_is_learned():
+    # a recording played in loops: 10 Hz for 28 s, a 2 s pause, again (its stamps go back each time)
+    msgs = bursts(range(0, 120, 30), on=28.0)
+    frames = sampled(msgs, HALF)
+    restarts = {30.5, 60.5, 90.5}  # the first sample after each pause
+
+    def reset(t):
+        return [Event(t - 0.5, "stamp_reset", "topic:/img", "info", "header stamps went back 30.0 s",
+                      {"back_s": 30.0})] if t in restarts else []
+    looped = [(t, G, reset(t)) for t, G, _ in frames]
+    alerts = drive("topic_rate", looped)
+    assert alerts and max(t for t, _, _ in alerts) < 30.5  # its first pause only: a departure
+    # without the stamps going back, every pause of the continuous topic is a silence
+    assert max(t for t, _, _ in drive("topic_rate", frames)) > 90.0
+
+
 def test_topic_rate_short_bursts_are_judged_by_their_rate_while_publishing():
     # 5 messages at 10 Hz every 6 s: the 3 s window's rate is at most 1.7 Hz and mostly lower
     # (0.3 Hz as a burst leaves it); its 5.6 s quiets are its rhythm, learned as gaps. (The grid of
