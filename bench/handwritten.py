@@ -113,6 +113,14 @@ class Robot:
             raise ValueError(f"fault {fault}: unknown kind {how!r}")
 
 
+class NamespacedRobot(Robot):
+    """A robot whose nodes share base names across namespaces: a node's fault file is named by its
+    namespace and name (``r1.planner``, ``arm.left.controller``)."""
+
+    def fault_file(self, target: str) -> Path:
+        return self.fault_dir / target.strip("/").replace("/", ".")
+
+
 def run(robot: Robot, fault: str | None, seconds_before: float, post: float,
         samples: Path | None = None) -> dict:
     """One run of ``robot`` (not started yet) under the monitor, ``fault`` injected

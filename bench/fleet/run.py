@@ -11,9 +11,8 @@ after that.
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
-from bench.handwritten import Design, Robot, main
+from bench.handwritten import Design, NamespacedRobot, main
 
 DESIGN = Design(
     module="bench.fleet.robot",
@@ -46,13 +45,6 @@ DESIGN = Design(
 NODES, FAULTS = DESIGN.nodes, DESIGN.faults
 
 
-class Fleet(Robot):
-    """The fleet: a node's fault file is named by its namespace and name (``r1.planner``)."""
-
-    def fault_file(self, target: str) -> Path:
-        return self.fault_dir / target.strip("/").replace("/", ".")
-
-
 if __name__ == "__main__":
-    sys.exit(main(None, __doc__, "fleet", Fleet, DESIGN, 40.0,
+    sys.exit(main(None, __doc__, "fleet", NamespacedRobot, DESIGN, 40.0,
                   "s from the start to the injection (40: the teleop joined, goals under way)"))

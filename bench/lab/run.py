@@ -39,9 +39,8 @@ The faults, each with its true root cause (the target node):
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
-from bench.handwritten import Design, Robot, main
+from bench.handwritten import Design, NamespacedRobot, main
 
 DESIGN = Design(
     module="bench.lab.robot",
@@ -75,13 +74,6 @@ DESIGN = Design(
 NODES, FAULTS = DESIGN.nodes, DESIGN.faults
 
 
-class Lab(Robot):
-    """The lab robot: a node's fault file is named by its namespace and name (``arm.left.controller``)."""
-
-    def fault_file(self, target: str) -> Path:
-        return self.fault_dir / target.strip("/").replace("/", ".")
-
-
 if __name__ == "__main__":
-    sys.exit(main(None, __doc__, "lab", Lab, DESIGN, 40.0,
+    sys.exit(main(None, __doc__, "lab", NamespacedRobot, DESIGN, 40.0,
                   "s from the start to the injection (40: the console joined, the first grasp planned)"))
