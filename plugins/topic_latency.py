@@ -31,7 +31,8 @@ class TopicLatency(Plugin):
     jitter the spread over the window, so one late message (a publisher or the network busy for
     a moment while a participant joins) or one gap (a mux switching sources, a process stalled)
     holds the value up for the whole window, on a slow topic at several times its baseline;
-    only a rise that outlasts the window is a change of the topic.
+    only a rise that outlasts the window is a change of the topic. Jitter is not judged while
+    several publishers send on the topic (`_interleaved`).
 
     Common mode: when at least ``common_mode_min`` topics and ``common_mode_ratio`` of the topics
     measured in a sample rise at once, the sample is a stall of the host or of the monitor (the
@@ -70,6 +71,8 @@ class TopicLatency(Plugin):
             fresh = age != age or age < since  # a message since the last sample (age unknown: yes)
             rate = ctx.value(topic, "rate_hz")
             for attr in ("latency_ms", "jitter_ms"):
+                if attr == "jitter_ms" and _interleaved(ctx, topic):
+                    continue
                 floor = _least_rise(s, attr, rate)
                 ex = excess(ctx, topic, attr, floor, alerting)
                 ex = _above_usual(ctx, topic, attr, floor, ex, alerting)
@@ -88,6 +91,17 @@ class TopicLatency(Plugin):
                 yield ctx.alert(topic, "warn", f"{what} {value:.1f} ms, normally {med:.1f} ms",
                                 symptom=f"{what}_rise", value_ms=value, baseline_ms=med)
         yield from drops
+
+
+def _interleaved(ctx: PluginContext, topic: str) -> bool:
+    """True when several publishers sent on ``topic`` in the window (``publisher_rates``; without
+    it, when it has several publishers): its arrival intervals interleave their streams, and one
+    joining or pausing (a joystick held beside an autonomy node) changes the jitter with nothing
+    late. Its jitter says nothing then."""
+    rates = ctx.attr(topic, "publisher_rates")
+    if rates:
+        return sum(1 for hz in rates.values() if hz > 0) > 1
+    return ctx.value(topic, "publishers") > 1
 
 
 def _least_rise(s: dict[str, Any], attr: str, rate: float) -> float:

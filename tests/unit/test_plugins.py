@@ -1123,6 +1123,20 @@ def test_graph_anomalies_duplicate_names():
     assert drive("graph_anomalies", [(1.0, G, [])]) == [(1.0, "node:/camera", "error")]
 
 
+def test_topic_latency_jitter_of_two_publishers_interleaving_is_not_judged():
+    # a joystick held beside an autonomy node: while both send, the arrival intervals interleave
+    def both(jitter, joystick):
+        G = model(jitter=jitter)
+        G.nodes["topic:/img"]["publisher_rates"] = {"node:/camera": 10.0, "node:/joystick": joystick}
+        return G
+    healthy = [(float(t), both(noisy(1.0, 0.3), 0.0), []) for t in range(30)]
+    held = [(float(t), both(90.0, 20.0), []) for t in range(30, 40)]
+    assert drive("topic_latency", healthy + held) == []
+    # the same rise with one publisher sending is the topic's own
+    alone = [(float(t), both(90.0, 0.0), []) for t in range(30, 40)]
+    assert drive("topic_latency", healthy + alone) != []
+
+
 def test_topic_latency_counts_one_late_message_once():
     # A topic slower than the sampling: one late message stays in the 3 s window for 3 samples
     # (ages 0.2, 1.2, 2.2 s). That is one observation, not three: no alert. Three late
