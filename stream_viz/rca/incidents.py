@@ -12,7 +12,9 @@ incident). Each incident is ranked on its own alerts; the diagnosis is the ranki
 
 The current incident is one with a candidate at all (not, say, the metric evidence of a process
 that hosts no node); among those an ongoing one (its last episode ended less than
-``episode_gap`` before the latest alert, or lasts: a node that vanished) if any; among those,
+``episode_gap`` before the latest alert, or lasts: a node that vanished) if any; among those
+one with an alerted symptom still holding (within ``LASTING_S`` of the latest alert: a blip that
+ended 20 s ago does not displace a fault whose alerts still come) if any; among those,
 one that is not a recurrence (an incident all of whose members had symptoms in incidents that ended before it
 began) if any; among those the one whose best candidate stands out most (the strongest
 hypothesis test ``ht`` among its candidates, the same for every ranking method), so a minor
@@ -41,11 +43,16 @@ from stream_viz.records import Alert
 Ranker = Callable[[Context], list[RootCause]]
 
 
+LASTING_S = 10.0  # a symptom within this of the latest alert still holds (stored every 5 s)
+
+
 @dataclass
 class Incident:
     """One incident: its members' episodes in it, when, and its ranked root causes.
 
-    ``end`` is the last alert (or evidence) time; ``ongoing`` whether it still goes on;
+    ``end`` is the last alert (or evidence) time; ``ongoing`` whether it still goes on (its
+    last episode ended less than the episode gap ago); ``lasting`` whether an alerted symptom of
+    it held within `LASTING_S` of the latest alert;
     ``recurring`` whether all its members had symptoms in incidents that ended before it began;
     ``strength`` the strongest hypothesis test among its candidates and ``first`` the member of
     its earliest alert (set when it is ranked);
@@ -58,6 +65,7 @@ class Incident:
     start: float
     end: float
     ongoing: bool
+    lasting: bool = False
     recurring: bool = False
     strength: float = 0.0
     first: str | None = None
@@ -211,7 +219,11 @@ def find_incidents(
         start = min(a for v in eps.values() for a, _ in v)
         last = max(b for v in eps.values() for _, b in v)
         end = max(b if b < INF else max(a, now) for v in eps.values() for a, b in v)
-        out.append(Incident(0, eps, start, end, last >= now - gap))
+        # Lasting by its alerts: metric evidence (a hint, such as a process's CPU burst) keeps no
+        # blip that ended current over a fault whose alerts still come.
+        said = [items[i][1][1] for i in members
+                if alerted is None or items[i][1] in alerted.get(items[i][0], ())]
+        out.append(Incident(0, eps, start, end, last >= now - gap, max(said) >= now - LASTING_S))
     out.sort(key=lambda inc: (inc.start, inc.members))
     for k, inc in enumerate(out, 1):
         inc.id = k
@@ -224,7 +236,7 @@ def current(incidents: list[Incident]) -> Incident | None:
     """Return the current incident (module docstring), or None when there is none."""
     if not incidents:
         return None
-    return max(incidents, key=lambda inc: (inc.strength > 0, inc.ongoing, not inc.recurring,
+    return max(incidents, key=lambda inc: (inc.strength > 0, inc.ongoing, inc.lasting, not inc.recurring,
                                            round(inc.strength, 9), len(inc.episodes), inc.start))
 
 

@@ -107,6 +107,21 @@ def test_the_current_incident_is_ongoing_new_and_stands_out(G):
     assert current(strengths(old, **{SCAN: 0.3, BATTERY: 0.0})).members == [SCAN]  # even when over
 
 
+def test_a_blip_that_ended_does_not_displace_a_fault_whose_alerts_still_come(G):
+    # /scan's fault alerts from 100 s to now (130); the battery's loud blip ended at 112, within
+    # the episode gap, its process evidence (a hint) going on to 121: the fault is current
+    episodes = {SCAN: [(100.0, 130.0)], BATTERY: [(110.0, 112.0)], BATT: [(111.0, 121.0)]}
+    alerted = {SCAN: [(100.0, 130.0)], BATTERY: [(110.0, 112.0)]}
+    got = find_incidents(G, episodes, 4, 15.0, 130.0, alerted=alerted)
+    assert [(i.members, i.ongoing, i.lasting) for i in got] == [
+        ([SCAN], True, True), ([BATT, BATTERY], True, False)]
+    assert current(strengths(got, **{SCAN: 0.3, BATT: 0.9})).members == [SCAN]
+    # its alerts still coming too (at 125): the one that stands out more
+    alerted[BATTERY] = episodes[BATTERY] = [(110.0, 125.0)]
+    got = find_incidents(G, episodes, 4, 15.0, 130.0, alerted=alerted)
+    assert current(strengths(got, **{SCAN: 0.3, BATT: 0.9})).members == [BATT, BATTERY]
+
+
 def test_an_older_unrelated_incident_does_not_take_the_first_place(G):
     # The controller logged errors long ago (an old incident, loud: 10 errors); now the sensor
     # crashes. Before: one ranking of everything in the window put the controller first.
