@@ -14,7 +14,8 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, forget_baseline, held, streak
+from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, held, streak
+from stream_viz.detect.reconfigure import learnt_since, relearn_from
 from stream_viz.records import Alert
 
 
@@ -59,13 +60,11 @@ class MessageAge(Plugin):
         s = ctx.settings
         alerting = ctx.state.setdefault("alerting", set())
         since = ctx.since_last_call()
-        restarted = ctx.state.setdefault("restarted", {})  # topic -> when its stamps went back
         for e in ctx.events:
-            if e.kind == "stamp_reset":
-                restarted[e.member] = e.t
+            if e.kind == "stamp_reset":  # its stamps went back: the age is learnt anew from then
+                relearn_from(ctx, e.member, "stamp_age_ms", e.t)
                 alerting.discard((e.member, "stamp_age_ms"))
                 held(ctx.state, e.member, False, ctx.t)
-                forget_baseline(ctx, e.member, "stamp_age_ms")
         for topic in ctx.watched():
             age = ctx.value(topic, "stamp_age_ms")
             if math.isnan(age):
@@ -76,20 +75,20 @@ class MessageAge(Plugin):
             skew = "ahead" if ahead else "implausible" if implausible else None
             if _standing(ctx, topic, skew, s["learn_s"]):
                 if skew == "ahead":
-                    yield from self._stale(ctx, topic, age, fresh, alerting, restarted.get(topic))
+                    yield from self._stale(ctx, topic, age, fresh, alerting)
                 continue
             if streak(ctx.state, (topic, "skew"), skew is not None, fresh) >= s["confirm"]:
                 yield _skew(ctx, topic, age)
                 continue
             if skew is not None:
                 continue
-            yield from self._stale(ctx, topic, age, fresh, alerting, restarted.get(topic))
+            yield from self._stale(ctx, topic, age, fresh, alerting)
 
     @staticmethod
-    def _stale(ctx: PluginContext, topic: str, age: float, fresh: bool, alerting: set,
-               restarted: float | None) -> Iterator[Alert]:
+    def _stale(ctx: PluginContext, topic: str, age: float, fresh: bool, alerting: set) -> Iterator[Alert]:
         s = ctx.settings
-        seen = excess(ctx, topic, "stamp_age_ms", s["min_rise_ms"], alerting, since=restarted)
+        since = learnt_since(ctx, topic, "stamp_age_ms")
+        seen = excess(ctx, topic, "stamp_age_ms", s["min_rise_ms"], alerting, since=since)
         if seen is not None:
             value, med, risen = seen
             seen = (value, med, risen and value - med >= s["rise_ratio"] * abs(med))

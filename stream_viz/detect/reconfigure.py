@@ -38,8 +38,16 @@ def param_changes(ctx: Any) -> dict[str, float]:
 
 
 def learnt_since(ctx: Any, member: str, attr: str) -> float | None:
-    """Return the time ``member``'s ``attr`` is learnt anew from (its last reconfiguration), or None."""
+    """Return the time ``member``'s ``attr`` is learnt anew from (its last reconfiguration, or
+    another change of its normal: `relearn_from`), or None."""
     return ctx.state.get("_relearn", {}).get((member, attr))
+
+
+def relearn_from(ctx: Any, member: str, attr: str, at: float) -> None:
+    """Learn ``member``'s ``attr`` anew from ``at`` (its normal changed then): `learnt_since`
+    answers ``at``, the cached baseline is dropped (`excess` takes ``since``)."""
+    ctx.state.setdefault("_relearn", {})[(member, attr)] = at
+    forget_baseline(ctx, member, attr)
 
 
 @reads_settings(*RECONFIGURE_SETTINGS)
@@ -64,7 +72,6 @@ def reconfigured(ctx: Any, member: str, attr: str, nodes: Iterable[str],
     prompt = at is not None and at <= start <= at + ctx.settings["reconfigure_s"]
     if not prompt or relearn.get(key, -float("inf")) >= at:
         return False
-    relearn[key] = at
-    forget_baseline(ctx, member, attr)
+    relearn_from(ctx, member, attr, at)
     began.pop(key, None)
     return True
