@@ -117,9 +117,10 @@ def _waiting(ctx: PluginContext, service: str, servers: list[str]) -> Iterator[A
 
 
 def _longest_ms(ctx: PluginContext, service: str) -> float:
-    """The longest mean response time the service has shown (NaN: none answered yet): its usual
-    time until a baseline is learnt (a service called twice a minute takes minutes to learn)."""
-    _, values = ctx.past(service, "response_ms")
+    """The longest mean response time the service has shown in the baseline's ``window`` (NaN:
+    none answered yet): its usual time until a baseline is learnt (a service called twice a
+    minute takes minutes to learn)."""
+    _, values = ctx.past(service, "response_ms", last=ctx.settings["window"])
     values = values[~np.isnan(values)]
     return float(values.max()) if len(values) else float("nan")
 

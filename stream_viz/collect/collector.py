@@ -343,13 +343,12 @@ class Collector:
 def stamp_reset_events(stats: dict[str, TopicStats]) -> list[Event]:
     """One ``stamp_reset`` event per topic whose header stamps went back since the last sample."""
     out = []
-    for topic, st in sorted(stats.items()):
-        if st.stamp_resets:
-            recv, back = max(st.stamp_resets, key=lambda r: r[1])
-            out.append(Event(recv / 1e9, "stamp_reset", make_id("topic", topic), "info",
-                             f"header stamps went back {back / 1e9:.1f} s: the stream restarted its time "
-                             "(a recording looped, a simulation reset)",
-                             {"back_s": back / 1e9, "resets": len(st.stamp_resets)}))
+    for topic, st in sorted((tp, st) for tp, st in stats.items() if st.stamp_resets):
+        recv, back = max(st.stamp_resets, key=lambda r: r[1])
+        out.append(Event(recv / 1e9, "stamp_reset", make_id("topic", topic), "info",
+                         f"header stamps went back {back / 1e9:.1f} s: the stream restarted its time "
+                         "(a recording looped, a simulation reset)",
+                         {"back_s": back / 1e9, "resets": len(st.stamp_resets)}))
     return out
 
 

@@ -123,8 +123,8 @@ def snapshot_main(json: bool, settle_s: float) -> str:
 
     half = max(settle_s, 0.0) / 2
     with Collector() as c:
-        discover(lambda: frozenset(node_fqn(ns, n) for n, ns in c.node.get_node_names_and_namespaces()
-                                   if node_fqn(ns, n) != c.own), half)
+        discover(lambda: frozenset(node_fqn(ns, n) for n, ns in c.node.get_node_names_and_namespaces())
+                 - {c.own}, half)
         c.sample()  # subscribes to the topics, primes cpu % and the per-second rates
         time.sleep(half)
         sample = c.sample()
