@@ -110,14 +110,17 @@ def test_a_device_clock_ahead_from_the_start_is_normal_and_its_late_data_is_not(
 
 
 LOOPING = """
-import sys, time
+import os, sys, time
 import rclpy
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import Imu
 rclpy.init()
 n = rclpy.create_node('log_player')
 pub = n.create_publisher(Imu, '/mocap', 10)
-t0, loop, pause = time.time(), float(sys.argv[1]), float(sys.argv[2])
+loop, pause = float(sys.argv[1]), float(sys.argv[2])
+while len(sys.argv) > 3 and not os.path.exists(sys.argv[3]):  # played from when the test says
+    time.sleep(0.05)
+t0 = time.time()
 def tick():  # a recording played in loops: its stamps go back to the first loop's each time
     into = (time.time() - t0) % loop
     if into > loop - pause:
@@ -145,11 +148,13 @@ def test_a_looping_recording_is_no_stale_data(children, run_of):
     assert run.alerts == []
 
 
-def test_a_recordings_pause_between_loops_is_a_silence_once(children, run_of):
-    children.python(LOOPING, "14", "2.5", name="player")  # 11.5 s of 10 Hz, then 2.5 s of nothing
+def test_a_recordings_pause_between_loops_is_a_silence_once(children, tmp_path, run_of):
+    play = tmp_path / "play"
+    children.python(LOOPING, "16", "2.5", str(play), name="player")  # 13.5 s of 10 Hz, 2.5 s of nothing
     run = run_of(["topic_rate", "message_age"])
-    _ready(run, "topic:/mocap")
-    resets, end = [], time.monotonic() + 46.0  # three pauses
+    _ready(run, "node:/log_player")
+    play.write_text("1")  # from the monitor's first look, so the topic has settled before a pause
+    resets, end = [], time.monotonic() + 52.0  # three pauses
     while time.monotonic() < end:
         resets += [e.t for e in run.step().events if e.kind == "stamp_reset"]
         time.sleep(PERIOD)
