@@ -6,6 +6,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.detect.startup import standing
 from stream_viz.records import SEVERITY_RANK as RANK
 from stream_viz.records import Alert, Event
 
@@ -80,13 +81,10 @@ class Diagnostics(Plugin):
 
 def _standing(ctx: PluginContext, e: Event, level: str, learn_s: float) -> bool:
     """True when a WARN is the normal of ``e``'s status: it warned within ``learn_s`` of when it was
-    first seen, at any level (kept per status name in the plugin state; called for every status)."""
-    first = ctx.state.setdefault("first_seen", {})  # status name -> (first seen, warned while learning)
+    first seen, at any level (`standing`, per status name; called for every status), or its
+    warning comes and goes."""
     name = str(e.data.get("name", ""))
-    since, warned = first.setdefault(name, (e.t, False))
-    if level == "warn" and not warned and e.t - since < learn_s:
-        first[name] = (since, True)
-        return True
+    warned = standing(ctx.state, name, e.t, "warn" if level == "warn" else None, learn_s)
     return warned or _recurring(ctx, name, level)
 
 

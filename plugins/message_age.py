@@ -16,6 +16,7 @@ from typing import Any, ClassVar
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, held, streak
 from stream_viz.detect.reconfigure import learnt_since, relearn_from
+from stream_viz.detect.startup import standing
 from stream_viz.records import Alert
 
 
@@ -73,7 +74,7 @@ class MessageAge(Plugin):
             fresh = math.isnan(newest) or newest < since  # a message since the last sample
             ahead, implausible = age < -s["skew_ms"], age > s["implausible_s"] * 1000.0
             skew = "ahead" if ahead else "implausible" if implausible else None
-            if _standing(ctx, topic, skew, s["learn_s"]):
+            if standing(ctx.state, topic, ctx.t, skew, s["learn_s"]):
                 if skew == "ahead":
                     yield from self._stale(ctx, topic, age, fresh, alerting)
                 continue
@@ -102,16 +103,6 @@ class MessageAge(Plugin):
         yield ctx.alert(topic, "warn", f"stale data: messages arrive {age:.0f} ms after their header "
                         f"stamp{usual}", symptom="stale", value_ms=age,
                         baseline_ms=None if risen is None else risen[1])
-
-
-def _standing(ctx: PluginContext, topic: str, skew: str | None, learn_s: float) -> bool:
-    """Whether ``skew`` (None: none now) is the topic's standing skew: shown within ``learn_s`` of
-    its first stamped message (the first kind shown then is its normal; none then: none is)."""
-    first = ctx.state.setdefault("first", {}).setdefault(topic, ctx.t)
-    normal = ctx.state.setdefault("normal_skew", {})
-    if skew is not None and ctx.t - first <= learn_s:
-        normal.setdefault(topic, skew)
-    return skew is not None and normal.get(topic) == skew
 
 
 def _skew(ctx: PluginContext, topic: str, age: float) -> Alert:

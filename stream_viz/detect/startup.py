@@ -1,5 +1,6 @@
 """A node's bring-up: the first seconds of its process, when complaints are usually about peers
-that are not up yet ("service not available, retrying", a transform not yet published)."""
+that are not up yet ("service not available, retrying", a transform not yet published); and a
+member's standing condition: what it shows from its first look on is its normal."""
 
 from __future__ import annotations
 
@@ -43,3 +44,28 @@ def hold_back(ctx: PluginContext, node: str) -> None:
     """Count a line of ``node`` logged during its bring-up: not a symptom by itself."""
     held = ctx.state.setdefault("bring_up", {})
     held[node] = held.get(node, 0) + 1
+
+
+def standing(state: dict, key: object, t: float, kind: str | None, learn_s: float) -> bool:
+    """Return True when ``kind`` (None: nothing now) is ``key``'s standing condition: the first
+    kind it showed within ``learn_s`` of when it was first seen (a status that warns from the
+    start, a device whose stamps run ahead of our clock). Robots run with such conditions.
+
+    Parameters
+    ----------
+    state : dict
+        The plugin's state (``ctx.state``); the first sight and the normal are kept in it.
+    key : hashable
+        What is judged (a status name, a topic).
+    t : float
+        Now, or the observation's time.
+    kind : str or None
+        The condition it shows now.
+    learn_s : float
+        How long after the first sight a condition counts as its normal.
+    """
+    first = state.setdefault("_first_seen", {}).setdefault(key, t)
+    normal = state.setdefault("_standing", {})
+    if kind is not None and t - first < learn_s:
+        normal.setdefault(key, kind)
+    return kind is not None and normal.get(key) == kind
