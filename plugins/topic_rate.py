@@ -19,7 +19,7 @@ from stream_viz.detect.baseline import (
     streak,
 )
 from stream_viz.detect.process import SETTINGS as PROCESS_SETTINGS
-from stream_viz.detect.rhythm import SAME_MESSAGE_S, Rhythm, follow, newest_message, quiet_limit
+from stream_viz.detect.rhythm import SAME_MESSAGE_S, Rhythm, follow, newest_message, quiet_limit, restarted
 from stream_viz.model.ids import name_of
 from stream_viz.model.qos import qos_policy
 from stream_viz.records import Alert
@@ -101,9 +101,9 @@ class TopicRate(Plugin):
         alerting = ctx.state.setdefault("alerting", set())
         ctx.state["interval"] = ctx.since_last_call()  # what this sample's process metrics cover
         rhythms: dict[str, Rhythm] = ctx.state.setdefault("rhythms", {})
-        for e in ctx.events:  # its stream restarted its time (a recording looped): the quiet that
-            if e.kind == "stamp_reset" and e.member in rhythms:  # ends now was its loop's end
-                rhythms[e.member].departed = False
+        for e in ctx.events:
+            if e.kind == "stamp_reset" and e.member in rhythms:
+                restarted(rhythms[e.member])
         watched = list(ctx.watched())
         # Every topic's rhythm is followed, so one the RCA starts watching later is judged at once.
         topics = ctx.structural(lambda: set(ctx.members("topic")), key="topics")

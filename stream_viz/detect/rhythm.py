@@ -29,7 +29,11 @@ from what the collector shows every sample (the receive time of the newest messa
   median over time counts the quiets as zeros): against that rate a quiet of its own rhythm would
   not be notable, and the gaps a silence is judged by would go unlearned.
 
-Pure: `Rhythm` is plain data, changed only by `follow`.
+A quiet that ends as the topic's stream restarts its time (its stamps went back: a recording
+played in loops, paused between them) was the loop's end: `restarted` marks it healthy even if it
+alerted, so it is learned and the next pauses are within the rhythm.
+
+Pure: `Rhythm` is plain data, changed only by `follow` and `restarted`.
 """
 
 from __future__ import annotations
@@ -147,6 +151,12 @@ def follow(r: Rhythm, t: float, newest: float | None, rate: float, *, window_s: 
     if not r.settled:
         r.settled = _settles(r, settle_s, margin, min_gaps)
     return quiet
+
+
+def restarted(r: Rhythm) -> None:
+    """The topic's stream restarted its time (a ``stamp_reset``): the quiet that ends now was its
+    loop's end, a healthy gap to learn though it was a symptom."""
+    r.departed = False
 
 
 def _message(r: Rhythm, newest: float, notable: float) -> None:

@@ -78,3 +78,21 @@ def test_a_continuous_topic_slowed_to_a_quarter_is_a_rate_drop(hz):
     assert alerts, "no alert"
     first = alerts[0]
     assert first.data["symptom"] == "rate_drop" and HANG < first.t < HANG + 6.0, (first.t, first.message)
+
+
+def test_a_symptom_quiet_ended_by_a_restarted_stream_is_learned_as_a_gap():
+    from stream_viz.detect.rhythm import Rhythm, follow, restarted
+
+    def run(restart: bool) -> list[float]:
+        r, kw = Rhythm(), dict(window_s=3.0, notable=1.5, settle_s=10.0, margin=2.0, min_gaps=3)
+        for k in range(120):  # 10 Hz for 12 s: continuous
+            follow(r, k / 10 + 0.05, k / 10, 10.0, **kw)
+        follow(r, 14.0, 11.9, 10.0, **kw)  # 2.1 s quiet: a symptom
+        r.departed = True
+        if restart:
+            restarted(r)
+        follow(r, 15.0, 14.5, 10.0, **kw)  # the stream is back
+        return r.gaps
+
+    assert run(restart=True) == [pytest.approx(2.6)]
+    assert run(restart=False) == []
