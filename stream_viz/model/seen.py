@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Collection
+
 import networkx as nx
 
 from stream_viz.model.graph import graph_over
 
 
 def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float,
-             edges_kept: bool = False) -> nx.MultiDiGraph:
+             missing: list[tuple[str, str, int, dict]] | None = None) -> nx.MultiDiGraph:
     """Return the union of ``seen`` and the live model ``G`` at time ``t``.
 
     Members and edges of ``G`` take their current attributes (no ``gone``; an attribute they no
@@ -24,9 +26,9 @@ def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float,
         The live model now.
     t : float
         Time of ``G``.
-    edges_kept : bool
-        The caller knows ``G`` has every edge of ``seen`` (``seen`` is the previous live model
-        and the collector's diff removed no edge): they are not searched for.
+    missing : list of (u, v, key, attributes), optional
+        ``missing_edges(seen, G)`` when the caller found it faster (`missing_among`); None:
+        searched here.
 
     Returns
     -------
@@ -40,7 +42,7 @@ def remember(seen: nx.MultiDiGraph, G: nx.MultiDiGraph, t: float,
     live = G._node
     lost = seen._node.keys() - live.keys()
     nodes = [(m, a) for m, a in seen._node.items() if m in lost]
-    edges = [] if edges_kept else missing_edges(seen, G)
+    edges = missing_edges(seen, G) if missing is None else missing
     if not nodes and not edges:
         return G
     out = graph_over(G)  # G's attribute dicts: read-only, as G itself when nothing is gone
@@ -80,6 +82,32 @@ def missing_edges(seen: nx.MultiDiGraph, G: nx.MultiDiGraph) -> list[tuple[str, 
             have = there.get(v, {}) if there is not None else {}
             out.extend((u, v, k, a) for k, a in keys.items() if k not in have)
     return out
+
+
+def missing_among(seen: nx.MultiDiGraph, G: nx.MultiDiGraph,
+                  edges: Collection[tuple[str, str, int]]) -> list[tuple[str, str, int, dict]]:
+    """Return those of ``edges`` that ``seen`` has and ``G`` lacks, as `missing_edges` does (in
+    ``seen``'s edge order, with ``seen``'s attribute dicts), looking at ``edges`` only.
+
+    Parameters
+    ----------
+    seen, G : MultiDiGraph
+        Two graphs (not modified).
+    edges : collection of (u, v, key)
+        The candidates; those ``seen`` lacks are left out.
+
+    Returns
+    -------
+    list of tuple
+        ``[e for e in missing_edges(seen, G) if e[:3] in edges]``.
+    """
+    have, live = seen._succ, G._succ
+    found = [(u, v, k) for u, v, k in edges
+             if k in have.get(u, {}).get(v, ()) and k not in live.get(u, {}).get(v, ())]
+    if len(found) > 1:  # seen's order: its members', then each member's neighbours', then keys'
+        at = {m: i for i, m in enumerate(seen._node)}
+        found.sort(key=lambda e: (at[e[0]], list(have[e[0]]).index(e[1]), list(have[e[0]][e[1]]).index(e[2])))
+    return [(u, v, k, have[u][v][k]) for u, v, k in found]
 
 
 def drop_gone(seen: nx.MultiDiGraph, t: float, keep_s: float) -> list[str]:

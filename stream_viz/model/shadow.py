@@ -7,7 +7,7 @@ import networkx as nx
 from stream_viz.model.diff import GraphDiff
 from stream_viz.model.graph import new_graph
 from stream_viz.model.history import History
-from stream_viz.model.seen import drop_gone, remember
+from stream_viz.model.seen import drop_gone, missing_among, missing_edges, remember
 
 
 class Shadow:
@@ -27,6 +27,9 @@ class Shadow:
         self.history = History(maxlen=history)
         self.forget_gone_s = forget_gone_s
         self._live: nx.MultiDiGraph | None = None  # the previous live model
+        # The edges of the seen graph that are gone: with the sample's diff, the only ones the
+        # live model can lack, so no sample searches every edge (after a crash: every sample).
+        self._gone_edges: set[tuple[str, str, int]] = set()
         # Changes whenever the seen graph's members or edges change (which of them are gone
         # included): what is drawn from its structure alone is built again only then.
         self.structure = 0
@@ -35,12 +38,15 @@ class Shadow:
         """Add the live model ``G`` at ``t`` (its members, its θ); return the members forgotten
         (sorted).
 
-        ``diff`` is the sample's (what changed since the previous live model): while the seen
-        graph is that model itself (nothing gone), the edges it lacks are the diff's removed ones,
-        so with none removed they are not searched for (every edge, every sample).
+        ``diff`` is the sample's (what changed since the previous live model): the edges the seen
+        graph has and ``G`` lacks are then among its gone ones and the diff's removed ones, and
+        only those are looked at (not every edge, every sample).
         """
-        kept = diff is not None and self.seen is self._live and not diff.removed_edges
-        self.seen = remember(self.seen, G, t, edges_kept=kept)
+        if diff is not None and self._live is not None:
+            missing = missing_among(self.seen, G, self._gone_edges | diff.removed_edges)
+        else:
+            missing = missing_edges(self.seen, G)
+        self.seen = remember(self.seen, G, t, missing)
         self._live = G
         # Long after a member vanished (longer than the RCA window by default) it can no longer
         # be a cause: drop it and its history, so a churning system does not grow the run.
@@ -48,6 +54,7 @@ class Shadow:
         gone = drop_gone(self.seen, t, self.forget_gone_s)
         if gone:
             self.history.forget(set(self.seen))
+        self._gone_edges = {(u, v, k) for u, v, k, _ in missing if not gone or self.seen.has_edge(u, v, k)}
         if diff is None or diff or gone:  # an empty diff: the same live structure, the same gone
             self.structure += 1
         # The attribute dicts, not a data view: every member, every sample.

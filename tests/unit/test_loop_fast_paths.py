@@ -18,7 +18,7 @@ from stream_viz.model.graph import (
     new_graph,
 )
 from stream_viz.model.history import History
-from stream_viz.model.seen import missing_edges, remember
+from stream_viz.model.seen import missing_among, missing_edges, remember
 from stream_viz.viz.system import signatures
 
 A, B, T = "node:/a", "node:/b", "topic:/t"
@@ -71,6 +71,25 @@ def test_missing_edges_equals_the_definition_on_random_graphs():
         seen, live = _graph(pool), _graph([e for e in pool if rng.random() < 0.8])
         assert missing_edges(seen, live) == _missing_by_definition(seen, live)
         assert missing_edges(live, seen) == _missing_by_definition(live, seen)
+
+
+def test_missing_among_literal_and_on_random_graphs():
+    seen = _graph([(A, T, 0), (T, B, 0), (A, B, 1), ("process:1", A, 1)])
+    live = _graph([(A, T, 0)])
+    # Only the candidates, in seen's order; one seen lacks and one live has are left out.
+    got = missing_among(seen, live, {("process:1", A, 1), (T, B, 0), (B, A, 0), (A, T, 0)})
+    assert [e[:3] for e in got] == [(T, B, 0), ("process:1", A, 1)]
+    assert got[0][3] is seen.edges[T, B, 0]
+    rng = random.Random(9)
+    members = [f"node:/n{i}" for i in range(12)]
+    for _ in range(200):
+        pool = [(rng.choice(members), rng.choice(members), rng.randrange(3)) for _ in range(30)]
+        seen, live = _graph(pool), _graph([e for e in pool if rng.random() < 0.8])
+        every = {e[:3] for e in seen.edges(keys=True)}
+        assert missing_among(seen, live, every) == _missing_by_definition(seen, live)
+        some = {e for e in every if rng.random() < 0.5}
+        want = [e for e in _missing_by_definition(seen, live) if e[:3] in some]
+        assert missing_among(seen, live, some) == want
 
 
 def test_signatures_equal_the_definition():
