@@ -9,7 +9,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, held, streak
+from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, held
 from stream_viz.model.qos import qos_policy
 from stream_viz.records import Alert
 
@@ -22,8 +22,8 @@ class TopicLatency(Plugin):
     ``latency_period_ratio`` × the period for latency) and the value is also that floor above
     what the topic often shows (the ``usual_quantile`` of the same past: the jitter of a topic
     that publishes in bursts includes its gaps in some windows and not in others, a two-valued
-    past whose median says nothing) for ``confirm`` samples in a row; drops when
-    ``drops_per_s ≥ max(drops_min_per_s, drops_ratio × rate)`` for ``confirm`` samples. Only
+    past whose median says nothing) for ``confirm`` samples in a row; drops likewise, risen by
+    ``max(drops_min_per_s, drops_ratio × rate)`` above the topic's own (`_drops`). Only
     samples with a message newer than the previous sample count (``age_s``): a topic slower than
     the sampling keeps one late message in its window for several samples, which is one
     observation, not ``confirm``. A rise must also have held for ``latency_hold_s`` /
@@ -77,7 +77,7 @@ class TopicLatency(Plugin):
                 ex = excess(ctx, topic, attr, floor, alerting)
                 ex = _above_usual(ctx, topic, attr, floor, ex, alerting)
                 seen.append((topic, attr, ex, fresh))
-            drops += _drops(ctx, topic, rate, fresh)
+            drops += _drops(ctx, topic, rate, fresh, alerting)
         stall = common_mode(seen, s["common_mode_min"], s["common_mode_ratio"])
         if stall:
             ctx.state["common_mode"] = ctx.state.get("common_mode", 0) + 1
@@ -136,19 +136,28 @@ def _above_usual(ctx: PluginContext, topic: str, attr: str, floor: float,
     return value, med, value - hit[1] >= floor
 
 
-def _drops(ctx: PluginContext, topic: str, rate: float, fresh: bool) -> list[Alert]:
-    """``drops_per_s ≥ max(drops_min_per_s, drops_ratio × rate)`` for ``confirm`` fresh samples,
-    on a topic some publisher sends reliably: a best-effort publisher's messages are lost by
-    design on a busy link or reader, the monitor's own first (sequence gaps are counted where
-    the monitor receives)."""
+def _drops(ctx: PluginContext, topic: str, rate: float, fresh: bool, alerting: set) -> list[Alert]:
+    """Drops risen above the topic's own: ``drops_per_s`` at least ``max(drops_min_per_s,
+    drops_ratio × rate)`` above its baseline and its usual (as latency, `excess`), for
+    ``confirm`` fresh samples, on a topic some publisher sends reliably.
+
+    Sequence gaps are counted where the monitor receives, best effort: a best-effort publisher's
+    messages are lost by design on a busy link or reader, and a reliable one's large messages
+    (images, point clouds: many fragments each) reach a best-effort reader with some missing all
+    the time. What a topic shows from the first look on is its normal; a rise above it is news.
+    """
     s = ctx.settings
-    drops = ctx.value(topic, "drops_per_s")
-    if math.isnan(drops) or best_effort(ctx.attr(topic, "qos")):
+    if best_effort(ctx.attr(topic, "qos")):
         return []
-    limit = max(s["drops_min_per_s"], s["drops_ratio"] * (0.0 if math.isnan(rate) else rate))
-    if streak(ctx.state, (topic, "drops"), drops >= limit, fresh) < s["confirm"]:
+    floor = max(s["drops_min_per_s"], s["drops_ratio"] * (0.0 if math.isnan(rate) else rate))
+    ex = _above_usual(ctx, topic, "drops_per_s", floor,
+                      excess(ctx, topic, "drops_per_s", floor, alerting), alerting)
+    risen = confirm(ctx, topic, "drops_per_s", ex, alerting, fresh)
+    if risen is None:
         return []
-    return [ctx.alert(topic, "warn", f"{drops:.3g} messages/s dropped", symptom="drops", drops_per_s=drops)]
+    drops, med = risen
+    return [ctx.alert(topic, "warn", f"{drops:.3g} messages/s dropped, normally {med:.3g}", symptom="drops",
+                      drops_per_s=drops, baseline_per_s=med)]
 
 
 def best_effort(qos: Any) -> bool:

@@ -626,25 +626,30 @@ def _note_frozen(ctx: PluginContext, pending: list[tuple[float, str, set[str], b
 def _publisher_stopped(ctx: PluginContext, topic: str, transitions: dict[str, list[float]]) -> Alert | None:
     """One publisher of a topic others go on publishing sent nothing in the collector's window
     after sending in each of its last ``STEADY_SAMPLES`` samples (``publisher_rates``: whose
-    messages they were), and has never before stopped and resumed by itself (a publisher that
+    messages they were; a node that left the topic's publishers and came back starts afresh),
+    and has never before stopped and resumed by itself (a publisher that
     does publishes in bursts: a joystick while held). The topic's rate hides it (``/tf`` from
     four nodes loses a quarter); the others still flowing, the stop is that publisher's. Not
     when the node changed state, or a node feeding it did, around its stop (`_healthy_quiet`),
     nor for a node gone from the graph (``member_gone``'s), nor while the simulation its
     publishers run on is paused."""
     rates = ctx.attr(topic, "publisher_rates") or {}
-    runs = ctx.state.setdefault("publisher_runs", {})  # (topic, node) -> (samples sending, stopped at)
+    # topic -> node -> (samples sending, stopped at); a node no longer publishing it is forgotten:
+    # one that comes back (restarted by hand, relaunched) is a new publisher, silent until it sends.
+    runs = ctx.state.setdefault("publisher_runs", {}).setdefault(topic, {})
+    for node in runs.keys() - rates.keys():
+        del runs[node]
     intermittent = ctx.state.setdefault("intermittent", set())  # (topic, node) that stopped and resumed
     stopped = []
     for node, hz in rates.items():
-        sending, since = runs.get((topic, node), (0, None))
+        sending, since = runs.get(node, (0, None))
         if hz > 0:
             if since is not None:  # it resumed by itself: it publishes in bursts (a joystick held)
                 intermittent.add((topic, node))
-            runs[topic, node] = ((sending if since is None else 0) + 1, None)
+            runs[node] = ((sending if since is None else 0) + 1, None)
             continue
         since = ctx.t if since is None else since
-        runs[topic, node] = (sending, since)
+        runs[node] = (sending, since)
         if sending >= STEADY_SAMPLES and (topic, node) not in intermittent and ctx.attr(node, "alive", True):
             stopped.append((node, since))
     others = sum(hz for hz in rates.values() if hz > 0)

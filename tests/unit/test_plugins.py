@@ -129,6 +129,26 @@ def test_topic_rate_one_of_two_publishers_stopping_is_its_symptom():
     assert drive("topic_rate", late) == []
 
 
+def test_topic_rate_a_publisher_restarted_by_hand_is_no_stop():
+    # /lidar's process is Ctrl-C'd at 30 s (it leaves the topic's publishers) and relaunched:
+    # back at 36 s, its first sample sends nothing yet, then it sends again. A new publisher.
+    def frames(back_hz):
+        out = []
+        for t in range(45):
+            G = _two_publishers(10.0, 10.0)
+            rates = G.nodes["topic:/img"]["publisher_rates"]
+            if 30 <= t < 36:
+                del rates["node:/lidar"]
+            elif t >= 36:
+                rates["node:/lidar"] = 0.0 if t == 36 else back_hz
+            out.append((float(t), G, []))
+        return out
+
+    assert drive("topic_rate", frames(10.0)) == []
+    # One that comes back and never sends has not sent steadily yet: no stop of it either.
+    assert drive("topic_rate", frames(0.0)) == []
+
+
 def test_topic_rate_a_publisher_in_bursts_is_no_stop():
     # a joystick held 6 s every 40 s beside an autonomy node at 10 Hz: its runs never reach 15
     # samples in a row (they do not add up), and once it has resumed by itself it publishes in
@@ -710,10 +730,16 @@ def test_topic_latency_quiet_then_rise_and_drops():
     # A jitter rise counts once it has outlasted the collector's 3 s window (jitter_hold_s 4 s).
     bursty = healthy[:30] + [(float(t), model(jitter=90.0), []) for t in range(30, 36)]
     assert drive("topic_latency", bursty) == [(34.0, "topic:/img", "warn"), (35.0, "topic:/img", "warn")]
-    drops = [(float(t), model(drops=0.2 if t < 3 else 4.0), []) for t in range(7)]
-    assert drive("topic_latency", drops) == [(5.0, "topic:/img", "warn"), (6.0, "topic:/img", "warn")]
+    # Drops risen above the topic's own, confirmed over 3 samples.
+    drops = [(float(t), model(drops=noisy(0.2, 0.1) if t < 30 else 4.0), []) for t in range(34)]
+    assert drive("topic_latency", drops) == [(32.0, "topic:/img", "warn"), (33.0, "topic:/img", "warn")]
+    # Large messages reach the monitor's best-effort reader with fragments missing from the first
+    # look on: ~2 a second is the topic's normal, a rise to 3 is not news, to 12 is.
+    for late, want in ((3.0, []), (12.0, [32.0, 33.0])):
+        lossy = [(float(t), model(drops=noisy(2.0, 0.5) if t < 30 else late), []) for t in range(34)]
+        assert [a.t for a in drive("topic_latency", lossy, full=True)] == want, late
     # The same losses of a best-effort publisher's messages (a camera's frames): by design.
-    for reliability, want in (("best_effort", []), ("reliable", [5.0, 6.0])):
+    for reliability, want in (("best_effort", []), ("reliable", [32.0, 33.0])):
         frames = []
         for t, G, ev in drops:
             G.nodes["topic:/img"]["qos"] = [{"role": "pub", "node": "/camera", "reliability": reliability}]
