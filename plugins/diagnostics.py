@@ -40,7 +40,10 @@ class Diagnostics(Plugin):
     without a fix indoors, a frequency check set too tight, an optional device unplugged: robots
     run with standing warnings): no alert while it stays WARN; a status that was OK then warns is
     news, as is any ERROR or STALE (``learn_s`` 0: every WARN alerts). A status that warned and
-    went back to OK by itself warns again without an alert: its warning comes and goes.
+    went back to OK by itself warns again without an alert: its warning comes and goes. A new
+    WARN counts once it has held ``warn_hold_s`` (robots warn for a while and recover by
+    themselves: a tank or battery running low until refilled, a temperature peak); an ERROR or a
+    STALE at once.
 
     Event plugins alert whether or not the member is watched (``watched_only`` to change it):
     a reported fault is evidence, not an attribute to screen.
@@ -49,7 +52,7 @@ class Diagnostics(Plugin):
     name = "diagnostics"
     kinds = ("node",)
     settings: ClassVar[dict[str, Any]] = {"stale_severity": "warn", "watched_only": False, "hardware": [],
-                                          "learn_s": 10.0}
+                                          "learn_s": 10.0, "warn_hold_s": 30.0}
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         s = ctx.settings
@@ -59,7 +62,8 @@ class Diagnostics(Plugin):
                 continue
             level = diag_level(e)
             standing = _standing(ctx, e, level, s["learn_s"])  # every status: when it was first seen
-            if level == "ok" or (standing and level == "warn"):
+            held = _warned_for(ctx, e, level)  # every status: how long it has been WARN
+            if level == "ok" or (level == "warn" and (standing or held < s["warn_hold_s"])):
                 continue
             member, by = _mapped(ctx, e)
             if s["watched_only"] and member not in ctx.watch:
@@ -86,6 +90,16 @@ def _standing(ctx: PluginContext, e: Event, level: str, learn_s: float) -> bool:
     name = str(e.data.get("name", ""))
     warned = standing(ctx.state, name, e.t, "warn" if level == "warn" else None, learn_s)
     return warned or _recurring(ctx, name, level)
+
+
+def _warned_for(ctx: PluginContext, e: Event, level: str) -> float:
+    """Seconds ``e``'s status has been WARN without a break (0 at its first WARN; -1 when not WARN)."""
+    since = ctx.state.setdefault("warn_since", {})  # status name -> time its WARN began
+    name = str(e.data.get("name", ""))
+    if level != "warn":
+        since.pop(name, None)
+        return -1.0
+    return e.t - since.setdefault(name, e.t)
 
 
 def _recurring(ctx: PluginContext, name: str, level: str) -> bool:

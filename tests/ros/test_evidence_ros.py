@@ -392,13 +392,17 @@ n.create_timer(0.5, tick)
 def test_a_standing_diagnostics_warning_is_normal_and_a_new_one_is_not(children, tmp_path, run_of):
     flag = tmp_path / "low"
     children.python(STANDING, str(flag), name="gps")
-    run = run_of(["diagnostics"])
+    run = run_of(["diagnostics"], {**FAST, "diagnostics": {"warn_hold_s": 6.0}})
     _ready(run, "node:/gps_driver")
     run.observe(14.0)  # past learn_s (10 s) from the first report
     assert [a for a in run.alerts if a.plugin == "diagnostics"] == []
     flag.write_text("1")
-    found = run.until(lambda a: a.plugin == "diagnostics", 10.0)
+    t0 = time.time()
+    run.observe(3.0)  # a new WARN counts once it has held warn_hold_s
+    assert [a for a in run.alerts if a.plugin == "diagnostics"] == []
+    found = run.until(lambda a: a.plugin == "diagnostics", 12.0)
     assert found and found[0].member == "node:/gps_driver" and found[0].severity == "warn", found
+    assert found[0].t >= t0 + 5.0, found[0].t - t0
     assert [st["name"] for st in found[0].data["statuses"]] == ["gps_driver: battery"]
 
 

@@ -373,7 +373,8 @@ def test_diagnostics_plugin_says_how_each_alert_was_mapped():
     evs = DiagnosticsReader().events("/diagnostics", DiagnosticArray(status=[
         _status("detector: inference", 2, "gpu0", "CUDA error"), _status("temperature", 1, "", "warm")]),
         1.0, "/camera", NodeNames({"/camera", "/detector"}))
-    alerts = drive_alerts("diagnostics", [(1.0, G, evs)], settings={"learn_s": 0.0})  # warns alert
+    alerts = drive_alerts("diagnostics", [(1.0, G, evs)],
+                          settings={"learn_s": 0.0, "warn_hold_s": 0.0})  # warns alert at once
     assert [(a.member, a.severity, a.data["mapped_by"]) for a in alerts] == [
         ("node:/camera", "warn", "publisher"), ("node:/detector", "error", "name")]
     assert alerts[1].message == "diagnostics detector: inference: ERROR CUDA error (mapped by name)"

@@ -1035,13 +1035,30 @@ def test_diagnostics_a_standing_warning_is_the_status_normal_a_new_one_is_news()
         ev = [diag(t, "gps", 1), diag(t, "temp", 0 if t < 20 else 1), diag(t, "lens", 1 if t < 25 else 2)]
         ev += [diag(t, "late", 1, "node:/detector")] if t >= 30 else []
         frames.append((float(t), G, ev))
-    alerts = drive("diagnostics", frames)
+    alerts = drive("diagnostics", frames, settings={"warn_hold_s": 0.0})  # a WARN counts at once
     warned = [t for t, m, sev in alerts if m == "node:/camera" and sev == "warn"]
     assert warned == [float(t) for t in range(20, 25)]
     assert [t for t, m, sev in alerts if sev == "error"] == [float(t) for t in range(25, 40)]
     assert [a for a in alerts if a[1] == "node:/detector"] == []  # warned as it appeared: its normal
     # learn_s 0: every WARN alerts, as robots without standing warnings may want
-    assert len(drive("diagnostics", frames, settings={"learn_s": 0.0})) == 40 + 10
+    assert len(drive("diagnostics", frames, settings={"learn_s": 0.0, "warn_hold_s": 0.0})) == 40 + 10
+
+
+def test_diagnostics_a_new_warning_counts_once_it_has_held():
+    G = model()
+
+    def frames(levels):
+        return [(float(t), G, [Event(float(t), "diag", "node:/sprayer", "info", f"tank: {lvl}",
+                                     {"name": "tank", "level": lvl})]) for t, lvl in enumerate(levels)]
+
+    # A tank running low for 20 s, refilled: no alert (warn_hold_s 30 s); the same WARN staying
+    # alerts once it has held 30 s; one that turns ERROR alerts at once.
+    assert drive("diagnostics", frames([0] * 20 + [1] * 20 + [0] * 20)) == []
+    staying = drive("diagnostics", frames([0] * 20 + [1] * 40))
+    assert [t for t, _, _ in staying] == [float(t) for t in range(50, 60)]
+    assert drive("diagnostics", frames([0] * 20 + [1] * 5 + [2] * 3)) == [(25.0, "node:/sprayer", "error"),
+                                                                           (26.0, "node:/sprayer", "error"),
+                                                                           (27.0, "node:/sprayer", "error")]
 
 
 def test_diagnostics_a_warning_that_came_and_went_by_itself_is_shown_once():
@@ -1052,7 +1069,8 @@ def test_diagnostics_a_warning_that_came_and_went_by_itself_is_shown_once():
                                     {"name": "battery", "level": level})])
 
     levels = [0] * 20 + [1] * 10 + [0] * 20 + [1] * 10 + [2] * 5
-    alerts = drive("diagnostics", [frame(t, lvl) for t, lvl in enumerate(levels)])
+    alerts = drive("diagnostics", [frame(t, lvl) for t, lvl in enumerate(levels)],
+                   settings={"warn_hold_s": 0.0})
     assert [t for t, _, sev in alerts if sev == "warn"] == [float(t) for t in range(20, 30)]
     assert [t for t, _, sev in alerts if sev == "error"] == [float(t) for t in range(60, 65)]
 
