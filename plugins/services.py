@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
@@ -39,7 +40,12 @@ class Services(Plugin):
       still coming up: the WARNs about a service not ready yet);
     * ``slow_response`` (warn): the service's mean response time rose above its own baseline by
       ``max(k·σ, min_rise_ms)`` for ``confirm`` samples;
-    * ``server_gone`` (warn): the service had a server and has none while clients remain.
+    * ``server_gone`` (warn): the service had a server and has none while clients remain;
+    * ``goal_stalled`` (warn, on the action: its server's progress): a goal has been executing
+      and its feedback quiet for ``max(goal_quiet_s, goal_margin ×`` the longest quiet between
+      feedback its earlier goals showed``)``, on an action whose goals had feedback while they
+      executed (judged from its second goal on: a server that gives no feedback, or gives it
+      rarely, says so in its first).
 
     A service is checked when it or one of its clients is watched.
     """
@@ -58,6 +64,8 @@ class Services(Plugin):
         "log_level": "warn",
         "startup_s": STARTUP_S,
         "server_gone": True,
+        "goal_quiet_s": 3.0,
+        "goal_margin": 3.0,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -70,6 +78,7 @@ class Services(Plugin):
             servers = ctx.servers(service)
             yield from _waiting(ctx, service, servers)
             yield from _slow(ctx, service, servers, clients, alerting)
+            yield from _stalled_goal(ctx, service, servers)
             if servers:
                 had[service] = servers
             elif had.get(service) and clients and ctx.settings["server_gone"]:
@@ -79,6 +88,48 @@ class Services(Plugin):
                                     f"{', '.join(name_of(g) for g in gone)})", symptom="server_gone",
                                     service=service, server=gone[0], servers=gone, client=c)
         yield from _logged(ctx)
+
+
+def _stalled_goal(ctx: PluginContext, action: str, servers: list[str]) -> Iterator[Alert]:
+    """``goal_stalled``: the action's goal executing without feedback for longer than its goals'
+    feedback allows (`Services`). Learnt per action from the collector's ``executing_since`` and
+    ``feedback_at``: the longest quiet while executing — between feedback, from a goal's start to
+    its first, from its last to the goal's end — that was no symptom, and whether a goal had any."""
+    since, fed = ctx.attr(action, "executing_since"), ctx.attr(action, "feedback_at")
+    g = ctx.state.setdefault("goals", {}).setdefault(action, _Goals())
+    start = since if g.last is None or since is None else max(since, g.last)
+    limit = max(ctx.settings["goal_quiet_s"], ctx.settings["goal_margin"] * g.longest)
+    if since is None or (fed is not None and fed > start):  # a goal ended, or feedback came
+        end = ctx.t if since is None else fed
+        if g.running and not g.stalled:  # the quiet that ended was the server's own rhythm
+            g.longest = max(g.longest, end - g.start)
+        if since is None:
+            g.with_feedback += g.fed
+            g.running = g.fed = g.stalled = False
+            g.last = None
+        else:
+            g.running, g.fed, g.stalled, g.start, g.last = True, True, False, fed, fed
+        return
+    g.running, g.start = True, start
+    quiet = ctx.t - start
+    g.stalled = bool(g.with_feedback) and quiet > limit
+    if g.stalled:
+        yield ctx.alert(action, "warn", f"goal executing, no feedback for {quiet:.1f} s (its goals had "
+                        f"feedback at least every {g.longest:.1f} s)", symptom="goal_stalled", action=action,
+                        server=servers[0] if servers else None, quiet_s=quiet)
+
+
+@dataclass
+class _Goals:
+    """What one action's goals have shown (`_stalled_goal`)."""
+
+    with_feedback: int = 0  # goals that had feedback while executing
+    longest: float = 0.0  # the longest quiet while executing that was no symptom (s)
+    running: bool = False  # a goal executes
+    fed: bool = False  # it had feedback
+    stalled: bool = False  # its quiet is a symptom
+    start: float = 0.0  # the current quiet's start: the goal's start or its last feedback
+    last: float | None = None  # its last feedback
 
 
 def _called(ctx: PluginContext) -> list[str]:

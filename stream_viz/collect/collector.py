@@ -11,6 +11,7 @@ import socket
 import time
 from typing import Any
 
+import networkx as nx
 import rclpy
 from rclpy.context import Context
 from rclpy.node import Node
@@ -20,7 +21,7 @@ from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 from stream_viz.collect.build import build_model
 from stream_viz.collect.diagnostics import DiagnosticsReader
 from stream_viz.collect.fastdds import decode_gid
-from stream_viz.collect.goals import GoalTracker
+from stream_viz.collect.goals import STATUS_SUFFIX, GoalTracker
 from stream_viz.collect.hosts import HostReports
 from stream_viz.collect.naming import NodeNames, recently_left
 from stream_viz.collect.params import param_event
@@ -163,7 +164,7 @@ class Collector:
         t = time.time()
         reading = read_graph(self.node, own=self.own, include_hidden=self.include_hidden,
                              include_internal=self.include_internal, qos=self.qos, gids=self.gids)
-        self.topics.update(reading.topics, reading.service_events, reading.goal_status)
+        self.topics.update(reading.topics, reading.service_events, reading.goal_status, reading.goal_feedback)
         self.goals.forget(set(reading.goal_status))
         pids = self.resolver.resolve(reading.rosout_gids)
         for fqn in reading.nodes:
@@ -198,6 +199,7 @@ class Collector:
         events += self._message_events(t, reading, index)
         services, calls = self._service_calls(reading)
         G = build_model(reading, pids, processes, stats, services, calls)
+        self._goal_progress(G, t, reading, stats)
         unreadable = {make_id("node", n): why for n, why in reading.skipped.items()}
         remote_events, unreadable_remote = self.hosts.apply(G, pids, t)  # other computers' agents
         events += remote_events
@@ -284,6 +286,21 @@ class Collector:
                 out.append(Event(t, "observe_error", make_id("topic", topic), "warn",
                                  f"cannot read a {topic} message: {e}"))
         return out
+
+    def _goal_progress(self, G: nx.MultiDiGraph, t: float, reading: GraphReading,
+                       stats: dict[str, TopicStats]) -> None:
+        """Put on each action member since when a goal has been executing and when its newest
+        feedback came (``executing_since``, ``feedback_at``: s, None when not / never)."""
+        for topic in reading.goal_feedback:
+            st = stats.get(topic)
+            if st is not None and st.measured and "age_s" in st.metrics:
+                self.goals.fed(topic, t - st.metrics["age_s"])
+        for topic in reading.goal_status:
+            action = topic.removesuffix(STATUS_SUFFIX)
+            member = make_id("action", action)
+            if member in G:
+                G.nodes[member].update(executing_since=self.goals.executing_since.get(action),
+                                       feedback_at=self.goals.feedback.get(action))
 
     @staticmethod
     def _publisher(reading: GraphReading, topic: str, gid: bytes | None) -> str | None:

@@ -47,6 +47,7 @@ class GraphReading:
     publisher_gids: dict[str, dict[bytes, str]] = field(default_factory=dict)  # topic -> gid -> node
     service_events: dict[str, str] = field(default_factory=dict)  # service -> its event topic's type
     goal_status: dict[str, list[str]] = field(default_factory=dict)  # action status topic -> servers
+    goal_feedback: dict[str, str] = field(default_factory=dict)  # action feedback topic -> its type
     skipped: dict[str, str] = field(default_factory=dict)  # node fqn -> why it was skipped
 
 

@@ -12,7 +12,7 @@ from typing import Any
 
 from rclpy.node import Node, NodeNameNonExistentError
 
-from stream_viz.collect.goals import GOAL_STATUS_TYPE, STATUS_SUFFIX
+from stream_viz.collect.goals import FEEDBACK_SUFFIX, GOAL_STATUS_TYPE, STATUS_SUFFIX
 from stream_viz.collect.readings import Endpoint, GraphReading, NodeReading
 from stream_viz.collect.services import EVENT_SUFFIX
 from stream_viz.model.ids import node_fqn
@@ -222,6 +222,8 @@ def read_graph(node: Node, *, own: str, include_hidden: bool = False,
                     r.service_events.setdefault(topic[: -len(EVENT_SUFFIX)], types[0])
                 elif role == "pub" and topic.endswith(STATUS_SUFFIX) and GOAL_STATUS_TYPE in types:
                     r.goal_status.setdefault(topic, []).append(fqn)  # an action server's goals
+                elif role == "pub" and topic.endswith(FEEDBACK_SUFFIX) and types:
+                    r.goal_feedback.setdefault(topic, types[0])  # their progress
     deadline = time.monotonic() + qos.budget_s
     for topic in sorted(r.topics):
         pubs_, subs_ = sorted(set(ends["pub"].get(topic, []))), sorted(set(ends["sub"].get(topic, [])))

@@ -51,10 +51,14 @@ Sink = Callable[[int, int, int, int, "bytes | None", bytes], None]
 
 
 def import_type(type_name: str) -> type:
-    """Import a message class from ``pkg/msg/Name``; raises ImportError / AttributeError naming it."""
+    """Import a message class from ``pkg/msg/Name`` (or an action's ``pkg/action/Name_FeedbackMessage``,
+    which rosidl puts under ``Name.Impl``); raises ImportError / AttributeError naming it."""
     pkg, _, name = type_name.rpartition("/")
-    module = pkg.replace("/", ".")
-    return getattr(importlib.import_module(module), name)
+    module = importlib.import_module(pkg.replace("/", "."))
+    if not hasattr(module, name) and "_" in name:
+        base, _, part = name.rpartition("_")
+        return getattr(getattr(module, base).Impl, part)
+    return getattr(module, name)
 
 
 @dataclass
@@ -120,17 +124,19 @@ class TopicMonitor:
         self._thread.start()
 
     def update(self, topics: dict[str, list[str]], service_events: dict[str, str] | None = None,
-               goal_status: Iterable[str] = ()) -> None:
+               goal_status: Iterable[str] = (), goal_feedback: dict[str, str] | None = None) -> None:
         """Follow the graph: subscribe to new topics, drop vanished ones (keeps the event topics).
 
         ``topics``: topic → types (measured when ``metrics``; /diagnostics_agg always);
         ``service_events``: service → its event topic's type (service introspection);
-        ``goal_status``: action servers' status topics (`stream_viz.collect.goals`).
+        ``goal_status``: action servers' status topics (`stream_viz.collect.goals`);
+        ``goal_feedback``: their feedback topics → type (counted only: when the newest came).
         """
         want = {t: types[0] for t, types in topics.items()
                 if types and t not in NO_RAW and (self.metrics or t in DIAGNOSTICS)}
         want.update({s + EVENT_SUFFIX: ty for s, ty in (service_events or {}).items()})
         want.update(dict.fromkeys(goal_status, GOAL_STATUS_TYPE))
+        want.update(goal_feedback or {})
         with self._lock:
             for t in list(self._watches):
                 w = self._watches[t]

@@ -560,6 +560,60 @@ def test_an_action_client_logging_about_its_action_names_the_server(children, tm
         "error", "log", "action:/nav/compute_path", "node:/nav/planner"), a
 
 
+FOLLOWER = """
+import os, sys, time
+import rclpy
+from rclpy.action import ActionServer
+from test_msgs.action import Fibonacci
+flag = sys.argv[1]
+rclpy.init()
+n = rclpy.create_node('follower', namespace='/nav')
+def execute(goal):  # 4 s a goal, feedback every 0.2 s; stuck (no feedback, no end) once flagged
+    for k in range(20):
+        while os.path.exists(flag):
+            time.sleep(0.1)
+        goal.publish_feedback(Fibonacci.Feedback(sequence=[k]))
+        time.sleep(0.2)
+    goal.succeed()
+    return Fibonacci.Result()
+ActionServer(n, Fibonacci, 'follow_path', execute)
+rclpy.spin(n)
+"""
+
+MISSION = """
+import rclpy
+from rclpy.action import ActionClient
+from test_msgs.action import Fibonacci
+rclpy.init()
+n = rclpy.create_node('mission', namespace='/nav')
+client = ActionClient(n, Fibonacci, 'follow_path')
+busy = []
+def done(_f):
+    busy.clear()
+def accepted(f):
+    f.result().get_result_async().add_done_callback(done)
+def tick():  # a goal at a time, 2 s apart
+    if not busy and client.server_is_ready():
+        busy.append(1)
+        client.send_goal_async(Fibonacci.Goal(order=3)).add_done_callback(accepted)
+n.create_timer(2.0, tick)
+rclpy.spin(n)
+"""
+
+
+def test_a_goal_executing_without_feedback_is_a_stall_of_its_action(children, tmp_path, run_of):
+    flag = tmp_path / "stuck"
+    children.python(FOLLOWER, str(flag), name="follower")
+    children.python(MISSION, name="mission")
+    run = run_of(["services"])
+    _ready(run, "node:/nav/follower", "node:/nav/mission", "action:/nav/follow_path")
+    # Two goals of 4 s with feedback: nothing; then the server stuck mid-goal.
+    a = _sick_after_healthy(run, flag, "services", "action:/nav/follow_path", healthy_s=14.0,
+                            symptom="goal_stalled", timeout=15.0)
+    assert a.data["server"] == "node:/nav/follower" and a.data["quiet_s"] > 3.0, a
+    assert a.member == "action:/nav/follow_path"
+
+
 PUBLISHER = """
 import os, sys, time
 import rclpy

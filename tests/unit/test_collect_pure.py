@@ -360,3 +360,33 @@ def test_goal_tracker_an_event_per_goal_that_ended_since_the_last_array():
     assert g.events(topic, _statuses((2, 6)), 4_000_000_000, ["/nav/controller"]) == []  # unchanged
     g.forget(set())
     assert g.events(topic, _statuses((3, 5)), 5_000_000_000, ["/nav/controller"]) == []  # first again
+
+
+def test_goal_tracker_keeps_since_when_a_goal_executes_and_its_newest_feedback():
+    from stream_viz.collect.goals import GoalTracker
+
+    g, topic, fb = GoalTracker(), "/nav/follow/_action/status", "/nav/follow/_action/feedback"
+    g.events(topic, _statuses((1, 1)), 1_000_000_000, ["/nav/controller"])  # accepted, not executing
+    assert g.executing_since == {}
+    g.events(topic, _statuses((1, 2)), 2_000_000_000, ["/nav/controller"])
+    g.events(topic, _statuses((1, 2), (2, 2)), 3_000_000_000, ["/nav/controller"])  # a second one
+    assert g.executing_since == {"/nav/follow": 2.0}
+    g.fed(fb, 2.5)
+    g.fed(fb, 2.4)  # an older newest (another window's): the newest stays
+    assert g.feedback == {"/nav/follow": 2.5}
+    g.events(topic, _statuses((1, 4), (2, 6)), 4_000_000_000, ["/nav/controller"])  # both ended
+    assert g.executing_since == {} and g.feedback == {"/nav/follow": 2.5}
+    g.events(topic, _statuses((3, 2)), 5_000_000_000, ["/nav/controller"])
+    assert g.executing_since == {"/nav/follow": 5.0}
+    g.forget(set())  # the server is gone
+    assert g.executing_since == {} and g.feedback == {}
+
+
+def test_import_type_finds_an_actions_feedback_message():
+    from test_msgs.action import Fibonacci
+
+    from stream_viz.collect.topics import import_type
+
+    assert import_type("test_msgs/action/Fibonacci_FeedbackMessage") is Fibonacci.Impl.FeedbackMessage
+    with pytest.raises(AttributeError, match="Nope"):
+        import_type("test_msgs/action/Nope_FeedbackMessage")

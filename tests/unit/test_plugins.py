@@ -1299,3 +1299,38 @@ def test_topic_latency_one_late_message_held_in_the_window_is_no_rise():
     # The same rise kept up is a change of the topic: counted once it outlasts the window.
     kept = base + [(float(t), model(rate=2.0, latency=61.0, age=0.2), []) for t in range(30, 36)]
     assert [a[0] for a in drive("topic_latency", kept)] == [34.0, 35.0]
+
+
+# --------------------------------------------------------------------------- services: goals
+
+def _goal_frames(goals, stall_at=None):
+    """/nav serves the action /nav/follow, /bt sends goals; ``goals`` (start, end) s; feedback every
+    0.5 s while one executes, none from ``stall_at`` on (the server stuck mid-goal)."""
+    frames, fed = [], None
+    for t in range(70):
+        G = model()
+        add_member(G, "node:/nav", pid=100, alive=True)
+        add_member(G, "node:/bt", pid=200, alive=True)
+        running = next((a for a, b in goals if a <= t < b), None)
+        if running is not None and (stall_at is None or t < stall_at):
+            fed = t - 0.25  # the newest feedback, a quarter of a second old
+        add_member(G, "action:/nav/follow", servers=["/nav"], clients=["/bt"],
+                   executing_since=None if running is None else float(running), feedback_at=fed)
+        frames.append((float(t), G, []))
+    return frames
+
+
+def test_services_a_goal_executing_without_feedback_is_a_stall_of_its_action():
+    goals = [(5, 15), (25, 40), (50, 60)]
+    assert drive("services", _goal_frames(goals)) == []  # feedback all through every goal
+    # Stuck in the second goal at 30 s: its feedback quiet past 3 s (goal_quiet_s) alerts on the
+    # action (its server's progress) until the goal is cancelled at 40 s, and in the next goal.
+    alerts = drive("services", _goal_frames(goals, stall_at=30), full=True)
+    assert [a.t for a in alerts] == [float(t) for t in (*range(33, 40), *range(54, 60))]
+    assert {a.member for a in alerts} == {"action:/nav/follow"}
+    assert alerts[0].data["symptom"] == "goal_stalled" and alerts[0].data["server"] == "node:/nav"
+    # Stuck in the first goal: nothing is known of its feedback yet (a server may give none).
+    assert drive("services", _goal_frames(goals, stall_at=8)) == []
+    # A server giving no feedback at all: never a stall.
+    quiet = _goal_frames(goals, stall_at=0)
+    assert drive("services", quiet) == []
