@@ -15,7 +15,10 @@ from collections import Counter, deque
 
 import numpy as np
 
-RECENT = 5  # intervals behind `rate_recent_hz`
+RECENT = 5  # intervals behind `rate_recent_hz`, at least
+# ... and at least those of this span: the last 5 intervals of a 500 Hz IMU are 10 ms, which one
+# scheduling hiccup of the publisher or of the monitor halves
+RECENT_NS = 500_000_000
 # (received ns, source ns, size, sequence number, publisher gid, received − header.stamp ns)
 Record = tuple[int, int, int, int | None, bytes | None, int | None]
 RESET_NS = 1_000_000_000  # stamps going back further than this: a restarted time, not reordering
@@ -125,7 +128,11 @@ class TopicWindow:
             m["age_s"] = max(0, now_ns - tail[-1]) / 1e9
             if n >= 4:
                 k = min(RECENT, n - 1)
-                m["rate_recent_hz"] = k / max((now_ns - tail[-1 - k]) / 1e9, 1e-9)
+                first = tail[-1 - k]
+                if now_ns - first < RECENT_NS:  # a fast topic: every interval of the span counts
+                    recv = np.fromiter((r[0] for r in self.buf), dtype=np.int64, count=n)
+                    first, k = _recent(recv, now_ns)
+                m["rate_recent_hz"] = k / max((now_ns - first) / 1e9, 1e-9)
         if n_publishers == 1 and self.no_seq == 0:
             m["drops_per_s"] = self.gaps / span
         return m
@@ -152,6 +159,14 @@ class TopicWindow:
         return {gid: n * 1e9 / span_ns for gid, n in self.by_gid.items()}
 
 
+def _recent(recv: np.ndarray, now_ns: int) -> tuple[int, int]:
+    """The intervals behind ``rate_recent_hz``: ``(first, k)``, the (k+1)-th newest arrival and k,
+    the last `RECENT` intervals or those of the last `RECENT_NS`, whichever are more (at most n - 1)."""
+    n = len(recv)
+    k = min(n - 1, max(RECENT, int(np.count_nonzero(recv > now_ns - RECENT_NS))))
+    return int(np.partition(recv, n - 1 - k)[n - 1 - k]), k
+
+
 def _tail(buf: deque, k: int) -> list:
     return [buf[i] for i in range(max(0, len(buf) - k), len(buf))]
 
@@ -168,8 +183,9 @@ def window_metrics(buf: list[tuple], now_ns: int, created_ns: int, window_ns: in
 
     Two fast signals beside the window's: ``age_s``, the time since the newest message (a topic
     that stops shows at once, not when the window has emptied), and ``rate_recent_hz``, the rate
-    over the last ``RECENT`` intervals up to now (at least 3; the open interval since the newest
-    message counts, so a slowed topic shows before the window has turned over).
+    over the last ``RECENT`` intervals, or those of the last ``RECENT_NS`` when more, up to now
+    (at least 3; the open interval since the newest message counts, so a slowed topic shows
+    before the window has turned over).
 
     ``stamp_age_ms``: the mean of received − ``header.stamp`` over the records that have one (a
     type beginning with a Header whose stamp is set): the age of the data, beside the transport
@@ -196,8 +212,7 @@ def window_metrics(buf: list[tuple], now_ns: int, created_ns: int, window_ns: in
         newest = int(recv.max())
         m["age_s"] = max(0, now_ns - newest) / 1e9
         if n >= 4:
-            k = min(RECENT, n - 1)
-            first = int(np.partition(recv, n - 1 - k)[n - 1 - k])  # the (k+1)-th newest arrival
+            first, k = _recent(recv, now_ns)
             m["rate_recent_hz"] = k / max((now_ns - first) / 1e9, 1e-9)
     if n_publishers == 1:
         seqs = [b[3] for b in buf if b[3] is not None]

@@ -190,6 +190,22 @@ def test_window_metrics_recent_rate_sees_a_slowdown_the_window_hides():
     assert m["age_s"] == pytest.approx(0.1)
 
 
+def test_window_metrics_recent_rate_of_a_fast_topic_spans_half_a_second():
+    s = 1_000_000_000
+    # 500 Hz (2 ms apart) for 3 s, the publisher held up 30 ms just before now: the last 5 intervals
+    # say ~150 Hz; over the last 0.5 s (RECENT_NS) the rate is ~470 Hz.
+    recv = [i * 2_000_000 for i in range(1485)]
+    buf = [(r, r, 10, None) for r in recv]
+    now = recv[-1] + 30_000_000
+    m = _both(buf, now_ns=now, created_ns=0, window_ns=3 * s, n_publishers=1)
+    inside = sum(1 for r in recv if r > now - s // 2)
+    assert m["rate_recent_hz"] == pytest.approx(inside / ((now - recv[-1 - inside]) / 1e9))
+    assert 440 < m["rate_recent_hz"] < 500
+    # Stopped for 0.6 s: nothing in the last 0.5 s, so the last 5 intervals again: it shows at once.
+    m = _both(buf, now_ns=recv[-1] + 600_000_000, created_ns=0, window_ns=3 * s, n_publishers=1)
+    assert m["rate_recent_hz"] == pytest.approx(5 / 0.610)
+
+
 def test_log_events():
     nodes = {"/ns/talker", "/cam"}
     assert logger_node("ns.talker", nodes) == "/ns/talker"
