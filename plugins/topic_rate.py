@@ -48,8 +48,10 @@ class TopicRate(Plugin):
       a zero rate means none for the collector's ``rate_window_s``, 3 s) for longer than
       ``max(silence_periods / rate, silence_min_s)`` (the rate while publishing, not counting a
       bursty topic's quiets: `stream_viz.detect.rhythm`), or ``gap_margin`` × the longest healthy gap
-      or quiet the topic has shown. Judged only once the topic's rhythm is settled: it published for
-      ``warmup_s`` without such a quiet, or showed ``min_gaps`` healthy gaps. Never while it has
+      or quiet the topic has shown, or, for a topic whose arrivals are irregular, the longest
+      quiet random arrivals at its rate show in ``irregular_horizon_s`` (`_by_chance`). Judged
+      only once the topic's rhythm is settled: it published for ``warmup_s`` without such a
+      quiet, or showed ``min_gaps`` healthy gaps. Never while it has
       no publisher (graph_anomalies' orphans), while all its publishers are transient-local (a
       latched topic publishes when its data changes; ``judge_latched``), or when a publisher
       changed state within ``transition_grace_s`` of the last message — a lifecycle transition
@@ -95,6 +97,8 @@ class TopicRate(Plugin):
         "stalled_cpu_ratio": 0.05,
         "reconfigure_s": 10.0,
         "judge_latched": False,
+        "irregular_cv": 0.3,
+        "irregular_horizon_s": 600.0,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -263,6 +267,8 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     if quiet is None or not r.settled or r.explained:
         return None
     limit = quiet_limit(r, _base_limit(s, ref), s["gap_margin"])
+    if quiet >= limit:  # its arrivals may be irregular: then longer quiets come by chance
+        limit = max(limit, _by_chance(ctx, topic, ref))
     stalled = False
     if quiet < limit:  # within its rhythm, unless its executor stopped under its inputs (then for good)
         base_limit = _base_limit(s, ref)
@@ -292,6 +298,22 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     return ctx.alert(topic, "error", f"silent for {quiet:.1f} s ({usual}){again}", symptom="silence",
                      silent_s=quiet, baseline_hz=ref, limit_s=limit, flaps=flaps,
                      episode_hold_s=s["flap_window_s"])
+
+
+def _by_chance(ctx: PluginContext, topic: str, ref_hz: float) -> float:
+    """The longest quiet an irregular topic shows by chance: ``ln(rate × irregular_horizon_s) /
+    rate``, the longest gap of random arrivals at its rate in that time, when its intervals' usual
+    spread is ``irregular_cv`` of their mean or more (a reader of a lossy best-effort stream, a
+    detector publishing per object found); 0 for a regular topic. The longest quiet seen in the
+    first seconds (what `quiet_limit` knows) says little of the next ten minutes of such a topic."""
+    s = ctx.settings
+    if ref_hz <= 0:
+        return 0.0
+    _, jitter = ctx.past(topic, "jitter_ms", last=s["window"])
+    jitter = jitter[np.isfinite(jitter)]
+    if not len(jitter) or float(np.median(jitter)) / 1000.0 * ref_hz < s["irregular_cv"]:
+        return 0.0
+    return math.log(max(2.0, ref_hz * s["irregular_horizon_s"])) / ref_hz
 
 
 def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[str, list[float]]) -> bool:

@@ -194,6 +194,23 @@ def test_topic_rate_silence_from_the_age_of_the_newest_message():
     assert drive("topic_rate", frames) == []
 
 
+def test_topic_rate_an_irregular_topic_s_chance_quiet_is_no_silence():
+    # 2.5 Hz whose intervals spread 0.6 of their mean (a reader of a lossy stream): a 2.4 s quiet
+    # after 30 s comes by chance (random arrivals at 2.5 Hz show ~2.9 s in 10 minutes); the same
+    # quiet of a regular topic (spread 0.02) is a silence, and the irregular one stopping for good
+    # is one past ln(2.5 × 600) / 2.5 = 2.9 s.
+    def frames(cv, quiet_ages):
+        jitter = cv / 2.5 * 1000.0
+        out = [(float(t), model(rate=2.5, jitter=jitter, age=0.2), []) for t in range(30)]
+        return out + [(30.0 + i, model(rate=2.5, jitter=jitter, age=a), []) for i, a in enumerate(quiet_ages)]
+
+    chance = [0.4, 1.4, 2.4, 0.1, 0.2, 0.3]
+    assert drive("topic_rate", frames(0.6, chance)) == []
+    assert [a[0] for a in drive("topic_rate", frames(0.02, chance))] == [32.0]
+    stopped = [0.4 + i for i in range(6)]
+    assert [a[0] for a in drive("topic_rate", frames(0.6, stopped))] == [33.0, 34.0, 35.0]
+
+
 def test_topic_rate_drop_from_the_recent_rate():
     # Slowed to a quarter: the recent rate shows it while the window's rate is still above half.
     frames = [(float(t), model(rate=noisy(10.0), recent=noisy(10.0)), []) for t in range(30)]
