@@ -52,7 +52,7 @@ class Diagnostics(Plugin):
     name = "diagnostics"
     kinds = ("node",)
     settings: ClassVar[dict[str, Any]] = {"stale_severity": "warn", "watched_only": False, "hardware": [],
-                                          "learn_s": 10.0, "warn_hold_s": 30.0}
+                                          "learn_s": 10.0, "warn_hold_s": 60.0}
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         s = ctx.settings

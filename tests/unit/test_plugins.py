@@ -1068,11 +1068,12 @@ def test_diagnostics_a_new_warning_counts_once_it_has_held():
         return [(float(t), G, [Event(float(t), "diag", "node:/sprayer", "info", f"tank: {lvl}",
                                      {"name": "tank", "level": lvl})]) for t, lvl in enumerate(levels)]
 
-    # A tank running low for 20 s, refilled: no alert (warn_hold_s 30 s); the same WARN staying
-    # alerts once it has held 30 s; one that turns ERROR alerts at once.
+    # A tank running low for 20 s, refilled, a battery low for 34 s: no alert (warn_hold_s 60 s);
+    # the same WARN staying alerts once it has held 60 s; one that turns ERROR alerts at once.
     assert drive("diagnostics", frames([0] * 20 + [1] * 20 + [0] * 20)) == []
-    staying = drive("diagnostics", frames([0] * 20 + [1] * 40))
-    assert [t for t, _, _ in staying] == [float(t) for t in range(50, 60)]
+    assert drive("diagnostics", frames([0] * 20 + [1] * 34 + [0] * 20)) == []
+    staying = drive("diagnostics", frames([0] * 20 + [1] * 70))
+    assert [t for t, _, _ in staying] == [float(t) for t in range(80, 90)]
     assert drive("diagnostics", frames([0] * 20 + [1] * 5 + [2] * 3)) == [(25.0, "node:/sprayer", "error"),
                                                                            (26.0, "node:/sprayer", "error"),
                                                                            (27.0, "node:/sprayer", "error")]
