@@ -95,6 +95,8 @@ def _stalled_goal(ctx: PluginContext, action: str, servers: list[str]) -> Iterat
     feedback allows (`Services`). Learnt per action from the collector's ``executing_since`` and
     ``feedback_at``: the longest quiet while executing — between feedback, from a goal's start to
     its first, from its last to the goal's end — that was no symptom, and whether a goal had any."""
+    if ctx.kind(action) != "action":
+        return
     since, fed = ctx.attr(action, "executing_since"), ctx.attr(action, "feedback_at")
     g = ctx.state.setdefault("goals", {}).setdefault(action, _Goals())
     start = since if g.last is None or since is None else max(since, g.last)
@@ -114,9 +116,9 @@ def _stalled_goal(ctx: PluginContext, action: str, servers: list[str]) -> Iterat
     quiet = ctx.t - start
     g.stalled = bool(g.with_feedback) and quiet > limit
     if g.stalled:
-        yield ctx.alert(action, "warn", f"goal executing, no feedback for {quiet:.1f} s (its goals had "
-                        f"feedback at least every {g.longest:.1f} s)", symptom="goal_stalled", action=action,
-                        server=servers[0] if servers else None, quiet_s=quiet)
+        yield ctx.alert(action, "warn", f"goal executing, no feedback for {quiet:.1f} s (the longest "
+                        f"quiet of its goals before: {g.longest:.1f} s)", symptom="goal_stalled",
+                        action=action, server=servers[0] if servers else None, quiet_s=quiet)
 
 
 @dataclass
