@@ -53,6 +53,7 @@ class TopicLatency(Plugin):
         "confirm": 3,
         "drops_min_per_s": 1.0,
         "drops_ratio": 0.05,
+        "drops_hold_s": 4.0,
         "common_mode_min": 4,
         "common_mode_ratio": 0.5,
         "usual_quantile": 0.9,
@@ -139,7 +140,7 @@ def _above_usual(ctx: PluginContext, topic: str, attr: str, floor: float,
 def _drops(ctx: PluginContext, topic: str, rate: float, fresh: bool, alerting: set) -> list[Alert]:
     """Drops risen above the topic's own: ``drops_per_s`` at least ``max(drops_min_per_s,
     drops_ratio × rate)`` above its baseline and its usual (as latency, `excess`), for
-    ``confirm`` fresh samples, on a topic some publisher sends reliably.
+    ``confirm`` fresh samples and ``drops_hold_s``, on a topic some publisher sends reliably.
 
     Sequence gaps are counted where the monitor receives, best effort: a best-effort publisher's
     messages are lost by design on a busy link or reader, and a reliable one's large messages
@@ -153,7 +154,10 @@ def _drops(ctx: PluginContext, topic: str, rate: float, fresh: bool, alerting: s
     ex = _above_usual(ctx, topic, "drops_per_s", floor,
                       excess(ctx, topic, "drops_per_s", floor, alerting), alerting)
     risen = confirm(ctx, topic, "drops_per_s", ex, alerting, fresh)
-    if risen is None:
+    # Counted over the collector's window, one burst of losses (a participant joining a busy link)
+    # holds the count up for the whole window: only a rise that outlasts it is the topic's.
+    lasted = held(ctx.state, (topic, "drops_per_s"), ex is not None and ex[2], ctx.t, fresh)
+    if risen is None or lasted < s["drops_hold_s"]:
         return []
     drops, med = risen
     return [ctx.alert(topic, "warn", f"{drops:.3g} messages/s dropped, normally {med:.3g}", symptom="drops",

@@ -747,16 +747,20 @@ def test_topic_latency_quiet_then_rise_and_drops():
     # A jitter rise counts once it has outlasted the collector's 3 s window (jitter_hold_s 4 s).
     bursty = healthy[:30] + [(float(t), model(jitter=90.0), []) for t in range(30, 36)]
     assert drive("topic_latency", bursty) == [(34.0, "topic:/img", "warn"), (35.0, "topic:/img", "warn")]
-    # Drops risen above the topic's own, confirmed over 3 samples.
-    drops = [(float(t), model(drops=noisy(0.2, 0.1) if t < 30 else 4.0), []) for t in range(34)]
-    assert drive("topic_latency", drops) == [(32.0, "topic:/img", "warn"), (33.0, "topic:/img", "warn")]
+    # Drops risen above the topic's own, confirmed over 3 samples, counted once they outlast the
+    # collector's 3 s window (drops_hold_s 4 s).
+    drops = [(float(t), model(drops=noisy(0.2, 0.1) if t < 30 else 4.0), []) for t in range(36)]
+    assert drive("topic_latency", drops) == [(34.0, "topic:/img", "warn"), (35.0, "topic:/img", "warn")]
+    # One burst of losses, held up by the window for 3 samples: not the topic's.
+    burst = [(float(t), model(drops=4.0 if 30 <= t < 33 else noisy(0.2, 0.1)), []) for t in range(36)]
+    assert drive("topic_latency", burst) == []
     # Large messages reach the monitor's best-effort reader with fragments missing from the first
     # look on: ~2 a second is the topic's normal, a rise to 3 is not news, to 12 is.
-    for late, want in ((3.0, []), (12.0, [32.0, 33.0])):
-        lossy = [(float(t), model(drops=noisy(2.0, 0.5) if t < 30 else late), []) for t in range(34)]
+    for late, want in ((3.0, []), (12.0, [34.0, 35.0])):
+        lossy = [(float(t), model(drops=noisy(2.0, 0.5) if t < 30 else late), []) for t in range(36)]
         assert [a.t for a in drive("topic_latency", lossy, full=True)] == want, late
     # The same losses of a best-effort publisher's messages (a camera's frames): by design.
-    for reliability, want in (("best_effort", []), ("reliable", [32.0, 33.0])):
+    for reliability, want in (("best_effort", []), ("reliable", [34.0, 35.0])):
         frames = []
         for t, G, ev in drops:
             G.nodes["topic:/img"]["qos"] = [{"role": "pub", "node": "/camera", "reliability": reliability}]
