@@ -67,7 +67,9 @@ class TopicRate(Plugin):
     * drop (warn): ``rate < drop_ratio × baseline`` and ``≥ drop_k`` σ below it for ``confirm``
       samples, the baseline being the median of the topic's own rate after ``warmup_s`` (frozen
       while alerting); only on a continuous topic (settled, no healthy gap: a bursty topic's rate
-      baseline says nothing), lasting longer than its longest healthy quiet; the rate compared
+      baseline says nothing), lasting longer than its longest healthy quiet, and for an
+      irregular topic (see silence) ``irregular_drop_s``: its rate follows what reaches its
+      publisher (a lossy stream halves for seconds as the host's load changes); the rate compared
       is the recent one (``rate_recent_hz``, the last few intervals) where measured, so a slowed
       topic shows before the collector's window has turned over;
     * below expectation (warn): ``rate < (1 - expected_tolerance) × expected_rate_hz`` from the
@@ -99,6 +101,7 @@ class TopicRate(Plugin):
         "judge_latched": False,
         "irregular_cv": 0.3,
         "irregular_horizon_s": 600.0,
+        "irregular_drop_s": 15.0,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -306,14 +309,19 @@ def _by_chance(ctx: PluginContext, topic: str, ref_hz: float) -> float:
     spread is ``irregular_cv`` of their mean or more (a reader of a lossy best-effort stream, a
     detector publishing per object found); 0 for a regular topic. The longest quiet seen in the
     first seconds (what `quiet_limit` knows) says little of the next ten minutes of such a topic."""
-    s = ctx.settings
+    if not _irregular(ctx, topic, ref_hz):
+        return 0.0
+    return math.log(max(2.0, ref_hz * ctx.settings["irregular_horizon_s"])) / ref_hz
+
+
+def _irregular(ctx: PluginContext, topic: str, ref_hz: float) -> bool:
+    """True when the topic's intervals usually spread ``irregular_cv`` of their mean or more
+    (its median jitter × its rate): its arrivals follow what reaches its publisher."""
     if ref_hz <= 0:
-        return 0.0
-    _, jitter = ctx.past(topic, "jitter_ms", last=s["window"])
+        return False
+    _, jitter = ctx.past(topic, "jitter_ms", last=ctx.settings["window"])
     jitter = jitter[np.isfinite(jitter)]
-    if not len(jitter) or float(np.median(jitter)) / 1000.0 * ref_hz < s["irregular_cv"]:
-        return 0.0
-    return math.log(max(2.0, ref_hz * s["irregular_horizon_s"])) / ref_hz
+    return bool(len(jitter)) and float(np.median(jitter)) / 1000.0 * ref_hz >= ctx.settings["irregular_cv"]
 
 
 def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[str, list[float]]) -> bool:
@@ -581,6 +589,8 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     samples, lasted = streak(ctx.state, (topic, "drop"), low), held(ctx.state, (topic, "drop"), low, ctx.t)
     if samples < s["confirm"] or lasted < r.longest:
         return None
+    if lasted < s["irregular_drop_s"] and _irregular(ctx, topic, med):
+        return None  # its rate follows a lossy or event-driven input: it halves for seconds by chance
     sim = f" (the simulation at {pace:.2g}× its usual pace)" if abs(pace - 1.0) > 0.1 else ""
     return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {med:.3g} Hz{sim}",
                      symptom="rate_drop", rate_hz=now_rate, baseline_hz=med, sim_pace_ratio=pace)

@@ -218,6 +218,21 @@ def test_topic_rate_drop_from_the_recent_rate():
     assert drive("topic_rate", frames) == [(31.0, "topic:/img", "warn")]
 
 
+def test_topic_rate_an_irregular_topic_s_drop_must_outlast_irregular_drop_s():
+    # 3.6 Hz with intervals spreading 0.45 of their mean (the field robot's row detector reading
+    # 1 MiB best-effort clouds): halved for 10 s as the host's load changed is no drop; halved for
+    # good it is one 15 s on (irregular_drop_s). A regular topic halved alerts after 2 samples.
+    def frames(cv, low_s, total_s=20):
+        jitter = cv / 3.6 * 1000.0
+        out = [(float(t), model(rate=3.6, recent=3.6, jitter=jitter, age=0.1), []) for t in range(30)]
+        return out + [(30.0 + i, model(rate=1.7 if i < low_s else 3.6, recent=1.7 if i < low_s else 3.6,
+                                       jitter=jitter, age=0.1), []) for i in range(total_s)]
+
+    assert drive("topic_rate", frames(0.45, 10)) == []
+    assert drive("topic_rate", frames(0.45, 20))[0] == (45.0, "topic:/img", "warn")
+    assert drive("topic_rate", frames(0.02, 10))[0] == (31.0, "topic:/img", "warn")
+
+
 def test_topic_rate_slow_topic_needs_three_periods():
     # A 0.2 Hz topic: silence only after 3 periods (15 s) without a message.
     rates = [0.2] * 20 + [0.0] * 20
