@@ -74,16 +74,21 @@ def _keep(name: str, include_hidden: bool) -> bool:
 
 
 class QosCache:
-    """QoS per (topic, node, role), refreshed only for topics whose endpoint set changed.
+    """QoS per (topic, node, role), refreshed for topics whose endpoint set changed and, a few
+    per sample, for those read longest ago.
 
     ``get_*_info_by_topic`` scans every endpoint of the graph (one call costs O(endpoints)), so
-    calling it for every topic every sample is quadratic; per-node queries are cheap. Stale topics
-    are refreshed within ``budget_s`` per sample, the rest on the next samples.
+    calling it for every topic every sample is quadratic; per-node queries are cheap. Topics whose
+    endpoint set changed are refreshed within ``budget_s`` per sample, the rest on the next
+    samples. A node that re-creates an endpoint with another QoS (a lifecycle node configured
+    again, a QoS parameter applied) keeps the endpoint set: each topic is also read again once
+    its QoS is older than ``every_s``, oldest first, within ``stale_budget_s`` a sample.
     """
 
-    def __init__(self, budget_s: float = 0.03) -> None:
-        self.budget_s = budget_s
+    def __init__(self, budget_s: float = 0.03, every_s: float = 10.0, stale_budget_s: float = 0.005) -> None:
+        self.budget_s, self.every_s, self.stale_budget_s = budget_s, every_s, stale_budget_s
         self._known: dict[str, frozenset[tuple[str, str]]] = {}
+        self._read_at: dict[str, float] = {}  # topic -> when its QoS was read (monotonic)
         self._qos: dict[tuple[str, str, str], dict[str, Any]] = {}
         self._gids: dict[str, dict[bytes, str]] = {}  # topic -> publisher endpoint gid -> node
 
@@ -91,6 +96,22 @@ class QosCache:
                 nodes: dict[str, NodeReading], deadline: float) -> None:
         if self._known.get(topic) == endpoints or time.monotonic() > deadline:
             return
+        self._read(node, topic, endpoints, nodes)
+
+    def refresh_stale(self, node: Node, topics: dict[str, frozenset[tuple[str, str]]],
+                      nodes: dict[str, NodeReading]) -> None:
+        """Read again, oldest first, the topics whose QoS is older than ``every_s``, for at most
+        ``stale_budget_s`` (one read at least, when one is due)."""
+        now = time.monotonic()
+        due = sorted((at, t) for t, at in self._read_at.items() if t in topics and now - at >= self.every_s)
+        deadline = now + self.stale_budget_s
+        for _, topic in due:
+            self._read(node, topic, topics[topic], nodes)
+            if time.monotonic() > deadline:
+                break
+
+    def _read(self, node: Node, topic: str, endpoints: frozenset[tuple[str, str]],
+              nodes: dict[str, NodeReading]) -> None:
         gids: dict[bytes, str] = {}
         for role, call in (("pub", node.get_publishers_info_by_topic),
                            ("sub", node.get_subscriptions_info_by_topic)):
@@ -100,6 +121,7 @@ class QosCache:
                     gids[e.gid] = e.node
         self._gids[topic] = gids
         self._known[topic] = endpoints
+        self._read_at[topic] = time.monotonic()
 
     def get(self, topic: str, node: str, role: str) -> dict[str, Any]:
         return self._qos.get((topic, node, role), {})
@@ -115,6 +137,7 @@ class QosCache:
 
     def forget(self, topics: set[str]) -> None:
         self._known = {t: v for t, v in self._known.items() if t in topics}
+        self._read_at = {t: v for t, v in self._read_at.items() if t in topics}
         self._qos = {k: v for k, v in self._qos.items() if k[0] in topics}
         self._gids = {t: v for t, v in self._gids.items() if t in topics}
 
@@ -225,10 +248,14 @@ def read_graph(node: Node, *, own: str, include_hidden: bool = False,
                 elif role == "pub" and topic.endswith(FEEDBACK_SUFFIX) and types:
                     r.goal_feedback.setdefault(topic, types[0])  # their progress
     deadline = time.monotonic() + qos.budget_s
+    keys, lists = {}, {}
     for topic in sorted(r.topics):
         pubs_, subs_ = sorted(set(ends["pub"].get(topic, []))), sorted(set(ends["sub"].get(topic, [])))
-        key = frozenset([(n, "pub") for n in pubs_] + [(n, "sub") for n in subs_])
-        qos.refresh(node, topic, key, r.nodes, deadline)
+        keys[topic] = frozenset([(n, "pub") for n in pubs_] + [(n, "sub") for n in subs_])
+        lists[topic] = (pubs_, subs_)
+        qos.refresh(node, topic, keys[topic], r.nodes, deadline)
+    qos.refresh_stale(node, keys, r.nodes)
+    for topic, (pubs_, subs_) in lists.items():
         t0 = r.topics[topic][0] if r.topics[topic] else ""
         r.publishers[topic] = [Endpoint(n, topic, t0, b"", qos.get(topic, n, "pub")) for n in pubs_]
         r.subscribers[topic] = [Endpoint(n, topic, t0, b"", qos.get(topic, n, "sub")) for n in subs_]

@@ -329,6 +329,47 @@ def test_qos_incompatible_subscribers_reliable_and_deadline(children, run_of):
     assert run.problems == []
 
 
+RECREATED = """
+import os, sys
+import rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+rclpy.init()
+talker, listener = rclpy.create_node('talker'), rclpy.create_node('listener')
+pub = talker.create_publisher(String, '/chatter', QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+state = {'sub': listener.create_subscription(String, '/chatter', lambda m: None,
+                                             QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))}
+def tick():
+    pub.publish(String(data='x'))
+    if os.path.exists(sys.argv[1]) and state['sub'] is not None:
+        # configured again with a QoS parameter: the same node, topic and endpoint count
+        listener.destroy_subscription(state['sub'])
+        state['sub'] = None
+        state['sub'] = listener.create_subscription(
+            String, '/chatter', lambda m: None, QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+        os.remove(sys.argv[1])
+talker.create_timer(0.05, tick)
+""" + _spin("talker, listener")
+
+
+def test_a_subscription_re_created_with_an_incompatible_qos_is_found(children, run_of, tmp_path):
+    # The endpoint set of /chatter never changes, so only the periodic re-read of each topic's
+    # QoS (QosCache.every_s, 10 s) can see the new one.
+    flag = tmp_path / "reconfigure"
+    children.python(RECREATED, str(flag), name="recreated")
+    run = run_of(["qos_compat"])
+    _ready(run, "node:/talker", "node:/listener")
+    run.observe(3.0)
+    assert [a for a in run.alerts if a.plugin == "qos_compat"] == []
+    flag.touch()
+    t0 = time.time()
+    found = run.until(lambda a: a.member == "node:/listener", 25.0)
+    assert found, f"no alert 25 s after the re-creation: {run.alerts}"
+    assert found[0].data["reasons"] == ["node:/talker: Best effort publisher and reliable subscription"]
+    assert found[0].t - t0 <= 10.0 + 3 * PERIOD + 2.0
+    assert not flag.exists()  # the child did re-create it
+
+
 DIAG = """
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
