@@ -14,7 +14,15 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, held, streak
+from stream_viz.detect.baseline import (
+    BASELINE_SETTINGS,
+    cached_baseline,
+    confirm,
+    exceeds,
+    excess,
+    held,
+    streak,
+)
 from stream_viz.detect.reconfigure import learnt_since, relearn_from
 from stream_viz.detect.startup import standing
 from stream_viz.records import Alert
@@ -24,8 +32,10 @@ class MessageAge(Plugin):
     """Alerts on watched topics whose messages arrive with old or impossible header stamps.
 
     * ``stale`` (warn): the age rises above the topic's own baseline by ``max(k·σ,
-      min_rise_ms, rise_ratio × baseline)`` for ``confirm`` samples with a new message; with
-      ``max_age_ms`` > 0 also any age above it;
+      min_rise_ms, rise_ratio × baseline)`` for ``confirm`` samples with a new message and for
+      ``hold_s`` (the mean over the window, which one late message holds up), or sooner, for
+      ``fast_confirm`` such samples, when the youngest of the newest messages is as late
+      (`_all_late`); with ``max_age_ms`` > 0 also any age above it;
     * ``clock_skew`` (warn): the age is below ``-skew_ms`` (the stamps are in our future: the
       publisher's clock runs ahead, another host's or a simulated one) or above ``implausible_s``
       (stamps not from this clock at all: simulated time, an unset or unsynchronised clock), for
@@ -49,6 +59,7 @@ class MessageAge(Plugin):
         "k": 6.0,
         "confirm": 3,
         "hold_s": 4.0,
+        "fast_confirm": 2,
         "min_rise_ms": 100.0,
         "rise_ratio": 0.5,
         "max_age_ms": 0.0,
@@ -96,6 +107,9 @@ class MessageAge(Plugin):
         risen = confirm(ctx, topic, "stamp_age_ms", seen, alerting, fresh)
         if held(ctx.state, topic, seen is not None and seen[2], ctx.t, fresh) < s["hold_s"]:
             risen = None
+        if risen is None and _all_late(ctx, topic, seen, fresh, since):
+            alerting.add((topic, "stamp_age_ms"))  # the baseline must not learn the delay
+            risen = (seen[0], seen[1])
         over = s["max_age_ms"] > 0 and age > s["max_age_ms"]
         if risen is None and not over:
             return
@@ -103,6 +117,23 @@ class MessageAge(Plugin):
         yield ctx.alert(topic, "warn", f"stale data: messages arrive {age:.0f} ms after their header "
                         f"stamp{usual}", symptom="stale", value_ms=age,
                         baseline_ms=None if risen is None else risen[1])
+
+
+def _all_late(ctx: PluginContext, topic: str, seen: tuple[float, float, bool] | None, fresh: bool,
+              since: float | None) -> bool:
+    """True when the mean age has risen and so has the youngest of the newest messages
+    (``stamp_age_recent_ms``), by the same margin, for ``fast_confirm`` fresh samples: every
+    recent message is late, which one old-stamped message in the window never makes it; no need
+    to wait out the window (``hold_s``)."""
+    s = ctx.settings
+    young = ctx.value(topic, "stamp_age_recent_ms")
+    late = False
+    if seen is not None and seen[2] and young == young:
+        base = cached_baseline(ctx, topic, "stamp_age_ms", frozen=True, since=since)
+        if base is not None:
+            med, sigma, _ = base
+            late = exceeds(young, med, sigma, s["k"], max(s["min_rise_ms"], s["rise_ratio"] * abs(med)))
+    return streak(ctx.state, (topic, "all_late"), late, fresh) >= s["fast_confirm"]
 
 
 def _skew(ctx: PluginContext, topic: str, age: float) -> Alert:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections import Counter, deque
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -117,6 +118,7 @@ class TopicWindow:
             m["latency_ms"] = (self.s_recv - self.s_src) / n / 1e6
             if self.n_age:
                 m["stamp_age_ms"] = self.s_age / self.n_age / 1e6
+                m["stamp_age_recent_ms"] = _youngest(self.buf)
             if sized:
                 m["bandwidth_kBps"] = self.s_size / span / 1000.0
             if n >= 3:
@@ -167,6 +169,19 @@ def _recent(recv: np.ndarray, now_ns: int) -> tuple[int, int]:
     return int(np.partition(recv, n - 1 - k)[n - 1 - k]), k
 
 
+def _youngest(records: Sequence[tuple]) -> float:
+    """The smallest message age (ms) among the newest ``RECENT + 1`` records that have one (at
+    least one has): high only when each of the newest messages is late, which one old-stamped
+    message never makes it."""
+    ages: list[int] = []
+    for r in reversed(records):
+        if r[5] is not None:
+            ages.append(r[5])
+            if len(ages) > RECENT:
+                break
+    return min(ages) / 1e6
+
+
 def _tail(buf: deque, k: int) -> list:
     return [buf[i] for i in range(max(0, len(buf) - k), len(buf))]
 
@@ -189,7 +204,9 @@ def window_metrics(buf: list[tuple], now_ns: int, created_ns: int, window_ns: in
 
     ``stamp_age_ms``: the mean of received − ``header.stamp`` over the records that have one (a
     type beginning with a Header whose stamp is set): the age of the data, beside the transport
-    latency (received − source timestamp, i.e. since it was published).
+    latency (received − source timestamp, i.e. since it was published); ``stamp_age_recent_ms``
+    the smallest of them among the newest ``RECENT + 1`` records that have one (stale data shows
+    in it at once, a single late message never).
     """
     span_ns = min(window_ns, now_ns - created_ns)
     m: dict[str, float] = {}
@@ -205,6 +222,7 @@ def window_metrics(buf: list[tuple], now_ns: int, created_ns: int, window_ns: in
         ages = [b[5] for b in buf if b[5] is not None]
         if ages:
             m["stamp_age_ms"] = sum(ages) / len(ages) / 1e6
+            m["stamp_age_recent_ms"] = _youngest(buf)
         if sized:
             m["bandwidth_kBps"] = sum(b[2] for b in buf) / span / 1000.0
         if n >= 3:

@@ -18,7 +18,7 @@ SCHEMAS: dict[str, tuple[str, ...]] = {
     "topic": (
         "rate_hz", "jitter_ms", "latency_ms", "bandwidth_kBps", "drops_per_s",
         "publishers", "subscribers", "rate_recent_hz", "age_s", "stamp_age_ms",
-        "gap_s", "sim_pace",
+        "gap_s", "sim_pace", "stamp_age_recent_ms",
     ),
     "node": ("publishers", "subscriptions", "services", "clients", "sent_hz"),
     "service": ("servers", "clients", "calls_per_s", "response_ms", "waiting", "wait_s"),

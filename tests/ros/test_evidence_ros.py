@@ -75,6 +75,7 @@ def test_message_age_of_stamps_lagging_300ms(children, tmp_path, run_of):
     sick = _theta(run, "topic:/robot/imu")
     # the data's age, beside a transport latency that did not change
     assert 280.0 <= sick["stamp_age_ms"] <= 400.0 and sick["latency_ms"] < 50.0, sick
+    assert 280.0 <= sick["stamp_age_recent_ms"] <= sick["stamp_age_ms"], sick  # the youngest is late too
 
 
 DEVICE_CLOCK = """
@@ -336,9 +337,9 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 rclpy.init()
 talker, listener = rclpy.create_node('talker'), rclpy.create_node('listener')
-pub = talker.create_publisher(String, '/chatter', QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
-state = {'sub': listener.create_subscription(String, '/chatter', lambda m: None,
-                                             QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))}
+best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+pub = talker.create_publisher(String, '/chatter', best_effort)
+state = {'sub': listener.create_subscription(String, '/chatter', lambda m: None, best_effort)}
 def tick():
     pub.publish(String(data='x'))
     if os.path.exists(sys.argv[1]) and state['sub'] is not None:

@@ -571,14 +571,29 @@ def test_services_client_log_naming_its_service_or_server():
 # --------------------------------------------------------------------------- message age
 
 
-def _aged(age_ms, t, newest=0.05):
+def _aged(age_ms, t, newest=0.05, young=None):
     G = model()
     theta = G.nodes["topic:/img"]["theta"]
     G.nodes["topic:/img"]["theta"] = make_theta("topic", {
         **{k: float(v) for k, v in zip(("rate_hz", "jitter_ms", "latency_ms", "bandwidth_kBps", "drops_per_s",
                                         "publishers", "subscribers"), theta, strict=False)},
-        "age_s": newest, "stamp_age_ms": age_ms})
+        "age_s": newest, "stamp_age_ms": age_ms, **({} if young is None else {"stamp_age_recent_ms": young})})
     return (float(t), G, [])
+
+
+def test_message_age_every_recent_message_late_is_stale_without_waiting_out_the_window():
+    healthy = [_aged(2.0 + (t % 3) * 0.5, t, young=1.5) for t in range(15)]
+    # The youngest of the newest messages 300 ms late too: every one is, after 2 fresh samples.
+    lagging = healthy + [_aged(150.0 + 150.0 * (t > 15), t, young=300.0) for t in range(15, 18)]
+    alerts = drive_alerts("message_age", lagging)
+    assert [(a.t, a.data["symptom"]) for a in alerts] == [(16.0, "stale"), (17.0, "stale")]
+    # One old-stamped message among new ones lifts the mean only: the youngest stays young.
+    once = healthy + [_aged(302.0 if t < 18 else 2.0, t, young=2.0) for t in range(15, 25)]
+    assert drive("message_age", once) == []
+    # A stall that delivers a late batch in one sample and fresh messages in the next.
+    batch = healthy + [_aged(200.0 if t < 18 else 2.0, t, young=250.0 if t == 15 else 2.0)
+                       for t in range(15, 25)]
+    assert drive("message_age", batch) == []
 
 
 def test_message_age_stale_against_its_own_baseline():
