@@ -30,7 +30,7 @@ SUITES = ("short", "full", "control", "sweep")
 __all__ = ["plan", "report", "run_id"]
 
 
-def execute(specs: list[dict], out: Path) -> None:
+def execute(specs: list[dict], out: Path, peers: bool = True) -> None:
     """Run every spec not yet done (``run.json`` present), one at a time."""
     for i, spec in enumerate(specs, 1):
         d = out / run_id(spec)
@@ -56,7 +56,7 @@ def execute(specs: list[dict], out: Path) -> None:
         for s in specs
         if (out / run_id(s) / "run.json").exists() and not (out / run_id(s) / "peers.json").exists()
     ]
-    if todo and PEER_PY.exists():
+    if todo and peers and PEER_PY.exists():
         print(f"peers on {len(todo)} runs …", flush=True)
         subprocess.run([str(PEER_PY), str(ROOT / "bench/eval/peers.py"), *todo], cwd=ROOT, timeout=3600)
 
@@ -111,6 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", help="run only these systems (comma list: demo, amr, gen100)")
     ap.add_argument("--kinds", help="run only these fault kinds (comma list: leak,cpu; none: fault-free)")
     ap.add_argument("--report-only", action="store_true", help="rescore what is in --out")
+    ap.add_argument("--no-peers", action="store_true",
+                    help="do not run the peers (a later call without it runs them on these runs)")
     ap.add_argument("--samples", action="store_true",
                     help="record each run's samples.jsonl.gz (for stream-viz replay)")
     ap.add_argument("--plots", type=Path, help="write eval_*.png here (peer venv matplotlib)")
@@ -130,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
             specs = [s for s in specs if (s["fault"] or "none") in args.kinds.split(",")]
         if args.samples:
             specs = [{**s, "samples": True} for s in specs]
-        execute(specs, out)
+        execute(specs, out, peers=not args.no_peers)
     print(report(out))
     if args.results:
         print(f"results: {publish(out, suite, args.results, argv if argv is not None else sys.argv[1:])}")
