@@ -26,7 +26,10 @@ class MemberGone(Plugin):
     * not alive (error, every sample while it lasts): DDS lists the node, its process is gone;
     * left (``left_severity``): the node left the graph and its process cannot be seen (no
       pid): clean or not cannot be told. A node of a known process that leaves deregistered
-      (destroyed on purpose, or its process is ending cleanly) and raises nothing.
+      (destroyed on purpose, or its process is ending cleanly) and raises nothing; so does one
+      listed for less than ``brief_s`` (a spawner, a CLI call, gone before its process was
+      found): a node whose process died stays listed until its DDS lease ends (Fast DDS: 20 s),
+      so one that left sooner deregistered.
 
     Alerts whether or not the member is watched unless ``watched_only``: a death is evidence,
     not an attribute to screen.
@@ -37,7 +40,7 @@ class MemberGone(Plugin):
     settings: ClassVar[dict[str, Any]] = {
         "left_severity": "warn", "watched_only": False,
         "loop_window_s": 60.0, "loop_min": 3, "loop_fatal": 6,
-        "cycle_life_s": 30.0, "cycle_away_s": 5.0,
+        "cycle_life_s": 30.0, "cycle_away_s": 5.0, "brief_s": 10.0,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -69,14 +72,28 @@ class MemberGone(Plugin):
                 yield ctx.alert(m, sev, _restart_text(ctx, m, restarts), symptom="restart",
                                 restarts=len(restarts), window_s=ctx.t - restarts[0], pid=ctx.attr(m, "pid"),
                                 **hold)
+        listed = _listed_since(ctx)
         for m in sorted(ctx.diff.removed_members):
-            if ctx.kind(m) == "node" and m not in exited and ok(m) and not _pid_known(ctx, m):
+            brief = ctx.t - listed.pop(m, float("-inf")) < s["brief_s"]
+            if ctx.kind(m) == "node" and m not in exited and ok(m) and not _pid_known(ctx, m) and not brief:
                 yield ctx.alert(m, s["left_severity"], "left the graph; its process is not visible here",
                                 symptom="left")
         exited.difference_update(ctx.diff.added_members)  # back again: a later departure is news
         for m in ctx.members("node"):
             if ctx.attr(m, "alive") is False and m not in said and ok(m):
                 yield ctx.alert(m, "error", "not alive", symptom="not_alive", **hold)
+
+
+def _listed_since(ctx: PluginContext) -> dict[str, float]:
+    """When each node joined the graph (-inf for those listed at the monitor's first sample:
+    they may have been listed long before), kept in the plugin state."""
+    since = ctx.state.get("listed")
+    if since is None:
+        since = ctx.state["listed"] = dict.fromkeys(ctx.members("node"), float("-inf"))
+    for m in ctx.diff.added_members:
+        if ctx.kind(m) == "node":
+            since.setdefault(m, ctx.t)
+    return since
 
 
 def _exited_members(ctx: PluginContext, e: Event) -> list[str]:

@@ -949,6 +949,22 @@ def test_member_gone_exit_restart_left_and_not_alive():
     assert drive("member_gone", [(float(t), G, []) for t in range(5)]) == []
 
 
+def test_member_gone_a_node_listed_briefly_without_a_process_deregistered():
+    # A spawner (no pid found: it ended before its process was) joins at 5 s and leaves at 8 s:
+    # a crashed node stays listed until its DDS lease ends, so it deregistered. Listed from 5 s
+    # to 20 s, its departure cannot be told from a lease running out: it warns.
+    G = model()
+    G_with = model()
+    add_member(G_with, "node:/spawner", pid=None)
+
+    def run(leave_at):
+        frames = [(float(t), G_with if 5 <= t < leave_at else G, []) for t in range(leave_at + 2)]
+        return drive("member_gone", frames)
+
+    assert run(8) == []
+    assert run(20) == [(20.0, "node:/spawner", "warn")]
+
+
 def exit_of(t, pid, nodes, still_listed):
     """The collector's exit events of process ``pid`` (one per node, one for the process)."""
     data = {"pid": pid, "process": f"process:{pid}", "nodes": nodes, "still_listed": still_listed}
