@@ -266,7 +266,7 @@ def rank_count(ctx: Context) -> list[RootCause]:
     scored = []
     for n, v in ctx.views.items():
         own = (1.0 if m == n or m.startswith("process:") else ctx.settings.charge for m in v.own)
-        # A node with metric evidence and no alert of its own has no relevance: 0, not a KeyError.
+        # A symptom outside this ranking's relevance (not among its alerts) counts 0, not a KeyError.
         total = sum(rel.get(m, 0.0) * f for m, f in zip(v.own, own, strict=True))
         scored.append((total, v.onset, n))
     top = max((x for x, _, _ in scored), default=0.0) or 1.0
