@@ -25,6 +25,7 @@ from stream_viz.detect.baseline import (
 )
 from stream_viz.detect.reconfigure import learnt_since, relearn_from
 from stream_viz.detect.startup import standing
+from stream_viz.model.ids import name_of
 from stream_viz.records import Alert
 
 
@@ -40,6 +41,9 @@ class MessageAge(Plugin):
       publisher's clock runs ahead, another host's or a simulated one) or above ``implausible_s``
       (stamps not from this clock at all: simulated time, an unset or unsynchronised clock), for
       ``confirm`` samples. No stale check on such a topic: its ages say nothing about delay.
+
+    On a topic several nodes publish (``/tf``), the alert names those whose own messages are late
+    (``publisher_ages``; data ``publishers``) when the others' are not: the RCA charges them.
 
     A topic whose stamps went back (a ``stamp_reset`` event: a recording that looped, a
     simulation reset) learns its age afresh from then on: its data are as old as its new time
@@ -114,9 +118,25 @@ class MessageAge(Plugin):
         if risen is None and not over:
             return
         usual = f", normally {risen[1]:.0f} ms" if risen is not None else f" (limit {s['max_age_ms']:.0f} ms)"
+        floor = max(s["min_rise_ms"], s["rise_ratio"] * abs(seen[1] if seen else 0.0))
+        late = _late_publishers(ctx, topic, floor)
+        whose = f", from {', '.join(name_of(p) for p in late)} (the others' on time)" if late else ""
         yield ctx.alert(topic, "warn", f"stale data: messages arrive {age:.0f} ms after their header "
-                        f"stamp{usual}", symptom="stale", value_ms=age,
-                        baseline_ms=None if risen is None else risen[1])
+                        f"stamp{usual}{whose}", symptom="stale", value_ms=age,
+                        baseline_ms=None if risen is None else risen[1],
+                        **({"publishers": late} if late else {}))
+
+
+def _late_publishers(ctx: PluginContext, topic: str, floor: float) -> list[str]:
+    """The publishers of ``topic`` whose own messages are ``floor`` ms older than the youngest
+    publisher's (``publisher_ages``), when some are and some are not: on ``/tf`` from three nodes,
+    the one whose stamps froze, whose symptom it is."""
+    ages = ctx.attr(topic, "publisher_ages") or {}
+    if len(ages) < 2:
+        return []
+    least = min(ages.values())
+    late = sorted(p for p, ms in ages.items() if ms - least >= floor)
+    return late if len(late) < len(ages) else []
 
 
 def _all_late(ctx: PluginContext, topic: str, seen: tuple[float, float, bool] | None, fresh: bool,

@@ -108,8 +108,9 @@ class QosCompat(Plugin):
     nothing: the misconfigured end is the cause of its silence), ``warn`` when it matches only
     some; the reasons and the publishers in the data. With ``warnings``, rmw's warnings (policies
     it cannot judge) are ``info`` alerts. A topic is checked when it or the subscriber is
-    watched; topics in ``ignore_topics`` never. Rechecked when the graph or the watchlist
-    changed, or every ``recheck_s`` (the QoS of new endpoints may come a sample late).
+    watched; topics in ``ignore_topics`` never. Rechecked when the graph, the watchlist or an
+    endpoint's QoS (the graph's ``qos_version``: a subscription re-created with another QoS) changed,
+    or every ``recheck_s`` (the QoS of new endpoints may come a sample late).
     """
 
     name = "qos_compat"
@@ -136,13 +137,13 @@ class QosCompat(Plugin):
 
 def _analyse(ctx: PluginContext) -> list[tuple[str, str, str, list[str], int, list[str]]]:
     """``(topic, subscriber, level, mismatched publishers, publishers, reasons)`` per subscriber
-    with an error (or a warning), cached until the graph or the watchlist changes."""
+    with an error (or a warning), cached until the graph, the watchlist or a QoS changes."""
     def compute() -> list[tuple[str, str, str, list[str], int, list[str]]]:
         ignore = ctx.topic_ids(ctx.settings["ignore_topics"])
         topics = [t for t in ctx.members("topic") if t not in ignore]
         return [row for topic in topics for row in _mismatches(ctx, topic)]
 
-    return ctx.structural(compute, ctx.settings["recheck_s"])
+    return ctx.structural(compute, ctx.settings["recheck_s"], token=ctx.graph.graph.get("qos_version"))
 
 
 def _mismatches(ctx: PluginContext, topic: str) -> list[tuple[str, str, str, list[str], int, list[str]]]:

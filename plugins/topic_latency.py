@@ -32,7 +32,11 @@ class TopicLatency(Plugin):
     a moment while a participant joins) or one gap (a mux switching sources, a process stalled)
     holds the value up for the whole window, on a slow topic at several times its baseline;
     only a rise that outlasts the window is a change of the topic. Jitter is not judged while
-    several publishers send on the topic (`_interleaved`).
+    several publishers send on the topic (`_interleaved`), nor while an input of its publisher
+    started or stopped within the last ``switch_samples`` (`_inputs_switched`: a mux handing over
+    to a joystick, a relay of an on-demand topic forwards what comes, when it comes), nor while
+    the topic's endpoints changed in number within them (`_endpoints_changed`: a recorder
+    joining).
 
     Common mode: when at least ``common_mode_min`` topics and ``common_mode_ratio`` of the topics
     measured in a sample rise at once, the sample is a stall of the host or of the monitor (the
@@ -59,6 +63,7 @@ class TopicLatency(Plugin):
         "usual_quantile": 0.9,
         "latency_hold_s": 4.0,
         "jitter_hold_s": 4.0,
+        "switch_samples": 8,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -77,6 +82,10 @@ class TopicLatency(Plugin):
                 floor = _least_rise(s, attr, rate)
                 ex = excess(ctx, topic, attr, floor, alerting)
                 ex = _above_usual(ctx, topic, attr, floor, ex, alerting)
+                if attr == "jitter_ms" and ex is not None and ex[2] and (
+                        _inputs_switched(ctx, topic, s["switch_samples"])
+                        or _endpoints_changed(ctx, topic, s["switch_samples"])):
+                    continue
                 seen.append((topic, attr, ex, fresh))
             drops += _drops(ctx, topic, rate, fresh, alerting)
         stall = common_mode(seen, s["common_mode_min"], s["common_mode_ratio"])
@@ -103,6 +112,35 @@ def _interleaved(ctx: PluginContext, topic: str) -> bool:
     if rates:
         return sum(1 for hz in rates.values() if hz > 0) > 1
     return ctx.value(topic, "publishers") > 1
+
+
+def _inputs_switched(ctx: PluginContext, topic: str, last: int) -> bool:
+    """True when a topic that a publisher of ``topic`` subscribes to was silent (rate 0 or
+    unknown) and sending (> 0) within its ``last`` samples: the publisher's input mix changed
+    (a joystick taking over a mux, a goal starting a controller), and with it what the
+    publisher forwards, when."""
+    for node in ctx.publishers(topic):
+        for source in ctx.subscribed_topics(node):
+            if source == topic:
+                continue
+            _, rates = ctx.past(source, "rate_hz", last=last)
+            sending = np.nan_to_num(np.append(rates, ctx.value(source, "rate_hz")), nan=0.0) > 0
+            if sending.any() and not sending.all():
+                return True
+    return False
+
+
+def _endpoints_changed(ctx: PluginContext, topic: str, last: int) -> bool:
+    """True when ``topic``'s publishers or subscribers changed in number within its ``last``
+    samples: matching a new endpoint (a recorder or a viewer subscribing to everything, a node
+    restarted) takes the publisher's time, and the joiner's start-up the computer's, for a few
+    seconds, seen in the graph only after they began. Its jitter says nothing then."""
+    for attr in ("publishers", "subscribers"):
+        _, counts = ctx.past(topic, attr, last=last)
+        counts = np.append(counts, ctx.value(topic, attr))
+        if len(np.unique(counts[np.isfinite(counts)])) > 1:
+            return True
+    return False
 
 
 def _least_rise(s: dict[str, Any], attr: str, rate: float) -> float:

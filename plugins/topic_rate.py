@@ -37,6 +37,9 @@ CLOCK = "topic:/clock"  # simulated time (`stream_viz.collect.simclock`)
 PAUSED = 0.05  # the simulation's pace under this share of its usual: paused
 STEADY_SAMPLES = 15  # a publisher that sent in this many samples in a row sends continuously
 STOPPING_PERIODS = 3.0  # a quiet this many usual periods long: the topic is stopping, not slower
+# On simulated time a sensor's messages come in bursts, one per /clock tick: its intervals spread
+# however steady its rate per simulated second is (σ within this share of it): then it is regular.
+STEADY_PER_SIM = 0.1
 
 
 class TopicRate(Plugin):
@@ -73,7 +76,12 @@ class TopicRate(Plugin):
       is the recent one (``rate_recent_hz``, the last few intervals) where measured, so a slowed
       topic shows before the collector's window has turned over;
     * below expectation (warn): ``rate < (1 - expected_tolerance) × expected_rate_hz`` from the
-      config, for ``confirm`` samples.
+      config, for ``confirm`` samples;
+    * a slowed simulation (warn, on ``/clock``): its pace (``sim_pace``, its real-time factor)
+      under ``sim_slow_ratio`` × its usual (and not paused) for ``sim_slow_s``: the simulator's
+      fault (a heavy scene, a pathological mesh). What runs on simulated time slows with it on our
+      clock, which is no drop or silence of those topics: their rates and quiets are judged at the
+      simulation's pace against its usual one (frozen while it is slowed).
     """
 
     name = "topic_rate"
@@ -102,6 +110,8 @@ class TopicRate(Plugin):
         "irregular_cv": 0.3,
         "irregular_horizon_s": 600.0,
         "irregular_drop_s": 15.0,
+        "sim_slow_ratio": 0.4,
+        "sim_slow_s": 3.0,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -120,6 +130,9 @@ class TopicRate(Plugin):
                 _follow(ctx, rhythms.setdefault(topic, Rhythm()), topic, rate, None)
         if ctx.diff.removed_members:
             _forget(ctx, rhythms)
+        slowed = _simulation_slowed(ctx) if CLOCK in ctx.graph else None
+        if slowed is not None:
+            yield slowed
         transitions = _transitions(ctx)
         relearn = ctx.state.setdefault("relearn", {})  # topic -> learned anew from (a reconfiguration)
         followed = []  # every rhythm is followed before any is judged: a quiet is judged with its inputs'
@@ -269,13 +282,15 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     ref = _ref_hz(r, base)
     if quiet is None or not r.settled or r.explained:
         return None
+    pace = _pace(ctx, topic)  # on simulated time a quiet lasts 1/pace as long on our clock
+    judged = quiet * pace if 0 < pace < 1 else quiet
     limit = quiet_limit(r, _base_limit(s, ref), s["gap_margin"])
-    if quiet >= limit:  # its arrivals may be irregular: then longer quiets come by chance
+    if judged >= limit:  # its arrivals may be irregular: then longer quiets come by chance
         limit = max(limit, _by_chance(ctx, topic, ref))
     stalled = False
-    if quiet < limit:  # within its rhythm, unless its executor stopped under its inputs (then for good)
+    if judged < limit:  # within its rhythm, unless its executor stopped under its inputs (then for good)
         base_limit = _base_limit(s, ref)
-        if not r.departed and (quiet < base_limit or _healthy_quiet(ctx, topic, r, transitions)
+        if not r.departed and (judged < base_limit or _healthy_quiet(ctx, topic, r, transitions)
                                or not _stalled(ctx, topic, r, rhythms)):
             return None
         stalled, limit = True, base_limit
@@ -283,7 +298,9 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
         r.explained = True
         return None
     if not r.departed and (_inherited(ctx, topic, r, rhythms, transitions) or _busy(ctx, topic)):
-        r.explained = True
+        # For good once this sample's process metrics cover only the quiet: a span that began
+        # before it (a late sample) may still show a stopped executor's last work.
+        r.explained = ctx.t - ctx.state.get("interval", math.inf) >= r.newest
         return None
     if not r.departed and _withheld(ctx, topic, r, rhythms):
         return None  # the topic's own rhythm: learned when it ends, judged again every sample
@@ -581,6 +598,10 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     quieting = quiet is not None and quiet >= _base_limit(s, med)
     pace = _pace(ctx, topic)
     expect = med * pace  # on simulated time, the rate follows the simulation's pace
+    per_sim = _per_simulated_second(ctx, topic) if pace != 1.0 else None
+    if per_sim is not None:  # sample by sample: a baseline over a wandering pace blurs the median
+        now_pace = ctx.value(CLOCK, "sim_pace")
+        expect, sigma = per_sim[0] * now_pace, per_sim[1] * now_pace
     # An empty window is a quiet (judged by `_silence`), not a lower rate.
     low = (not quieting and 0 < now_rate < s["drop_ratio"] * expect
            and expect - now_rate >= s["drop_k"] * sigma)
@@ -589,11 +610,13 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     samples, lasted = streak(ctx.state, (topic, "drop"), low), held(ctx.state, (topic, "drop"), low, ctx.t)
     if samples < s["confirm"] or lasted < r.longest:
         return None
-    if lasted < s["irregular_drop_s"] and _irregular(ctx, topic, med):
+    steady = per_sim is not None and per_sim[1] <= STEADY_PER_SIM * per_sim[0]
+    if lasted < s["irregular_drop_s"] and not steady and _irregular(ctx, topic, med):
         return None  # its rate follows a lossy or event-driven input: it halves for seconds by chance
     sim = f" (the simulation at {pace:.2g}× its usual pace)" if abs(pace - 1.0) > 0.1 else ""
-    return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {med:.3g} Hz{sim}",
-                     symptom="rate_drop", rate_hz=now_rate, baseline_hz=med, sim_pace_ratio=pace)
+    usual = expect if per_sim is not None else med
+    return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {usual:.3g} Hz{sim}",
+                     symptom="rate_drop", rate_hz=now_rate, baseline_hz=usual, sim_pace_ratio=pace)
 
 
 def _pace(ctx: PluginContext, topic: str) -> float:
@@ -607,10 +630,45 @@ def _pace(ctx: PluginContext, topic: str) -> float:
     if not pubs or not all(CLOCK in ctx.subscribed_topics(p) for p in pubs):
         return 1.0
     now = ctx.value(CLOCK, "sim_pace")
-    base = cached_baseline(ctx, CLOCK, "sim_pace")
+    base = cached_baseline(ctx, CLOCK, "sim_pace", frozen=ctx.state.get("sim_slow", False))
     if not now >= 0 or base is None or not base[0] > 0:
         return 1.0
     return now / base[0]
+
+
+def _per_simulated_second(ctx: PluginContext, topic: str) -> tuple[float, float] | None:
+    """The topic's rate per simulated second (its rate over ``/clock``'s pace, sample by sample):
+    robust median and σ over the baseline window, recomputed every ``refresh_s`` as the other
+    baselines and kept while the topic alerts; None when fewer than ``min_samples`` samples have
+    both."""
+    s, cache = ctx.settings, ctx.state.setdefault("per_sim", {})
+    hit = cache.get(topic)  # (next refresh time, baseline or None)
+    if hit is not None and (ctx.t < hit[0] or topic in ctx.state.get("alerting", ())):
+        return hit[1]
+    t_rate, rate = ctx.past(topic, "rate_hz", last=s["window"])
+    t_pace, pace = ctx.past(CLOCK, "sim_pace", last=s["window"])
+    _, i, j = np.intersect1d(t_rate, t_pace, return_indices=True)
+    ok = np.isfinite(rate[i]) & (pace[j] > 0.01)  # a paused simulation has no rate per second
+    per = rate[i][ok] / pace[j][ok]
+    found = None if len(per) < s["min_samples"] else robust(per)[:2]
+    cache[topic] = (ctx.t + (s["refresh_s"] if found is not None else 1.0), found)
+    return found
+
+
+def _simulation_slowed(ctx: PluginContext) -> Alert | None:
+    """The simulation at under ``sim_slow_ratio`` of its usual pace, not paused, for ``sim_slow_s``
+    (its usual pace frozen meanwhile, as `_pace` reads it)."""
+    s = ctx.settings
+    now = ctx.value(CLOCK, "sim_pace")
+    base = cached_baseline(ctx, CLOCK, "sim_pace", frozen=ctx.state.get("sim_slow", False))
+    usual = base[0] if base is not None else math.nan
+    slow = usual > 0 and PAUSED * usual <= now < s["sim_slow_ratio"] * usual
+    ctx.state["sim_slow"] = slow
+    if held(ctx.state, (CLOCK, "sim_slow"), slow, ctx.t) < s["sim_slow_s"] or not slow:
+        return None
+    return ctx.alert(CLOCK, "warn", f"the simulation runs at {now:.2g}× real time, usually {usual:.2g}×: "
+                     "everything on simulated time slows with it", symptom="sim_slow", sim_pace=now,
+                     baseline_pace=usual)
 
 
 def _note_changes(ctx: PluginContext, changed: dict[str, float], relearn: dict[str, float],

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections import defaultdict
+from collections.abc import Callable
 
 import networkx as nx
 
@@ -35,7 +36,8 @@ def build_model(
     topic_stats : dict, optional
         Topic → `TopicStats` (a topic missing here is ``measured=False``). Its messages/s per
         publisher gid become the topic attribute ``publisher_rates`` (node id → Hz, the gids
-        mapped with ``reading.publisher_gids``) and add up to each node's θ ``sent_hz``.
+        mapped with ``reading.publisher_gids``) and add up to each node's θ ``sent_hz``; its mean
+        message age per publisher gid, ``publisher_ages`` (node id → ms, where two or more have one).
     service_stats : dict, optional
         Service → `ServiceStats` of the services whose calls are observed (introspection).
     calls : dict, optional
@@ -49,6 +51,7 @@ def build_model(
         process tree (process → node, parent process → child, ``root`` over several tops).
     """
     G = new_graph()
+    G.graph["qos_version"] = reading.qos_version  # a QoS changed in place: no member or edge did
     stats = topic_stats or {}
     counts: dict[str, dict[str, float]] = {n: dict.fromkeys(SCHEMAS["node"], 0.0) for n in reading.nodes}
     for c in counts.values():
@@ -64,6 +67,9 @@ def build_model(
         shares = _shares(st, sorted({e.node for e in pubs}), reading.publisher_gids.get(topic, {}))
         if st.by_publisher:
             attrs["publisher_rates"] = {make_id("node", n): hz for n, hz in shares.items()}
+        ages = publisher_ages(st.age_by_publisher, reading.publisher_gids.get(topic, {}))
+        if len(ages) > 1:  # whose stamps are late, where several publish (`/tf`)
+            attrs["publisher_ages"] = {make_id("node", n): ms for n, ms in ages.items()}
         for n, hz in shares.items():
             if n in counts:
                 sent = counts[n]["sent_hz"]
@@ -99,11 +105,22 @@ def build_model(
 def publisher_rates(by_gid: dict[bytes, float], gid_nodes: dict[bytes, str]) -> dict[str, float]:
     """Return node fqn → messages/s from messages/s per publisher gid (a node's publishers of
     one topic add up); gids of no known publisher are left out."""
+    return _per_node(by_gid, gid_nodes, lambda a, b: a + b)
+
+
+def publisher_ages(by_gid: dict[bytes, float], gid_nodes: dict[bytes, str]) -> dict[str, float]:
+    """Return node fqn → mean message age (ms) from the mean age per publisher gid (a node's
+    publishers of one topic: the oldest); gids of no known publisher are left out."""
+    return _per_node(by_gid, gid_nodes, max)
+
+
+def _per_node(by_gid: dict[bytes, float], gid_nodes: dict[bytes, str],
+              combine: Callable[[float, float], float]) -> dict[str, float]:
     out: dict[str, float] = {}
-    for gid, hz in by_gid.items():
+    for gid, x in by_gid.items():
         node = gid_nodes.get(gid)
         if node is not None:
-            out[node] = out.get(node, 0.0) + hz
+            out[node] = combine(out[node], x) if node in out else x
     return out
 
 

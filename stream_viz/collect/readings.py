@@ -49,6 +49,7 @@ class GraphReading:
     goal_status: dict[str, list[str]] = field(default_factory=dict)  # action status topic -> servers
     goal_feedback: dict[str, str] = field(default_factory=dict)  # action feedback topic -> its type
     skipped: dict[str, str] = field(default_factory=dict)  # node fqn -> why it was skipped
+    qos_version: int = 0  # `QosCache.version`: changes when an endpoint's QoS changed in place
 
 
 @dataclass(frozen=True)
@@ -84,4 +85,5 @@ class TopicStats:
     reason: str = ""
     metrics: dict[str, float] = field(default_factory=dict)
     by_publisher: dict[bytes, float] = field(default_factory=dict)  # publisher gid -> messages/s
+    age_by_publisher: dict[bytes, float] = field(default_factory=dict)  # publisher gid -> mean age ms
     stamp_resets: list[tuple[int, int]] = field(default_factory=list)  # (received ns, back ns)

@@ -79,6 +79,7 @@ class SampleEncoder:
         self._edge_attrs: dict[tuple[str, str, int], dict[str, Any]] = {}
         self._theta: dict[str, bytes] = {}  # θ as last written, as bytes: NaN equals NaN, and fast
         self._unreadable: dict[str, str] = {}
+        self._graph_attrs: dict[str, Any] = {}
 
     def encode(self, sample: Sample) -> dict[str, Any]:
         """Return the record of ``sample`` (JSON-able but for numpy values `_dumps` converts)."""
@@ -124,6 +125,9 @@ class SampleEncoder:
         if sample.unreadable != self._unreadable:
             self._unreadable = dict(sample.unreadable)
             rec["unreadable"] = self._unreadable
+        if G.graph != self._graph_attrs:  # the graph's own (``qos_version``: a QoS changed in place)
+            self._graph_attrs = dict(G.graph)
+            rec["graph_attrs"] = self._graph_attrs
         return rec
 
 
@@ -144,6 +148,7 @@ class SampleDecoder:
         self._edges: dict[tuple[str, str, int], dict[str, Any]] = {}
         self._theta: dict[str, np.ndarray] = {}
         self._unreadable: dict[str, str] = {}
+        self._graph_attrs: dict[str, Any] = {}
         self._prev = new_graph()
 
     def decode(self, rec: Mapping[str, Any]) -> Sample:
@@ -169,6 +174,8 @@ class SampleDecoder:
                 self._theta[m] = th if remap is None else remap(th)
         if "unreadable" in rec:
             self._unreadable = {str(m): str(why) for m, why in rec["unreadable"].items()}
+        if "graph_attrs" in rec:
+            self._graph_attrs = dict(rec["graph_attrs"])
         G = self._graph()
         events = [Event(float(et), kind, member, level, text, dict(data))
                   for et, kind, member, level, text, data in rec.get("events", [])]
@@ -178,6 +185,7 @@ class SampleDecoder:
 
     def _graph(self) -> nx.MultiDiGraph:
         G = new_graph()
+        G.graph.update(self._graph_attrs)
         theta = self._theta
         G.add_nodes_from((m, {**a, "theta": theta[m]} if m in theta else a) for m, a in self._members.items())
         G.add_edges_from((u, v, k, a) for (u, v, k), a in self._edges.items())

@@ -299,7 +299,7 @@ class TopicMonitor:
                 if m and w.kind == "clock" and (pace := self.clock.pace(now, PACE_SPAN_NS)) is not None:
                     m["sim_pace"] = pace
                 out[t] = TopicStats(True, "", m, w.window.publisher_rates(now, w.created_ns, self.window_ns),
-                                    w.window.take_resets())
+                                    w.window.publisher_ages(), w.window.take_resets())
         if not self.metrics:
             for t in publishers:
                 out.setdefault(t, TopicStats(False, "topic metrics are off"))

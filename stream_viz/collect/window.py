@@ -29,8 +29,8 @@ WARMUP_S = 1.0  # a fresh subscription has seen too little to call a rate (0 wou
 class TopicWindow:
     """Records of one topic, oldest first, and the running sums its metrics need."""
 
-    __slots__ = ("buf", "by_gid", "gap_ns", "gaps", "last_stamp", "n_age", "no_seq", "resets", "s_age", "s_d",
-                 "s_d2", "s_recv", "s_size", "s_src")
+    __slots__ = ("age_by_gid", "buf", "by_gid", "gap_ns", "gaps", "last_stamp", "n_age", "no_seq", "resets",
+                 "s_age", "s_d", "s_d2", "s_recv", "s_size", "s_src")
 
     def __init__(self) -> None:
         self.buf: deque[Record] = deque()
@@ -40,6 +40,7 @@ class TopicWindow:
         self.no_seq = 0  # records without a sequence number
         self.s_age = self.n_age = 0  # sum and count of the message ages (records that have one)
         self.by_gid: Counter[bytes] = Counter()  # records per publisher gid (those that have one)
+        self.age_by_gid: dict[bytes, list[int]] = {}  # gid -> [sum, count] of its records' ages
         self.gap_ns = 0  # the longest interval between records added since `take_gap`
         self.last_stamp: dict[bytes | None, int] = {}  # the newest header stamp per publisher
         self.resets: list[tuple[int, int]] = []  # (received ns, how far back ns) since `take_resets`
@@ -77,6 +78,10 @@ class TopicWindow:
             self.n_age += 1
         if gid is not None:
             self.by_gid[gid] += 1
+            if age is not None:
+                acc = self.age_by_gid.setdefault(gid, [0, 0])
+                acc[0] += age
+                acc[1] += 1
 
     def expire(self, before_ns: int) -> None:
         """Drop the records received before ``before_ns``."""
@@ -96,6 +101,12 @@ class TopicWindow:
                     self.by_gid[gid] = left
                 else:
                     del self.by_gid[gid]
+                if age is not None:
+                    acc = self.age_by_gid[gid]
+                    acc[0] -= age
+                    acc[1] -= 1
+                    if not acc[1]:
+                        del self.age_by_gid[gid]
             if buf:
                 d = buf[0][0] - recv
                 self.s_d -= d
@@ -159,6 +170,11 @@ class TopicWindow:
         if span_ns < WARMUP_S * 1e9:
             return {}
         return {gid: n * 1e9 / span_ns for gid, n in self.by_gid.items()}
+
+    def publisher_ages(self) -> dict[bytes, float]:
+        """Return publisher gid → mean message age (ms) of its records in the window that have
+        one: whose stamps are late when several publish on the topic (``/tf``)."""
+        return {gid: total / n / 1e6 for gid, (total, n) in self.age_by_gid.items()}
 
 
 def _recent(recv: np.ndarray, now_ns: int) -> tuple[int, int]:

@@ -11,7 +11,7 @@ questions (`PluginContext.nodes_of`, `PluginContext.publishers`, ...), and makes
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Hashable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, TypeVar
 
@@ -198,16 +198,19 @@ class PluginContext:
         self.state["_t_prev"] = self.t
         return since
 
-    def structural(self, compute: Callable[[], T], recheck_s: float = math.inf, key: str = "") -> T:
-        """Return ``compute()``, redone only when the graph or the watchlist changed, or every
-        ``recheck_s``: an analysis of the structure alone stays cheap on 1,000 members. ``key``
-        names the analysis when a plugin keeps several."""
+    def structural(self, compute: Callable[[], T], recheck_s: float = math.inf, key: str = "",
+                   token: Hashable = None) -> T:
+        """Return ``compute()``, redone only when the graph, the watchlist or ``token`` changed, or
+        every ``recheck_s``: an analysis of the structure alone stays cheap on 1,000 members. ``key``
+        names the analysis when a plugin keeps several; ``token`` is what else it depends on (the
+        graph's ``qos_version``: a QoS changed in place)."""
         slot = ("_structural", key)
         cached = self.state.get(slot)
-        if cached is not None and not self.diff and cached[0] == self.watch and self.t < cached[1]:
+        if cached is not None and not self.diff and cached[0] == self.watch and self.t < cached[1] \
+                and cached[3] == token:
             return cached[2]
         out = compute()
-        self.state[slot] = (self.watch, self.t + recheck_s, out)
+        self.state[slot] = (self.watch, self.t + recheck_s, out, token)
         return out
 
     def topic_ids(self, names: Iterable[str]) -> set[str]:

@@ -3,7 +3,8 @@ alert names.
 
 A symptom on a passive member says something is wrong with the nodes feeding it. With one
 publisher that is the one; with several (``/tf``, ``/diagnostics``, a fan-in) the symptom is
-charged to the publishers whose own traffic changed (``publisher_rates`` on the topic: a
+charged to the publishers its alerts name (data ``publishers``: whose own stamps are late), else
+to those whose own traffic changed (``publisher_rates`` on the topic: a
 publisher gone silent while the others go on), else to those with other evidence of their own
 at that time (their other outputs, their own alerts, their process), else equally to all. An
 alert that names a server, a service or a node (``data["server"]``, ``data["service"]``,
@@ -88,7 +89,7 @@ def pointed_nodes(G: nx.MultiDiGraph, member: str, names: Iterable[str]) -> list
 
 
 def publisher_shares(
-    G: nx.MultiDiGraph, topic: str, pubs: list[str], other: Mapping[str, float]
+    G: nx.MultiDiGraph, topic: str, pubs: list[str], other: Mapping[str, float], named: Iterable[str] = ()
 ) -> dict[str, float]:
     """Return the share of a symptom on ``topic`` that each of its publishers ``pubs`` carries.
 
@@ -103,16 +104,22 @@ def publisher_shares(
         Its publishers.
     other : mapping
         Each publisher's anomaly from evidence of its own at the time (0 or missing: none).
+    named : iterable of str, optional
+        The publishers the symptom's own alerts name (data ``publishers``: whose stamps are late).
 
     Returns
     -------
     dict
-        1 for the publishers the evidence points at; 0 for those still publishing when others
-        stopped; `LOW_SHARE` for those that the others' own evidence does not clear; 1 for all
-        when nothing tells them apart (or there is a single publisher).
+        1 for the publishers the alerts name or the evidence points at; 0 for the others
+        beside those named, and for those still publishing when others stopped; `LOW_SHARE` for
+        those that the others' own evidence does not clear; 1 for all when nothing tells them
+        apart (or there is a single publisher).
     """
     if len(pubs) < 2:
         return dict.fromkeys(pubs, 1.0)
+    named = set(named) & set(pubs)
+    if named and len(named) < len(pubs):
+        return {p: 1.0 if p in named else 0.0 for p in pubs}
     rates = G.nodes[topic].get("publisher_rates") if topic in G else None
     rates = rates if isinstance(rates, Mapping) else {}
     stopped = {p for p in pubs if G.nodes[p].get("gone") or _rate(rates.get(p)) == 0.0}

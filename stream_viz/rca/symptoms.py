@@ -44,7 +44,9 @@ class Symptoms:
     to alert — a node that logs is running, which a starved one is not; ``exited`` when a node's
     process was seen to die (an alert for its process with symptom ``exit``); ``latest`` the latest
     alert time; ``count`` how many alerts they come from; ``began`` when a member's symptom
-    began by its own alerts' word (data ``since``: a host saturated for a while before it alerts).
+    began by its own alerts' word (data ``since``: a host saturated for a while before it alerts);
+    ``culprits`` the publishers a topic's alerts name as the ones whose own messages are the
+    symptom (data ``publishers``: stale stamps of one of ``/tf``'s publishers, one stopped).
     """
 
     times: dict[str, np.ndarray] = field(default_factory=dict)
@@ -60,6 +62,7 @@ class Symptoms:
     logged: dict[str, float] = field(default_factory=dict)
     exited: dict[str, float] = field(default_factory=dict)
     began: dict[str, float] = field(default_factory=dict)
+    culprits: dict[str, set[str]] = field(default_factory=dict)
     latest: float = -INF
     count: int = 0
 
@@ -121,6 +124,8 @@ def collect_symptoms(
                 logged[m] = min(logged.get(m, INF), t)
         elif data.get("symptom") == "exit":
             exited[m] = min(exited.get(m, INF), t)
+        if data and isinstance(data.get("publishers"), list) and m.startswith("topic:"):
+            s.culprits.setdefault(m, set()).update(p for p in data["publishers"] if isinstance(p, str))
         if data and isinstance(data.get("since"), int | float):
             s.began[m] = min(s.began.get(m, INF), float(data["since"]), t)
         if data and not data.keys().isdisjoint(NAME_KEYS):
@@ -349,7 +354,7 @@ def _charge_shared(
         lo, hi = s.onset[m] - gap, s.episodes[m][-1][1] + gap
         other = {n: max(v.direct, v.charged, v.evidence) if overlaps(v.spans, lo, hi) else v.untimed
                  for n in nodes if (v := views.get(n)) is not None}
-        shares[m] = publisher_shares(G, m, nodes, other)
+        shares[m] = publisher_shares(G, m, nodes, other, s.culprits.get(m, ()))
     for m, nodes in shared_by:
         for n in nodes:
             x = s.anomaly[m] * settings.charge * shares[m][n]

@@ -101,9 +101,11 @@ def test_window_stamp_age_is_the_mean_of_the_messages_that_have_one():
     assert m["stamp_age_ms"] == pytest.approx(200.0)
     assert window_metrics(recs, 3 * S, 0, 3 * S, 2)["stamp_age_ms"] == pytest.approx(200.0)
     assert w.publisher_rates(3 * S, 0, 3 * S) == {b"a" * 16: 2 / 3, b"b" * 16: 1 / 3}
+    assert w.publisher_ages() == {b"a" * 16: 300.0, b"b" * 16: 100.0}  # whose stamps are late
     w.expire(2 * S)
     assert w.metrics(3 * S, 0, 3 * S, 2)["stamp_age_ms"] == pytest.approx(100.0)
     assert w.publisher_rates(3 * S, 0, 3 * S) == {b"a" * 16: 1 / 3, b"b" * 16: 1 / 3}
+    assert w.publisher_ages() == {b"b" * 16: 100.0}  # a's one aged record expired
     assert "stamp_age_ms" not in window_metrics([(1 * S, 1 * S, 1, 1, None, None)], 2 * S, 0, 2 * S, 1)
 
 
@@ -197,6 +199,20 @@ def test_qos_compat_alerts_on_the_subscriber_with_the_reason():
     assert "deadline" in a3.message and a3.severity == "error"
     assert drive("qos_compat", [(1.0, G, [])], settings={"ignore_topics": ["/img"]}) == []
     assert drive("qos_compat", [(1.0, G, [])], watch={"node:/camera"}) == []  # neither end watched
+
+
+def test_qos_compat_looks_again_when_a_qos_changed_in_place():
+    # a subscription re-created as reliable on a best-effort topic: no member or edge changed;
+    # the collector's qos_version says a QoS did, and the plugin looks again at once
+    def frame(t, version):
+        sub = Q() if t >= 3 else Q(rel="best_effort")
+        G = _qos_model(Q(rel="best_effort"), sub)
+        if version:
+            G.graph["qos_version"] = int(t >= 3)
+        return (float(t), G, [])
+
+    assert [a[0] for a in drive("qos_compat", [frame(t, True) for t in range(6)])] == [3.0, 4.0, 5.0]
+    assert drive("qos_compat", [frame(t, False) for t in range(6)]) == []  # its 10 s recheck: later
 
 
 def test_graph_anomalies_no_longer_judges_qos():
@@ -615,6 +631,24 @@ def test_message_age_stale_against_its_own_baseline():
     # for the 3 samples it stays in the window: not stale data
     once = healthy + [_aged(302.0 if t < 18 else 2.0, t) for t in range(15, 25)]
     assert drive("message_age", once) == []
+
+
+def test_message_age_names_the_publishers_whose_own_stamps_are_late():
+    # /img from the camera and a replay node: the camera's stamps froze, the replay's are on time
+    def two(t, camera_ms):
+        frame = _aged(2.0 if t < 15 else (camera_ms + 2.0) / 2, t)
+        frame[1].nodes["topic:/img"]["publisher_ages"] = {"node:/camera": camera_ms, "node:/replay": 2.0}
+        return frame
+    frames = [two(t, 2.0 + (t % 3) * 0.5) for t in range(15)] + [two(t, 602.0) for t in range(15, 21)]
+    alerts = drive_alerts("message_age", frames)
+    assert alerts and alerts[0].data["publishers"] == ["node:/camera"], alerts
+    assert "from /camera (the others' on time)" in alerts[0].message
+    # both late: the topic's, no one named
+    both = [two(t, 2.0) for t in range(15)] + [_aged(302.0, t) for t in range(15, 21)]
+    for _, G, _ in both[15:]:
+        G.nodes["topic:/img"]["publisher_ages"] = {"node:/camera": 302.0, "node:/replay": 302.0}
+    alerts = drive_alerts("message_age", both)
+    assert alerts and all("publishers" not in a.data for a in alerts)
 
 
 def test_message_age_skewed_or_implausible_clocks_are_said_so_not_called_latency():

@@ -19,7 +19,7 @@ RNG = np.random.default_rng(7)
 
 
 def model(rate=10.0, latency=2.0, jitter=1.0, drops=0.0, cpu=5.0, rss=80.0, alive=True, recent=None,
-          age=None):
+          age=None, subscribers=1):
     """camera (pid 100) -> /img -> detector (pid 200); ``recent``/``age``: the fast rate signals."""
     G = new_graph()
     add_member(G, "process:100", pid=100, alive=alive,
@@ -30,7 +30,7 @@ def model(rate=10.0, latency=2.0, jitter=1.0, drops=0.0, cpu=5.0, rss=80.0, aliv
     add_member(G, "node:/detector", pid=200, alive=True)
     add_member(G, "topic:/img", theta=make_theta("topic", {
         "rate_hz": rate, "latency_ms": latency, "jitter_ms": jitter, "drops_per_s": drops,
-        "publishers": 1, "subscribers": 1,
+        "publishers": 1, "subscribers": subscribers,
         **({} if recent is None else {"rate_recent_hz": recent}), **({} if age is None else {"age_s": age})}))
     add_flow_edge(G, "node:/camera", "topic:/img", "pub")
     add_flow_edge(G, "topic:/img", "node:/detector", "sub")
@@ -92,10 +92,33 @@ def test_topic_rate_on_simulated_time_follows_the_simulations_pace():
                                         0.9 if t < 30 else pace_after, subscribes), [])
                 for t in range(36)]
 
-    assert drive("topic_rate", frames(True), watch=["topic:/img"]) == []
+    # the slowed simulation is the simulator's symptom (on /clock, once held 3 s), not the camera's
+    slowed = [(float(t), "topic:/clock", "warn") for t in range(33, 36)]
+    assert drive("topic_rate", frames(True), watch=["topic:/img"]) == slowed
     dropped = [(float(t), "topic:/img", "warn") for t in range(31, 36)]
-    assert drive("topic_rate", frames(False), watch=["topic:/img"]) == dropped
+    assert sorted(drive("topic_rate", frames(False), watch=["topic:/img"])) == sorted(dropped + slowed)
     assert drive("topic_rate", frames(True, pace_after=0.9), watch=["topic:/img"]) == dropped
+    # a pace that wanders above half its usual (0.6-1.0 of real time) is no slowed simulation
+    wander = [(float(t), _on_sim_time(model(rate=noisy(10.0)), 0.6 + 0.4 * (t // 10 % 2)), [])
+              for t in range(60)]
+    assert drive("topic_rate", wander, watch=["topic:/img"]) == []
+
+
+def test_topic_rate_a_slowed_simulation_s_quiets_count_at_its_pace():
+    # a 1 Hz heartbeat on simulated time: at a quarter of the usual pace its 1 s becomes 5 s of
+    # ours, no silence; the same quiet on our clock is one
+    def frames(subscribes):
+        out = []
+        for t in range(60):
+            pace = 0.8 if t < 30 else 0.2
+            sent = t < 30 or t % 5 == 0  # every 5 s of ours after the slowdown
+            out.append((float(t), _on_sim_time(model(rate=1.0 if t < 30 else 0.2, age=0.1 if sent else
+                                                     (t % 5) + 0.1), pace, subscribes), []))
+        return out
+
+    judged = [a for a in drive("topic_rate", frames(True), watch=["topic:/img"]) if a[1] == "topic:/img"]
+    assert judged == []
+    assert [a for a in drive("topic_rate", frames(False), watch=["topic:/img"]) if a[1] == "topic:/img"]
 
 
 def test_topic_rate_a_paused_simulation_silences_no_topic_on_its_time():
@@ -452,6 +475,12 @@ def test_topic_rate_a_stalled_executor_silences_its_nodes_together_not_one_after
     det = [m + 0.05 for m in img]
     stopped = lambda t: noisy(3.0, 0.3) if t < 20 else 0.0  # noqa: E731
     frames = [(t, one_thread_model(img, det, t, stopped), []) for t in HALF[:40]]
+    assert {(m, s) for _, m, s in drive("topic_rate", frames)} == {("topic:/img", "error"),
+                                                                   ("topic:/det", "error")}
+    # A late sample (20.5 missed) measures the thread over 19.5-21.5, half of it still working:
+    # not yet a stop, and not the input's quiet for good either; the next sample shows the stop.
+    late = lambda t: noisy(3.0, 0.3) if t < 20 else 1.5 if t < 22 else 0.0  # noqa: E731
+    frames = [(t, one_thread_model(img, det, t, late), []) for t in HALF[:40] if t != 20.5]
     assert {(m, s) for _, m, s in drive("topic_rate", frames)} == {("topic:/img", "error"),
                                                                    ("topic:/det", "error")}
     # The thread goes on (other callbacks run: the camera lost its device): /det's quiet is /img's.
@@ -1232,6 +1261,41 @@ def test_topic_latency_jitter_of_two_publishers_interleaving_is_not_judged():
     # the same rise with one publisher sending is the topic's own
     alone = [(float(t), both(90.0, 0.0), []) for t in range(30, 40)]
     assert drive("topic_latency", healthy + alone) != []
+
+
+def test_topic_latency_jitter_while_an_input_of_its_publisher_switches_is_not_judged():
+    # a mux (the camera here) forwarding a joystick's bursts over its autonomy input: while the
+    # joystick starts or stops, what it forwards comes when its inputs send, not on its own clock
+    def mux(jitter, joystick):
+        G = model(jitter=jitter)
+        add_member(G, "topic:/joy", theta=make_theta("topic", {"rate_hz": joystick, "publishers": 1}))
+        add_flow_edge(G, "topic:/joy", "node:/camera", "sub")
+        return G
+    healthy = [(float(t), mux(noisy(1.0, 0.3), 0.0), []) for t in range(30)]
+    burst = [(float(t), mux(90.0, 10.0 if t < 35 else 0.0), []) for t in range(30, 40)]
+    assert drive("topic_latency", healthy + burst) == []
+    # the same rise while the input sends steadily (or stays silent) is the topic's own
+    steady = [(float(t), mux(noisy(1.0, 0.3), 10.0), []) for t in range(30)]
+    held = [(float(t), mux(90.0, 10.0), []) for t in range(30, 40)]
+    assert drive("topic_latency", steady + held) != []
+    silent = [(float(t), mux(90.0, 0.0), []) for t in range(30, 40)]
+    assert drive("topic_latency", healthy + silent) != []
+
+
+def test_topic_latency_jitter_while_the_topic_s_endpoints_change_is_not_judged():
+    # a recorder subscribing to every topic: matching it takes the publishers' time, and its
+    # start-up the computer's, for seconds that begin before the graph shows it
+    def joined(jitter, subscribers):
+        return model(jitter=jitter, subscribers=subscribers)
+    healthy = [(float(t), joined(noisy(1.0, 0.3), 1.0), []) for t in range(120)]
+    joining = [(float(t), joined(90.0 if t < 126 else noisy(1.0, 0.3), 1.0 if t < 122 else 2.0), [])
+               for t in range(120, 135)]
+    assert drive("topic_latency", healthy + joining) == []
+    # the same rise with no endpoint changing, or outlasting the change, is the topic's own
+    steady = [(float(t), joined(90.0 if t < 126 else noisy(1.0, 0.3), 1.0), []) for t in range(120, 135)]
+    assert drive("topic_latency", healthy + steady) != []
+    lasting = [(float(t), joined(90.0, 1.0 if t < 122 else 2.0), []) for t in range(120, 135)]
+    assert [t for t, _, _ in drive("topic_latency", healthy + lasting)][:1] == [130.0]  # 8 samples on
 
 
 def test_topic_latency_counts_one_late_message_once():

@@ -52,6 +52,15 @@ def test_publisher_shares_follow_own_traffic_then_other_evidence():
     assert publisher_shares(tf_graph(), TF, [LOC, ODOM], {}) == {LOC: 1.0, ODOM: 1.0}
     assert publisher_shares(tf_graph(loc_gone=True), TF, [LOC, ODOM], {}) == {LOC: 1.0, ODOM: 0.0}
     assert publisher_shares(tf_graph(), TF, [LOC], {}) == {LOC: 1.0}
+    # the alerts name whose own messages are the symptom (stale stamps): before anything else
+    assert publisher_shares(G, TF, [LOC, ODOM], {ODOM: 0.5}, {LOC}) == {LOC: 1.0, ODOM: 0.0}
+    assert publisher_shares(G, TF, [LOC, ODOM], {}, {LOC, ODOM}) == {LOC: 1.0, ODOM: 1.0}
+
+
+def test_a_multi_publisher_symptom_is_charged_to_the_publisher_its_alert_names():
+    stale = al(TF, "message_age", 10, "warn", symptom="stale", publishers=[LOC])
+    by, order = causes_of(tf_graph(), [stale])
+    assert order == [LOC] and by[LOC].evidence["symptoms"] == [TF]
 
 
 def test_a_multi_publisher_symptom_is_charged_equally_without_other_evidence():

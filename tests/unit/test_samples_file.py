@@ -47,6 +47,8 @@ def _graph(rate: float, extra: bool = False, pid: int = 10, latency: float = flo
 def _samples() -> list[Sample]:
     log = Event(101.5, "log", "node:/cam", "error", "boom", {"logger": "cam", "line": 3})
     graphs = [_graph(10.0), _graph(10.0), _graph(9.0, pid=11), _graph(9.0, extra=True)]
+    for G, version in zip(graphs, (0, 0, 0, 1), strict=True):
+        G.graph["qos_version"] = version  # a QoS changed in place at the last
     out, prev = [], new_graph()
     for i, G in enumerate(graphs):
         out.append(Sample(100.0 + i, G, [log] if i == 1 else [], diff(prev, G),
@@ -57,6 +59,7 @@ def _samples() -> list[Sample]:
 
 def _same(a: Sample, b: Sample) -> None:
     assert b.t == a.t and b.events == a.events and b.unreadable == a.unreadable and b.diff == a.diff
+    assert b.graph.graph == a.graph.graph
     assert list(b.graph.nodes) == list(a.graph.nodes)
     assert list(b.graph.edges(keys=True, data=True)) == list(a.graph.edges(keys=True, data=True))
     for m, attrs in a.graph.nodes(data=True):
@@ -72,7 +75,7 @@ def test_records_carry_only_what_changed_and_decode_to_the_samples():
     samples = _samples()
     enc = SampleEncoder()
     recs = [json.loads(json.dumps(enc.encode(s))) for s in samples]
-    assert set(recs[0]) == {"t", "graph", "theta"}
+    assert set(recs[0]) == {"t", "graph", "theta", "graph_attrs"}
     assert [m for m, _ in recs[0]["graph"]["members"]] == ["process:10", "node:/cam", "topic:/img"]
     assert recs[0]["graph"]["edges"] == [["process:10", "node:/cam", 1, {"kind": "tree"}],
                                          ["node:/cam", "topic:/img", 0, {"kind": "pub"}]]
@@ -86,7 +89,9 @@ def test_records_carry_only_what_changed_and_decode_to_the_samples():
                                               "qos": [{"node": "/cam", "depth": 10}]}}
     assert list(recs[2]["theta"]) == ["topic:/img"]
     # a new member: the graph in full again, every θ with it; unreadable unchanged
-    assert set(recs[3]) == {"t", "graph", "theta"} and set(recs[3]["theta"]) == {"process:10", "topic:/img"}
+    assert set(recs[3]) == {"t", "graph", "theta", "graph_attrs"}
+    assert set(recs[3]["theta"]) == {"process:10", "topic:/img"}
+    assert recs[3]["graph_attrs"] == {"qos_version": 1}
     dec = SampleDecoder()
     for s, r in zip(samples, recs, strict=True):
         _same(s, dec.decode(r))
