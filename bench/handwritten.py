@@ -51,6 +51,8 @@ class Design:
     again_s: float
 
 
+SLACK_S = 1.0  # an alert this close before the injection is its sample's (sampled as it happened)
+
 class Robot:
     """A robot's processes; its operator process started, ended and started again by a thread."""
 
@@ -58,6 +60,7 @@ class Robot:
         self.design, self.fault_dir, self.logs = design, fault_dir, logs
         self.procs: dict[str, subprocess.Popen] = {}
         self.pids: dict[int, str] = {}  # every pid a process ran as
+        self.transient: list[subprocess.Popen] = []  # short-lived ones beside (spawners, CLI tools)
         self.stop = threading.Event()
 
     def spawn(self, process: str, run_for: float = 0.0) -> subprocess.Popen:
@@ -86,11 +89,13 @@ class Robot:
                 return
 
     def end(self) -> None:
+        """End the robot's processes and the short-lived ones beside them: Ctrl-C, then SIGKILL."""
         self.stop.set()
-        for p in self.procs.values():
+        every = [*self.procs.values(), *self.transient]
+        for p in every:
             if p.poll() is None:
                 os.killpg(p.pid, signal.SIGINT)
-        for p in self.procs.values():
+        for p in every:
             try:
                 p.wait(5)
             except subprocess.TimeoutExpired:
@@ -160,9 +165,9 @@ def run(robot: Robot, fault: str | None, seconds_before: float, post: float,
         blocks = to_blocks(ranked, expand)
         group = d.nodes.get(process, (target,))
         record["truth"] = {"strict": target, "process": sorted(group)}
-        record["before"] = [a for a in record["alerts"] if a["t"] < injected_at - t0 - 1.0] if injected_at \
-            else record["alerts"]
-        record["first_alert_s"] = min((a.t - injected_at for a in alerts if a.t >= injected_at - 1.0),
+        record["before"] = [a for a in record["alerts"]
+                            if a["t"] < injected_at - t0 - SLACK_S] if injected_at else record["alerts"]
+        record["first_alert_s"] = min((a.t - injected_at for a in alerts if a.t >= injected_at - SLACK_S),
                                       default=None) if injected_at else None
         for level, truth in (("strict", {target}), ("process", set(group))):
             record[level] = {f"AC@{k}": hit_at(blocks, truth, k) for k in (1, 3)}

@@ -41,14 +41,19 @@ def rerank(db: Path) -> list:
     return tie_blocks((rc.member, round(rc.score, 6)) for rc in result.root_causes)
 
 
-def replayed(samples: Path) -> list:
-    """Today's live diagnosis of the run recorded in ``samples``: its final ranking, ties as tuples."""
+def replay_report(samples: Path) -> dict:
+    """The JSON report of ``stream-viz replay`` over the run recorded in ``samples``."""
     with tempfile.TemporaryDirectory() as d:
         report = Path(d) / "report.json"
         subprocess.run([sys.executable, "-m", "stream_viz.cli", "replay", str(samples), "--viewer", "none",
                         "--report", str(report), "--db", str(Path(d) / "alerts.sqlite")],
-                       check=True, capture_output=True, timeout=600)
-        causes = json.loads(report.read_text())["root_causes"]
+                       check=True, capture_output=True, timeout=1800)
+        return json.loads(report.read_text())
+
+
+def replayed(samples: Path) -> list:
+    """Today's live diagnosis of the run recorded in ``samples``: its final ranking, ties as tuples."""
+    causes = replay_report(samples)["root_causes"]
     return tie_blocks((rc["member"], round(rc["score"], 6)) for rc in causes)
 
 

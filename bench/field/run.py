@@ -107,10 +107,6 @@ class FieldRobot(NamespacedRobot):
     restart of the robot_state_publisher. The short-lived processes are not the robot's (not in
     `Design.nodes`): they are kept apart in ``transient`` and ended with the robot."""
 
-    def __init__(self, *args, **kw) -> None:
-        super().__init__(*args, **kw)
-        self.transient: list[subprocess.Popen] = []
-
     def start(self) -> None:
         super().start()
         for job in (self._spawners, self._developer_cli, self._manual_restart):
@@ -154,17 +150,6 @@ class FieldRobot(NamespacedRobot):
         if not self.stop.wait(5.0):
             self.spawn(RESTARTED)
 
-    def end(self) -> None:
-        super().end()
-        for p in self.transient:
-            if p.poll() is None:
-                os.killpg(p.pid, signal.SIGINT)
-        for p in self.transient:
-            try:
-                p.wait(5)
-            except subprocess.TimeoutExpired:
-                os.killpg(p.pid, signal.SIGKILL)
-                p.wait(5)
 
 
 if __name__ == "__main__":
