@@ -87,5 +87,5 @@ def _busiest(ctx: PluginContext, host: str, name: str, n: int = 3) -> str:
     cpus = ctx.attr(host, "cpus")
     if cpus and known:  # launchers above the nodes, read every few samples, are unknown in between
         outside = max(0.0, ctx.value(host, "machine_cpu_percent") * cpus - sum(c for c, _ in known)) / 100
-        parts.append(f"outside the robot's processes: {outside:.1f} of {cpus} CPUs")
+        parts.append(f"outside the robot's processes: {outside:.1f} of {cpus:g} CPUs")
     return f" ({'; '.join(parts)})" if parts else ""

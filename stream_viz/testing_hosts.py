@@ -89,10 +89,11 @@ def _child(pid: int, timeout: float = 5.0) -> int:
 
 
 class Host:
-    """One computer of a `Lab`: ``name`` (its host name), ``address``, the pid of its init."""
+    """One computer of a `Lab`: ``name`` (its host name), ``address``, the pid of its init, and
+    the CPUs its commands may run on (``cpus``, all when None: a computer of its own cores)."""
 
-    def __init__(self, lab: Lab, name: str, index: int, log: Path) -> None:
-        self.lab, self.name, self.address = lab, name, f"10.77.0.{index}"
+    def __init__(self, lab: Lab, name: str, index: int, log: Path, cpus: Sequence[int] | None = None) -> None:
+        self.lab, self.name, self.address, self.cpus = lab, name, f"10.77.0.{index}", cpus
         cmd = [*lab.enter(), "unshare", "-n", "-m", "-u", "-p", "--fork", "--mount-proc", "sh", "-c",
                f"hostname {name} && mount -t tmpfs tmpfs /dev/shm && exec sleep 100000"]
         self._outer = subprocess.Popen(cmd, stdout=log.open("w"), stderr=subprocess.STDOUT,
@@ -118,8 +119,9 @@ class Host:
         raise RuntimeError(f"host {self.name} did not start")
 
     def enter(self) -> list[str]:
-        """The command prefix that runs a command inside this host."""
-        return [*NSENTER, "-t", str(self.init), "-U", "-n", "-m", "-p", "-u", f"--wd={os.getcwd()}"]
+        """The command prefix that runs a command inside this host (on its CPUs)."""
+        pin = ["taskset", "-c", ",".join(map(str, self.cpus))] if self.cpus is not None else []
+        return [*NSENTER, "-t", str(self.init), "-U", "-n", "-m", "-p", "-u", f"--wd={os.getcwd()}", *pin]
 
     def sh(self, script: str) -> str:
         """Run a shell script in this host; return its output (raises when it fails)."""
@@ -174,9 +176,10 @@ class Lab:
         """Run a shell script in the lab's network namespace (raises when it fails)."""
         subprocess.run([*self.enter(), "sh", "-c", script], check=True, capture_output=True, timeout=20)
 
-    def add(self, name: str) -> Host:
-        """Add a computer called ``name`` to the network."""
-        host = Host(self, name, len(self.hosts) + 1, self.workdir / f"host_{name}.log")
+    def add(self, name: str, cpus: Sequence[int] | None = None) -> Host:
+        """Add a computer called ``name`` to the network, its commands held to ``cpus`` if given
+        (the only per-computer CPU limit an unprivileged user has: no cgroups)."""
+        host = Host(self, name, len(self.hosts) + 1, self.workdir / f"host_{name}.log", cpus)
         self.hosts.append(host)
         return host
 

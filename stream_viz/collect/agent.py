@@ -115,7 +115,7 @@ class Agent:
             processes[pid] = r
         self.seq += 1
         return HostReport(self.host, self.host_id, self.seq, self.period_s, mine, processes,
-                          self.machine.sample())
+                          self.machine.sample(mine.values()))
 
     def _participants(self) -> dict[str, int]:
         """GUID prefix → pid of this host's participants. The /rosout endpoints are read again

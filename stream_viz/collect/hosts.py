@@ -150,7 +150,7 @@ def _host_member(G: nx.MultiDiGraph, name: str, host_id: int | None, agent: str,
                  machine: Mapping[str, float], **attrs: Any) -> None:
     values = {k: v for k, v in machine.items() if k in SCHEMAS["host"]}
     if "cpus" in machine:
-        attrs["cpus"] = int(machine["cpus"])
+        attrs["cpus"] = round(machine["cpus"], 2)  # a quota's may be a fraction (1.5 CPUs)
     add_member(G, make_id("host", name), theta=make_theta("host", values), agent=agent,
                host_id="?" if host_id is None else f"{host_id:04x}", **attrs)
 
@@ -318,8 +318,9 @@ class HostReports:
         events = []
         for _, (before, after) in sorted(new.items()):
             events += remote_exits(t, after.host, before, after, node_prefix)
+        local = [p.pid for p in pids.values() if p.status in ("confirmed", "unverified") and p.pid]
         unknown = merge_hosts(G, pids, self.own, self.received, t, self.names,
-                              self.first_seen, self.machine.sample())
+                              self.first_seen, self.machine.sample(local))
         now = remote_pids(G, self.own[1])
         events += remote_restarts(t, self._pids, now)
         self._pids = now

@@ -15,6 +15,7 @@ A process we may not fully read keeps what could be read (the rest NaN, listed i
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from collections.abc import Iterable
@@ -23,6 +24,7 @@ from typing import NamedTuple
 
 import psutil
 
+from stream_viz.collect.cgroups import Quota, QuotaReading, parse_mountinfo, quota_of, quota_use, read_quota
 from stream_viz.collect.readings import ProcessReading
 
 MB = 1024.0 * 1024.0
@@ -58,6 +60,9 @@ class Counters(NamedTuple):
 # timed-event, delivery, transmit and lease threads): they run whether the executor does or not.
 MIDDLEWARE_THREADS = ("dds.", "recv", "tev", "dq.", "xmit", "lease", "gc")
 RAN_SHARE = 1e-3  # a thread that ran less than this share of a core between two probes is idle
+# ... or less than this share of the busiest thread's CPU: a main thread that woke once while the
+# executor worked (or as it blocked) is not a second executor thread.
+RAN_OF_BUSIEST = 0.05
 FIRST_PROBES = 4
 PROBE_MIN_S = 0.5  # probes closer than this say nothing (the sampler is called between samples too)
 
@@ -126,29 +131,83 @@ class ProcSample:
 
 
 class MachineSampler:
-    """The whole computer: CPU in use (% of all its cores), memory in use (%) and CPU pressure
-    (% of the time some task was ready to run and waited for a CPU), a host's θ.
+    """The whole computer: CPU in use (% of the cores the robot may use), memory in use (%) and
+    CPU pressure (% of the time some task was ready to run and waited for a CPU), a host's θ.
 
     What a process's own metrics cannot say: a computer saturated by something outside the robot
     (or by all its processes together) slows every node on it. Pressure tells a computer that is
     merely full (every core busy, nobody waiting) from one that starves its tasks; it is Linux's
-    PSI (``/proc/pressure/cpu``), unknown (NaN) where the kernel has none.
+    PSI (``/proc/pressure/cpu``), unknown (NaN) where the kernel has none. The cores counted are
+    those the robot's processes may run on (their affinity: a container's cpuset, a ``taskset``):
+    a robot held to 2 of 8 cores is saturated when those 2 are full, with the machine at 25 %.
+    A CPU quota over all of them (one cgroup's: a container's ``--cpus``, `cgroups`) binds the
+    same way: when its group uses more of its quota than the cores are used, the CPU is that
+    share (``cpus`` the quota), and its throttled periods count as tasks waiting.
     """
 
     def __init__(self, pressure: str = "/proc/pressure/cpu") -> None:
-        psutil.cpu_percent(None)  # the first call only starts the interval
+        psutil.cpu_percent(None, percpu=True)  # the first call only starts the interval
         self._pressure = pressure
         self._stalled = (time.monotonic(), _read_pressure(pressure))
+        self._affinity: dict[int, frozenset[int]] = {}
+        self._quotas: dict[int, Quota | None] = {}
+        self._counted: tuple[Quota, QuotaReading] | None = None
+        try:
+            with open("/proc/self/mountinfo") as f:
+                self._mounts = parse_mountinfo(f.read())
+        except OSError:  # not Linux: no cgroups
+            self._mounts = []
 
-    def sample(self) -> dict[str, float]:
+    def sample(self, pids: Iterable[int] = ()) -> dict[str, float]:
         """CPU and pressure since the last call and memory now, under the host θ names, and the
-        number of CPUs (``cpus``, an attribute of the host)."""
+        number of CPUs counted (``cpus``, an attribute of the host): those the processes ``pids``
+        may run on, every CPU when none is known."""
         now, stalled = time.monotonic(), _read_pressure(self._pressure)
         (then, before), self._stalled = self._stalled, (now, stalled)
-        return {"machine_cpu_percent": psutil.cpu_percent(None),
-                "machine_mem_percent": psutil.virtual_memory().percent,
-                "cpu_pressure_percent": pressure_percent(before, stalled, now - then),
-                "cpus": float(psutil.cpu_count() or 1)}
+        per_cpu = psutil.cpu_percent(None, percpu=True)
+        pids = set(pids)
+        mine = cores_of(len(per_cpu), self._cpus(pids))
+        out = {"machine_cpu_percent": sum(per_cpu[c] for c in mine) / len(mine) if mine else math.nan,
+               "machine_mem_percent": psutil.virtual_memory().percent,
+               "cpu_pressure_percent": pressure_percent(before, stalled, now - then),
+               "cpus": float(len(mine) or 1)}
+        used, throttled, cpus = self._quota_use(pids, now)
+        if used == used and not used < out["machine_cpu_percent"]:  # the quota binds first
+            out["machine_cpu_percent"], out["cpus"] = used, cpus
+        if throttled == throttled and not throttled <= out["cpu_pressure_percent"]:
+            out["cpu_pressure_percent"] = throttled
+        return out
+
+    def _quota_use(self, pids: set[int], now: float) -> tuple[float, float, float]:
+        """(% of the quota used, % of its periods throttled, its CPUs) since the last call, when
+        one quota group holds every process of ``pids``; NaNs otherwise."""
+        self._quotas = {p: q for p, q in self._quotas.items() if p in pids}
+        for pid in pids - self._quotas.keys():  # a process's cgroup seldom changes: read once
+            self._quotas[pid] = quota_of(pid, self._mounts)
+        groups = set(self._quotas.values())
+        q = groups.pop() if len(groups) == 1 else None
+        reading = read_quota(q, now) if q is not None else None
+        before, self._counted = self._counted, (q, reading) if reading is not None else None
+        if q is None or reading is None or before is None or before[0] != q:
+            return math.nan, math.nan, math.nan
+        return (*quota_use(q, before[1], reading), q.cpus)
+
+    def _cpus(self, pids: Iterable[int]) -> frozenset[int]:
+        # An affinity seldom changes: read once per process (a syscall each), forgotten with it.
+        seen = set(pids)
+        self._affinity = {p: c for p, c in self._affinity.items() if p in seen}
+        for pid in seen - self._affinity.keys():
+            try:
+                self._affinity[pid] = frozenset(os.sched_getaffinity(pid))
+            except (OSError, AttributeError):  # gone, not ours to read, or not Linux
+                continue
+        return frozenset().union(*self._affinity.values())
+
+
+def cores_of(listed: int, cpus: Iterable[int]) -> list[int]:
+    """Return the CPUs numbered ``cpus`` among the ``listed`` ones psutil reports, sorted; every
+    listed CPU when ``cpus`` names none of them."""
+    return sorted(c for c in set(cpus) if 0 <= c < listed) or list(range(listed))
 
 
 def _read_pressure(path: str) -> int | None:
@@ -335,7 +394,7 @@ def _procfs_counters(pid: int, st: ProcStat) -> Counters:
 
 def _probe_threads(pid: int, tr: _Tracked) -> None:
     """Count the threads of ``pid`` (the middleware's aside) that ran since the last probe; keep the
-    one when one did."""
+    one when one did, and what was known when none did."""
     now: dict[int, int] = {}
     for name in os.listdir(f"/proc/{pid}/task"):
         try:
@@ -346,15 +405,37 @@ def _probe_threads(pid: int, tr: _Tracked) -> None:
         except (OSError, ValueError, IndexError):
             continue  # a thread that ended, or no schedstat: not counted
     t = time.monotonic()
-    if tr.thread_ns is not None:
-        least = RAN_SHARE * 1e9 * (t - tr.probe_t)
-        ran = [tid for tid, ns in now.items() if ns - tr.thread_ns.get(tid, 0) >= least]
+    ran = None if tr.thread_ns is None else threads_that_ran(tr.thread_ns, now, t - tr.probe_t)
+    # Nothing ran: an idle or blocked executor is still the one it was (kept), and its CPU (none)
+    # is what tells a blocked callback.
+    if ran is not None and (ran or tr.running != tr.running):
         tr.running = float(len(ran))
         if len(ran) != 1:
             tr.worker = None
         elif tr.worker is None or tr.worker[0] != ran[0]:
             tr.worker = (ran[0], t, now[ran[0]] / 1e9)
     tr.thread_ns, tr.probe_t, tr.probes = now, t, tr.probes + 1
+
+
+def threads_that_ran(before: dict[int, int], now: dict[int, int], span_s: float) -> list[int]:
+    """The threads that worked between two probes.
+
+    Parameters
+    ----------
+    before, now : dict
+        Thread id -> its CPU time (ns) at each probe; a thread new since ``before`` started at 0.
+    span_s : float
+        Seconds between the probes.
+
+    Returns
+    -------
+    list of int
+        The threads (in ``now``'s order) that used at least ``RAN_SHARE`` of a core and at least
+        ``RAN_OF_BUSIEST`` of the busiest thread's CPU time.
+    """
+    used = {tid: ns - before.get(tid, 0) for tid, ns in now.items()}
+    least = max(RAN_SHARE * 1e9 * span_s, RAN_OF_BUSIEST * max(used.values(), default=0))
+    return [tid for tid, ns in used.items() if ns >= least]
 
 
 def _thread_ns(pid: int, tid: int) -> int:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -22,6 +23,7 @@ from stream_viz.testing import EXE, claim_domain
 from stream_viz.testing_hosts import NODE, OBSERVER, Lab, Samples, inner, lab_env, why_not
 from stream_viz.viz import paths, style
 from tests.cli.test_cli import check_report
+from tests.robust.test_host_load import BUSY_SENSOR, HOG, HOGS_FROM_S
 from tests.viz import rrd
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -189,3 +191,34 @@ def test_a_computer_off_the_network_is_ranked_first_as_that_host(lab, tmp_path):
     # (the reader's order of the blueprints sent is not the order they were sent in)
     layouts = [rrd.strings(tmp_path / "r.rrd", bp) for bp in RrdReader(str(tmp_path / "r.rrd")).blueprints()]
     assert any({"Host a", "Host b", "Hosts"} <= names for names in layouts), layouts
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2 or shutil.which("taskset") is None,
+                    reason="a computer of its own core needs 2 CPUs and `taskset`")
+def test_a_saturated_remote_computer_is_ranked_first_as_that_host(lab, tmp_path):
+    """Host b (one core of its own) is starved by work outside the robot: its agent reports its
+    core full and the monitor on host a (the other core, not full) names host b, not a node."""
+    env = lab_env(claim_domain())
+    a, b = lab.add("a", cpus=[0]), lab.add("b", cpus=[1])
+    a.run([sys.executable, _script(tmp_path, "node", NODE), "planner", "scan"], env, tmp_path / "planner.log")
+    b.run([sys.executable, _script(tmp_path, "sensor", BUSY_SENSOR)], env, tmp_path / "sensor.log")
+    b.run([EXE, "agent"], env, tmp_path / "agent.log")
+    monitor = a.run([EXE, "monitor", "--duration", "50", "--viewer", "none",
+                     "--report", str(tmp_path / "r.json"), "--db", str(tmp_path / "a.sqlite")],
+                    env, tmp_path / "monitor.log")
+    time.sleep(HOGS_FROM_S)
+    hog = _script(tmp_path, "hog", HOG)
+    for i in range(4):  # on b's core only
+        b.run([sys.executable, hog], env, tmp_path / f"hog{i}.log")
+    report = _report_of(monitor, tmp_path)
+    alerts = [(x["member"], round(x["t"], 1), x["message"]) for x in report["alerts"]]
+    saturated = [x["member"] for x in report["alerts"] if x["plugin"] == "host_state"
+                 and "saturated: CPU" in x["message"]]
+    # b first (a's core is full only if work outside the test takes it, as the machine's rest)
+    assert saturated and saturated[0] == "host:b", alerts
+    slowed = [x for x in report["alerts"] if x["member"] in ("topic:/scan", "topic:/map", "node:/lidar")]
+    # Not a miss of ours: the hogs must have slowed the sensor for the test to mean anything.
+    assert slowed, ("the hogs did not slow the sensor", alerts)
+    top = report["root_causes"][0]
+    assert top["member"] == "host:b", (report["root_causes"][:3], alerts)
+    assert "node:/lidar" in top["evidence"]["explains_nodes"]

@@ -8,6 +8,7 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
+from stream_viz.collect.cgroups import parse_mountinfo
 from stream_viz.testing import EXE
 
 # A node that logs an ERROR on /rosout every 0.5 s (the rosout plugin alerts on it).
@@ -71,3 +72,47 @@ def sample_times(rrd: Path) -> list[int]:
             col = rb.column(rb.schema.names.index("time")).cast("int64")
             stamps.update(v for v in col.to_pylist() if v is not None)
     return sorted(stamps)
+
+
+class QuotaGroup:
+    """A cgroup with a CPU quota of ``cpus``, as a container runtime makes one (``docker --cpus``):
+    in cgroup v2 (``cpu.max``) where its cpu controller is, else in v1 (``cpu`` and ``cpuacct``).
+    ``add(pid)`` moves a process into it; ``close()`` moves what is left out and removes it.
+    Raises OSError where cgroups cannot be made (not root, no cpu controller)."""
+
+    def __init__(self, cpus: float, name: str) -> None:
+        with open("/proc/self/mountinfo") as f:
+            mounts = parse_mountinfo(f.read())
+        v2 = [m for m in mounts if "" in m.controllers]
+        v1 = {c: m for m in mounts for c in m.controllers if c}
+        self.dirs: list[Path] = []
+        period = 100000
+        if "cpu" in v1:
+            for c in ("cpu", "cpuacct"):
+                if c in v1 and Path(v1[c].point, name) not in self.dirs:
+                    d = Path(v1[c].point, name)
+                    d.mkdir()
+                    self.dirs.append(d)
+            (self.dirs[0] / "cpu.cfs_quota_us").write_text(str(int(cpus * period)))
+        elif v2 and "cpu" in Path(v2[0].point, "cgroup.controllers").read_text().split():
+            top = Path(v2[0].point)
+            (top / "cgroup.subtree_control").write_text("+cpu")
+            d = top / name
+            d.mkdir()
+            self.dirs.append(d)
+            (d / "cpu.max").write_text(f"{int(cpus * period)} {period}")
+        else:
+            raise OSError("no cgroup hierarchy with the cpu controller")
+
+    def add(self, pid: int) -> None:
+        for d in self.dirs:
+            (d / "cgroup.procs").write_text(str(pid))
+
+    def close(self) -> None:
+        for d in self.dirs:
+            for pid in (d / "cgroup.procs").read_text().split():
+                try:
+                    (d.parent / "cgroup.procs").write_text(pid)
+                except OSError:
+                    continue  # gone meanwhile
+            d.rmdir()

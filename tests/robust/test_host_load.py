@@ -6,6 +6,7 @@ monitor``. The robot needs most of a core to keep its rate; the hogs take every 
 
 from __future__ import annotations
 
+import os
 import socket
 import subprocess
 import sys
@@ -14,7 +15,7 @@ import time
 import psutil
 import pytest
 
-from tests.robust.common import monitor_cmd, report
+from tests.robust.common import QuotaGroup, monitor_cmd, report
 
 pytestmark = pytest.mark.ros
 
@@ -79,3 +80,45 @@ def test_a_computer_starved_by_work_outside_the_robot_is_the_root_cause(children
     first, *rest = r["root_causes"]
     assert "node:/lidar" in first["evidence"]["explains_nodes"]
     assert all(c["score"] < first["score"] for c in rest)  # the slowed nodes below it, not tied
+
+
+def test_a_container_at_its_cpu_quota_is_the_root_cause(children, tmp_path):
+    """The robot runs in a container held to one CPU (a cgroup quota, as ``docker --cpus 1``) on a
+    machine with cores to spare; a build started in the container takes most of that CPU. The
+    machine's cores are half idle and no task waits for one: only the quota says the container
+    is saturated, and it is the root cause of the sensor's slowing."""
+    try:
+        group = QuotaGroup(1.0, f"stream-viz-test-{os.getpid()}")
+    except OSError as e:
+        pytest.skip(f"cannot make a cgroup with a CPU quota here: {e}")
+    hogs: list[subprocess.Popen] = []
+    try:
+        group.add(children.python(BUSY_SENSOR, name="sensor").pid)
+        rep = tmp_path / "r.json"
+        monitor = subprocess.Popen(monitor_cmd("--duration", "50", "--report", str(rep)), env=children.env,
+                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            time.sleep(HOGS_FROM_S)
+            hogs = [subprocess.Popen([sys.executable, "-c", HOG]) for _ in range(2)]
+            for p in hogs:
+                group.add(p.pid)
+            _, err = monitor.communicate(timeout=120)
+        finally:
+            if monitor.poll() is None:
+                monitor.kill()
+    finally:
+        for p in hogs:
+            p.kill()
+            p.wait()
+        group.close()
+    assert monitor.returncode == 0, err
+    r = report(rep)
+    host = f"host:{socket.gethostname()}"
+    said = [(a["member"], a["message"]) for a in r["alerts"]]
+    saturated = [a for a in r["alerts"] if a["member"] == host and a["plugin"] == "host_state"]
+    assert saturated, said
+    assert "of 1 CPUs" in saturated[0]["message"], saturated[0]["message"]  # the quota, not the cores
+    slowed = [a for a in r["alerts"] if a["member"] in ("topic:/scan", "topic:/map", "node:/lidar")]
+    assert slowed, ("the build did not slow the sensor", said)
+    causes = [c["member"] for c in r["root_causes"]]
+    assert causes[0] == host, (causes, said)

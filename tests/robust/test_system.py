@@ -15,9 +15,9 @@ import time
 import psutil
 import pytest
 
-from stream_viz.collect.processes import ProcessSampler
+from stream_viz.collect.processes import MachineSampler, ProcessSampler
 from stream_viz.testing import TALKER, wait_for
-from tests.robust.common import db_rows, monitor_cmd, report, run, sample_times, snapshot_has
+from tests.robust.common import QuotaGroup, db_rows, monitor_cmd, report, run, sample_times, snapshot_has
 
 pytestmark = pytest.mark.ros
 
@@ -108,6 +108,42 @@ def test_a_process_that_exits_between_listing_and_reading(children, procfs):
     q.wait(10)
     third = ProcessSampler(procfs=procfs).sample([q.pid, 2**22 + 7])  # never tracked: ended / never existed
     assert set(third.errors) == {q.pid, 2**22 + 7} and third.processes == {}
+
+
+@pytest.mark.skipif((os.cpu_count() or 1) < 2, reason="needs 2 CPUs")
+def test_a_host_s_cpu_counts_the_cores_its_processes_may_run_on(children):
+    """A robot held to one core (a cpuset, a taskset) by a busy loop of its own: that core is
+    full, whatever the other cores do."""
+    busy = children.run([sys.executable, "-c", "import os; os.sched_setaffinity(0, {1})\nwhile True: pass"],
+                        name="busy")
+    m = MachineSampler()
+    wait_for(lambda: os.sched_getaffinity(busy.pid) == {1}, 5.0)
+    m.sample([busy.pid])
+    time.sleep(1.0)
+    got = m.sample([busy.pid])
+    assert got["cpus"] == 1.0 and got["machine_cpu_percent"] >= 80.0, got
+    assert m.sample()["cpus"] == float(psutil.cpu_count())  # no process known: every core
+
+
+def test_a_host_s_cpu_is_its_quota_s_use_when_a_cgroup_quota_binds(children):
+    """A robot in a container held to half a CPU (a cgroup quota) by a busy loop of its own: the
+    quota is full and its tasks wait for the next period, whatever the machine's cores do."""
+    try:
+        group = QuotaGroup(0.5, f"stream-viz-sampler-{os.getpid()}")
+    except OSError as e:
+        pytest.skip(f"cannot make a cgroup with a CPU quota here: {e}")
+    busy = children.run([sys.executable, "-c", "while True: pass"], name="busy")
+    try:
+        group.add(busy.pid)
+        m = MachineSampler()
+        m.sample([busy.pid])
+        time.sleep(1.0)
+        got = m.sample([busy.pid])
+    finally:
+        children.end(busy, signal.SIGKILL)
+        group.close()
+    assert got["cpus"] == 0.5 and got["machine_cpu_percent"] >= 90.0, got
+    assert got["cpu_pressure_percent"] >= 50.0, got  # throttled in most periods
 
 
 def test_ancestors_of_the_nodes_processes_are_read_every_fifth_sample(children):
@@ -299,19 +335,24 @@ def test_procfs_reads_what_psutil_reads(children):
 
 def test_the_one_running_thread_is_measured_as_the_executor(children):
     """A process whose only working thread is not its main one (an executor spun in a thread): the
-    sampler finds it and follows its CPU; a blocked thread uses none."""
+    sampler finds it and follows its CPU; a blocked thread uses none, and a probe of the threads
+    that finds none ran keeps it (probed every sample here). The main thread wakes once as the
+    executor's last callback runs (as a lock's holder would): a thread that ran a little beside the
+    executor is not a second executor thread."""
     code = ("import threading, time\n"
             "stop = threading.Event()\n"
+            "def busy(s):\n"
+            "    end = time.monotonic() + s\n"
+            "    while time.monotonic() < end: pass\n"
             "def work():\n"
             "    while not stop.is_set():\n"
-            "        end = time.monotonic() + 0.02\n"
-            "        while time.monotonic() < end: pass\n"
-            "        time.sleep(0.03)\n"
+            "        busy(0.02); time.sleep(0.03)\n"
+            "    busy(0.3)\n"
             "    threading.Event().wait()\n"  # blocked for good, as a deadlocked callback
             "threading.Thread(target=work, name='spin', daemon=True).start()\n"
             "time.sleep(5); stop.set(); time.sleep(60)\n")
     p = children.run([sys.executable, "-c", code], name="spinner")
-    sampler = ProcessSampler(procfs=True)
+    sampler = ProcessSampler(procfs=True, probe_every=1)
     seen = []
     for _ in range(8):
         seen.append(sampler.sample([p.pid]).processes[p.pid].metrics)
@@ -319,3 +360,4 @@ def test_the_one_running_thread_is_measured_as_the_executor(children):
     assert [m.get("running_threads") for m in seen[3:6]] == [1.0, 1.0, 1.0], seen
     assert 15 < seen[4]["executor_cpu_percent"] < 70, seen  # ~40 % asked for
     assert seen[-1]["executor_cpu_percent"] < 1.0, seen  # blocked
+    assert seen[-1]["running_threads"] == 1.0, seen  # still that executor's process

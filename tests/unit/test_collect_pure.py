@@ -348,6 +348,9 @@ def test_topic_window_running_sums_equal_a_fresh_computation():
         assert got.keys() == want.keys(), step
         per_gid = Counter(r[4] for r in held if r[4] is not None)
         assert w.publisher_rates(now, 0, 3 * s) == {g: n / 3 for g, n in per_gid.items()}, step
+        aged = [(r[4], r[5]) for r in held if r[4] is not None and r[5] is not None]
+        want_ages = {g: np.mean([a for h, a in aged if h == g]) / 1e6 for g in {h for h, _ in aged}}
+        assert w.publisher_ages() == pytest.approx(want_ages, rel=1e-9), step
         for k in want:
             assert got[k] == pytest.approx(want[k], rel=1e-9, abs=1e-9), (step, k)
 
@@ -406,3 +409,17 @@ def test_import_type_finds_an_actions_feedback_message():
     assert import_type("test_msgs/action/Fibonacci_FeedbackMessage") is Fibonacci.Impl.FeedbackMessage
     with pytest.raises(AttributeError, match="Nope"):
         import_type("test_msgs/action/Nope_FeedbackMessage")
+
+
+def test_threads_that_ran_are_above_a_core_share_and_a_share_of_the_busiest():
+    from stream_viz.collect.processes import threads_that_ran
+
+    before = {1: 1_000_000_000, 2: 5_000_000, 3: 0}
+    # The executor worked 0.4 s; the main thread woke once (1.5 ms: over the core floor of 1 ms).
+    assert threads_that_ran(before, {1: 1_400_000_000, 2: 6_500_000, 3: 0}, 1.0) == [1]
+    # Two executor threads sharing the work both ran; a thread new since `before` counts from 0.
+    assert threads_that_ran(before, {1: 1_300_000_000, 2: 255_000_000, 4: 30_000_000}, 1.0) == [
+        1, 2, 4]
+    # Nothing over 0.1 % of a core over 2 s: none ran.
+    assert threads_that_ran(before, {1: 1_001_500_000, 2: 5_100_000}, 2.0) == []
+    assert threads_that_ran({}, {}, 1.0) == []

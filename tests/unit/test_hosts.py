@@ -6,7 +6,7 @@ import math
 
 from stream_viz.collect.hostreport import HOST_STATUS, HostReport, decode, encode, host_of_prefix
 from stream_viz.collect.hosts import Received, merge_hosts, remote_exits, remote_pids, remote_restarts
-from stream_viz.collect.processes import parse_pressure, pressure_percent
+from stream_viz.collect.processes import cores_of, parse_pressure, pressure_percent
 from stream_viz.collect.readings import PidInfo, ProcessReading
 from stream_viz.model.graph import PROCESS_TREE, add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.model.ids import pid_of
@@ -363,3 +363,9 @@ def test_each_host_gets_its_nodes_and_what_they_use_from_the_system_graph():
     assert a_part["ids"] == ["node:/planner", "topic:/cam/out", "topic:/imu/out"]
     assert a_part["edges"] == [("topic:/cam/out", "node:/planner"), ("topic:/imu/out", "node:/planner")]
     assert hosts_of(G) == ["a", "b"]
+
+
+def test_a_host_s_cpu_is_the_use_of_the_cores_its_robot_may_run_on():
+    assert cores_of(4, [2, 1, 2]) == [1, 2]  # a cpuset of 2 of 4 cores
+    assert cores_of(2, []) == [0, 1]  # none known: every core
+    assert cores_of(2, [7]) == [0, 1]  # a core psutil does not list: every core

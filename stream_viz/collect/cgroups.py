@@ -1,0 +1,183 @@
+"""A process's CPU quota from its cgroup: a container's ``docker --cpus``, a Kubernetes limit,
+a systemd ``CPUQuota``, read from cgroup v2 (``cpu.max``, ``cpu.stat``) or v1
+(``cpu.cfs_quota_us``, ``cpu.stat``, ``cpuacct.usage``).
+
+A robot held to 1.5 CPUs is saturated when its group uses 1.5, however idle the machine's
+cores: its tasks then wait for the next quota period (throttled), which the machine's own
+pressure (PSI) does not count. Parsing is pure (`parse_proc_cgroup`, `parse_mountinfo`,
+`parse_stat`); `quota_of` and `QuotaReading` read the files.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import NamedTuple
+
+
+class Mount(NamedTuple):
+    """A cgroup hierarchy's mount: where it is (``point``), which cgroup it shows (``root``), and
+    its controllers (``cpu``, ``cpuacct``; ``{""}`` for the unified v2 hierarchy)."""
+
+    point: str
+    root: str
+    controllers: frozenset[str]
+
+
+@dataclass(frozen=True)
+class Quota:
+    """The tightest CPU quota over a process: the cgroup that holds it (``path``), its share in
+    CPUs (quota / period), and the files of that group's CPU time (``usage``, in ``usage_s``
+    seconds a unit; empty: unreadable) and enforcement periods (``stat``)."""
+
+    path: str
+    cpus: float
+    usage: str
+    usage_s: float
+    stat: str
+
+
+def parse_proc_cgroup(text: str) -> dict[str, str]:
+    """Return controller -> cgroup path of a ``/proc/<pid>/cgroup`` text; the unified (v2)
+    hierarchy's path under ``""``."""
+    out: dict[str, str] = {}
+    for line in text.splitlines():
+        parts = line.split(":", 2)
+        if len(parts) == 3:
+            for c in parts[1].split(",") if parts[1] else [""]:
+                out[c] = parts[2]
+    return out
+
+
+def parse_mountinfo(text: str) -> list[Mount]:
+    """Return the cgroup mounts of a ``/proc/self/mountinfo`` text."""
+    out = []
+    for line in text.splitlines():
+        head, sep, tail = line.partition(" - ")
+        fields, rest = head.split(), tail.split()
+        if not sep or len(fields) < 5 or len(rest) < 3:
+            continue
+        if rest[0] == "cgroup2":
+            out.append(Mount(fields[4], fields[3], frozenset({""})))
+        elif rest[0] == "cgroup":
+            names = {o for o in rest[2].split(",") if o in ("cpu", "cpuacct")}
+            if names:
+                out.append(Mount(fields[4], fields[3], frozenset(names)))
+    return out
+
+
+def parse_stat(text: str) -> dict[str, int]:
+    """Return the ``key value`` lines of a cgroup ``cpu.stat`` text."""
+    out = {}
+    for line in text.splitlines():
+        key, _, value = line.partition(" ")
+        if value.strip().isdigit():
+            out[key] = int(value)
+    return out
+
+
+def cgroup_dir(mounts: list[Mount], controller: str, groups: dict[str, str]) -> tuple[str, str] | None:
+    """Return (directory, mount point) of the cgroup ``groups`` gives for ``controller`` (``""``:
+    v2), or None when no mount shows it (a path outside the mount's root)."""
+    path = groups.get(controller)
+    if path is None:
+        return None
+    for m in mounts:
+        if controller in m.controllers:
+            root = m.root.rstrip("/")
+            if path == m.root or path.startswith(root + "/"):
+                return os.path.join(m.point, path[len(root):].lstrip("/")).rstrip("/"), m.point
+    return None
+
+
+def quota_of(pid: int, mounts: list[Mount], proc: str = "/proc") -> Quota | None:
+    """Return the tightest CPU quota over process ``pid`` (on its cgroup or an ancestor), or None
+    when it has none (or its cgroup cannot be read)."""
+    try:
+        with open(f"{proc}/{pid}/cgroup") as f:
+            groups = parse_proc_cgroup(f.read())
+    except OSError:
+        return None
+    v2 = cgroup_dir(mounts, "", groups) if any("" in m.controllers for m in mounts) else None
+    where = cgroup_dir(mounts, "cpu", groups) or v2
+    if where is None:
+        return None
+    d, top = where
+    best: tuple[float, str] | None = None
+    while True:
+        cpus = _cpus_of(d)
+        if cpus is not None and (best is None or cpus < best[0]):
+            best = (cpus, d)
+        if d == top or len(d) <= len(top):
+            break
+        d = os.path.dirname(d)
+    if best is None:
+        return None
+    cpus, d = best
+    if os.path.exists(os.path.join(d, "cpu.max")):  # v2: usage in its own cpu.stat
+        return Quota(d, cpus, os.path.join(d, "cpu.stat"), 1e-6, os.path.join(d, "cpu.stat"))
+    usage = ""
+    acct = cgroup_dir(mounts, "cpuacct", groups)
+    if acct is not None:  # v1: the same group in the cpuacct hierarchy (often the same mount)
+        rel = os.path.relpath(d, top)
+        candidate = os.path.normpath(os.path.join(acct[1], rel, "cpuacct.usage"))
+        usage = candidate if os.path.exists(candidate) else ""
+    return Quota(d, cpus, usage, 1e-9, os.path.join(d, "cpu.stat"))
+
+
+def _cpus_of(d: str) -> float | None:
+    """The quota of cgroup directory ``d`` in CPUs, or None (none set, or unreadable)."""
+    try:
+        with open(os.path.join(d, "cpu.max")) as f:
+            quota, _, period = f.read().strip().partition(" ")
+    except OSError:
+        try:
+            with open(os.path.join(d, "cpu.cfs_quota_us")) as f:
+                quota = f.read().strip()
+            with open(os.path.join(d, "cpu.cfs_period_us")) as f:
+                period = f.read().strip()
+        except OSError:
+            return None
+    try:
+        q, p = int(quota), int(period)
+    except ValueError:  # "max": none
+        return None
+    return q / p if q > 0 and p > 0 else None
+
+
+class QuotaReading(NamedTuple):
+    """A quota group's counters at one time: CPU seconds used (NaN: unreadable), enforcement
+    periods and throttled periods."""
+
+    t: float
+    used_s: float
+    periods: int
+    throttled: int
+
+
+def read_quota(q: Quota, t: float) -> QuotaReading | None:
+    """Read ``q``'s counters at monotonic time ``t``; None when its group is gone."""
+    try:
+        with open(q.stat) as f:
+            stat = parse_stat(f.read())
+        if q.usage == q.stat:
+            used = stat.get("usage_usec", -1) * q.usage_s
+        elif q.usage:
+            with open(q.usage) as f:
+                used = int(f.read().strip()) * q.usage_s
+        else:
+            used = float("nan")
+    except (OSError, ValueError):
+        return None
+    return QuotaReading(t, used if used >= 0 else float("nan"), stat.get("nr_periods", 0),
+                        stat.get("nr_throttled", 0))
+
+
+def quota_use(q: Quota, before: QuotaReading, after: QuotaReading) -> tuple[float, float]:
+    """Return (% of the quota used, % of its enforcement periods throttled) between two readings;
+    NaN where unknown."""
+    dt = after.t - before.t
+    used = (after.used_s - before.used_s) / (dt * q.cpus) * 100.0 if dt > 0 else float("nan")
+    periods = after.periods - before.periods
+    throttled = (after.throttled - before.throttled) / periods * 100.0 if periods > 0 else float("nan")
+    return (min(100.0, used) if used == used else used), throttled
