@@ -22,13 +22,14 @@ from stream_viz.collect.build import build_model
 from stream_viz.collect.diagnostics import DiagnosticsReader
 from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.goals import STATUS_SUFFIX, GoalTracker
+from stream_viz.collect.graphsignal import GraphSignal
 from stream_viz.collect.hosts import HostReports
 from stream_viz.collect.naming import NodeNames, recently_left
 from stream_viz.collect.params import param_event
 from stream_viz.collect.pidmap import PidResolver
 from stream_viz.collect.processes import ProcessSampler
 from stream_viz.collect.readings import GraphReading, PidInfo, ProcessReading, TopicStats
-from stream_viz.collect.rosgraph import GidCache, QosCache, read_graph
+from stream_viz.collect.rosgraph import GidCache, QosCache, StructureCache, read_graph
 from stream_viz.collect.services import ServiceCalls, ServiceStats, party
 from stream_viz.collect.topics import DIAGNOSTICS, TopicMonitor, log_event
 from stream_viz.errors import CollectError
@@ -126,6 +127,7 @@ class Collector:
         self.sampler = ProcessSampler()
         self.qos = QosCache()
         self.gids = GidCache()
+        self.structure = StructureCache()  # without a graph change signal until start()
         self.diagnostics = DiagnosticsReader()
         self.goals = GoalTracker()
         self.calls = ServiceCalls(window_s=window_s)
@@ -144,6 +146,7 @@ class Collector:
         except Exception as e:  # rclpy raises RCLError/RuntimeError kinds we cannot name portably
             self.close()
             raise CollectError(f"cannot start the ROS 2 observer on domain {self.domain_id}: {e}") from e
+        self.structure = StructureCache(GraphSignal(self.node))
         self.topics = TopicMonitor(self.node, self.window_s, metrics=self.topic_metrics)
         self.topics.start()
         self.resolver = PidResolver(self.domain_id, self._own_host())
@@ -163,7 +166,8 @@ class Collector:
             raise CollectError("Collector.sample() called before start() (or after close())")
         t = time.time()
         reading = read_graph(self.node, own=self.own, include_hidden=self.include_hidden,
-                             include_internal=self.include_internal, qos=self.qos, gids=self.gids)
+                             include_internal=self.include_internal, qos=self.qos, gids=self.gids,
+                             structure=self.structure)
         self.topics.update(reading.topics, reading.service_events, reading.goal_status, reading.goal_feedback)
         self.goals.forget(set(reading.goal_status))
         pids = self.resolver.resolve(reading.rosout_gids)
@@ -174,6 +178,7 @@ class Collector:
         if ps.exited:  # one of its nodes may be back under the same name, with new gids
             self.gids.invalidate()
             self.qos.invalidate()
+            self.structure.invalidate()
         events = self._process_events(t, ps.exited, node_pids)
         events += self._restarts(t, node_pids)
         # Keep the process of nodes DDS still lists after their process died (SIGKILL: ~20 s).
@@ -346,6 +351,8 @@ class Collector:
         self._closed = True
         if self.topics is not None:
             self.topics.close()
+        if self.structure.signal is not None:
+            self.structure.signal.close()
         node, ctx, self.node, self._ctx = self.node, self._ctx, None, None
         end_node(node, ctx)
 

@@ -28,7 +28,7 @@ RET_TAKE_FAILED = 401  # RCL_RET_SUBSCRIPTION_TAKE_FAILED: nothing waiting
 HEAD = 48  # bytes of a message copied for the readers of fixed fields (header stamp, service event)
 
 
-class _Allocator(ctypes.Structure):
+class Allocator(ctypes.Structure):
     _fields_ = [("allocate", ctypes.c_void_p), ("deallocate", ctypes.c_void_p),
                 ("reallocate", ctypes.c_void_p), ("zero_allocate", ctypes.c_void_p),
                 ("state", ctypes.c_void_p)]
@@ -36,7 +36,7 @@ class _Allocator(ctypes.Structure):
 
 class _Uint8Array(ctypes.Structure):  # rcutils_uint8_array_t = rmw_serialized_message_t
     _fields_ = [("buffer", ctypes.POINTER(ctypes.c_uint8)), ("buffer_length", ctypes.c_size_t),
-                ("buffer_capacity", ctypes.c_size_t), ("allocator", _Allocator)]
+                ("buffer_capacity", ctypes.c_size_t), ("allocator", Allocator)]
 
 
 class _Gid(ctypes.Structure):
@@ -71,6 +71,16 @@ def _loaded(name: str) -> str | None:
     return None
 
 
+def rcl_libraries() -> tuple[ctypes.CDLL, ctypes.CDLL]:
+    """The rcl and rcutils libraries rclpy has loaded, with the default allocator's return type set."""
+    path_rcl, path_utils = _loaded("librcl.so"), _loaded("librcutils.so")
+    if path_rcl is None or path_utils is None:
+        raise OSError("librcl.so / librcutils.so not loaded (import rclpy first)")
+    rcl, rcutils = ctypes.CDLL(path_rcl), ctypes.CDLL(path_utils)
+    rcutils.rcutils_get_default_allocator.restype = Allocator
+    return rcl, rcutils
+
+
 # A record sink: (received ns, source ns, size, sequence number, gid, head bytes or the payload).
 Sink = Callable[[int, int, int, int, bytes, bytes], None]
 # A window's add: (received ns, source ns, size, sequence number, gid[, message age ns]).
@@ -102,11 +112,7 @@ class RclTake:
             self.why = f"rcl take with publisher gids unavailable: {e}"
 
     def _setup(self) -> None:
-        path_rcl, path_utils = _loaded("librcl.so"), _loaded("librcutils.so")
-        if path_rcl is None or path_utils is None:
-            raise OSError("librcl.so / librcutils.so not loaded (import rclpy first)")
-        rcl, rcutils = ctypes.CDLL(path_rcl), ctypes.CDLL(path_utils)
-        rcutils.rcutils_get_default_allocator.restype = _Allocator
+        rcl, rcutils = rcl_libraries()
         self._alloc = rcutils.rcutils_get_default_allocator()
         self._buf = _Uint8Array()
         init = rcutils.rcutils_uint8_array_init

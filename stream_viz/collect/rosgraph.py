@@ -8,11 +8,13 @@ are left out by default: they would swamp the model and tie every node to every 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 from typing import Any
 
 from rclpy.node import Node, NodeNameNonExistentError
 
 from stream_viz.collect.goals import FEEDBACK_SUFFIX, GOAL_STATUS_TYPE, STATUS_SUFFIX
+from stream_viz.collect.graphsignal import GraphSignal
 from stream_viz.collect.readings import Endpoint, GraphReading, NodeReading
 from stream_viz.collect.services import EVENT_SUFFIX
 from stream_viz.model.ids import node_fqn
@@ -85,8 +87,9 @@ class QosCache:
     its QoS is older than ``every_s``, oldest first, within ``stale_budget_s`` a sample.
     """
 
-    def __init__(self, budget_s: float = 0.03, every_s: float = 10.0, stale_budget_s: float = 0.005) -> None:
+    def __init__(self, budget_s: float = 0.03, every_s: float = 5.0, stale_budget_s: float = 0.005) -> None:
         self.budget_s, self.every_s, self.stale_budget_s = budget_s, every_s, stale_budget_s
+        self.version = 0  # counts reads that found an endpoint's QoS changed (its set the same)
         self._known: dict[str, frozenset[tuple[str, str]]] = {}
         self._read_at: dict[str, float] = {}  # topic -> when its QoS was read (monotonic)
         self._qos: dict[tuple[str, str, str], dict[str, Any]] = {}
@@ -116,6 +119,9 @@ class QosCache:
         for role, call in (("pub", node.get_publishers_info_by_topic),
                            ("sub", node.get_subscriptions_info_by_topic)):
             for e in _endpoints(call(topic), topic, nodes):
+                before = self._qos.get((topic, e.node, role))
+                if before is not None and before != e.qos:
+                    self.version += 1
                 self._qos[(topic, e.node, role)] = e.qos
                 if role == "pub":
                     gids[e.gid] = e.node
@@ -181,29 +187,56 @@ class GidCache:
         return {n: g for n, g in self._gids.items() if n in names}
 
 
-def read_graph(node: Node, *, own: str, include_hidden: bool = False,
-               include_internal: bool = False, qos: QosCache | None = None,
-               gids: GidCache | None = None) -> GraphReading:
-    """Return the ROS graph as node ``node`` sees it now.
+@dataclass
+class GraphStructure:
+    """What the per-node queries found: the nodes with their services and clients, each topic's
+    types and its publishing and subscribing nodes (``ends``: topic -> (publishers, subscribers),
+    sorted; ``keys``: topic -> its endpoint set), what a node publishes that is not a topic of the
+    model (service events, goal status and feedback), and the nodes skipped. Read-only once read."""
 
-    Parameters
-    ----------
-    node : rclpy Node
-        The observer node (its graph cache is read; it is never spun).
-    own : str
-        Fully qualified name of the observer node itself, left out of everything.
-    include_hidden : bool
-        Keep hidden nodes, topics and services (``_`` names, action internals).
-    include_internal : bool
-        Keep parameter services, ``/rosout`` and ``/parameter_events``.
-    qos : QosCache, optional
-        Where endpoint QoS is kept between samples (a fresh one reads every topic's QoS).
-    gids : GidCache, optional
-        Where the nodes' /rosout gids are kept between samples (a fresh one reads them).
-    """
-    qos = qos or QosCache(budget_s=float("inf"))
-    gids = gids or GidCache()
-    r = GraphReading()
+    nodes: dict[str, NodeReading] = field(default_factory=dict)
+    topics: dict[str, list[str]] = field(default_factory=dict)
+    ends: dict[str, tuple[list[str], list[str]]] = field(default_factory=dict)
+    keys: dict[str, frozenset[tuple[str, str]]] = field(default_factory=dict)
+    service_events: dict[str, str] = field(default_factory=dict)
+    goal_status: dict[str, list[str]] = field(default_factory=dict)
+    goal_feedback: dict[str, str] = field(default_factory=dict)
+    skipped: dict[str, str] = field(default_factory=dict)
+
+
+class StructureCache:
+    """The graph's structure, read again only when the graph changed (``signal``: a `GraphSignal`;
+    None: every call), when the last read skipped a node, and at least every ``every_s``."""
+
+    def __init__(self, signal: GraphSignal | None = None, every_s: float = 5.0) -> None:
+        self.signal, self.every_s = signal, every_s
+        self.reads = self.reuses = 0  # for tests and benchmarks
+        self._last: GraphStructure | None = None
+        self._key: tuple[str, bool, bool] | None = None
+        self._at = -float("inf")
+
+    def invalidate(self) -> None:
+        """Read the structure again on the next call."""
+        self._last = None
+
+    def get(self, node: Node, key: tuple[str, bool, bool], now: float) -> GraphStructure:
+        """Return the structure for ``key`` (own name, include_hidden, include_internal)."""
+        # Asked first: a change during the read below triggers again, for the next call.
+        changed = self.signal is None or self.signal.changed()
+        last = self._last
+        if changed or last is None or last.skipped or key != self._key or now - self._at >= self.every_s:
+            self._last, self._key, self._at = read_structure(node, *key), key, now
+            self.reads += 1
+        else:
+            self.reuses += 1
+        return self._last
+
+
+def read_structure(node: Node, own: str, include_hidden: bool = False,
+                   include_internal: bool = False) -> GraphStructure:
+    """Return the graph's structure: one listing of the nodes, then each node's publishers,
+    subscriptions, services and clients (`read_graph` has the parameters)."""
+    r = GraphStructure()
     for name, ns in node.get_node_names_and_namespaces():
         fqn = node_fqn(ns, name)
         if fqn == own or name == UNKNOWN_NODE or not _keep(fqn, include_hidden):
@@ -247,21 +280,54 @@ def read_graph(node: Node, *, own: str, include_hidden: bool = False,
                     r.goal_status.setdefault(topic, []).append(fqn)  # an action server's goals
                 elif role == "pub" and topic.endswith(FEEDBACK_SUFFIX) and types:
                     r.goal_feedback.setdefault(topic, types[0])  # their progress
-    deadline = time.monotonic() + qos.budget_s
-    keys, lists = {}, {}
     for topic in sorted(r.topics):
         pubs_, subs_ = sorted(set(ends["pub"].get(topic, []))), sorted(set(ends["sub"].get(topic, [])))
-        keys[topic] = frozenset([(n, "pub") for n in pubs_] + [(n, "sub") for n in subs_])
-        lists[topic] = (pubs_, subs_)
-        qos.refresh(node, topic, keys[topic], r.nodes, deadline)
-    qos.refresh_stale(node, keys, r.nodes)
-    for topic, (pubs_, subs_) in lists.items():
+        r.keys[topic] = frozenset([(n, "pub") for n in pubs_] + [(n, "sub") for n in subs_])
+        r.ends[topic] = (pubs_, subs_)
+    return r
+
+
+def read_graph(node: Node, *, own: str, include_hidden: bool = False,
+               include_internal: bool = False, qos: QosCache | None = None,
+               gids: GidCache | None = None, structure: StructureCache | None = None) -> GraphReading:
+    """Return the ROS graph as node ``node`` sees it now.
+
+    Parameters
+    ----------
+    node : rclpy Node
+        The observer node (its graph cache is read; it is never spun).
+    own : str
+        Fully qualified name of the observer node itself, left out of everything.
+    include_hidden : bool
+        Keep hidden nodes, topics and services (``_`` names, action internals).
+    include_internal : bool
+        Keep parameter services, ``/rosout`` and ``/parameter_events``.
+    qos : QosCache, optional
+        Where endpoint QoS is kept between samples (a fresh one reads every topic's QoS).
+    gids : GidCache, optional
+        Where the nodes' /rosout gids are kept between samples (a fresh one reads them).
+    structure : StructureCache, optional
+        Where the structure is kept between samples (a fresh one reads it).
+    """
+    qos = qos or QosCache(budget_s=float("inf"))
+    gids = gids or GidCache()
+    s = (structure or StructureCache()).get(node, (own, include_hidden, include_internal), time.monotonic())
+    # Fresh containers each sample: the structure is shared between the samples that reuse it.
+    r = GraphReading(nodes=dict(s.nodes), topics=dict(s.topics), service_events=dict(s.service_events),
+                     goal_status={t: list(v) for t, v in s.goal_status.items()},
+                     goal_feedback=dict(s.goal_feedback), skipped=dict(s.skipped))
+    deadline = time.monotonic() + qos.budget_s
+    for topic, key in s.keys.items():
+        qos.refresh(node, topic, key, r.nodes, deadline)
+    qos.refresh_stale(node, s.keys, r.nodes)
+    for topic, (pubs_, subs_) in s.ends.items():
         t0 = r.topics[topic][0] if r.topics[topic] else ""
         r.publishers[topic] = [Endpoint(n, topic, t0, b"", qos.get(topic, n, "pub")) for n in pubs_]
         r.subscribers[topic] = [Endpoint(n, topic, t0, b"", qos.get(topic, n, "sub")) for n in subs_]
         r.publisher_gids[topic] = qos.publisher_gids(topic)
     qos.forget(set(r.topics))
     r.rosout_gids = gids.get(node, r.nodes, time.monotonic())
+    r.qos_version = qos.version
     return r
 
 

@@ -263,3 +263,49 @@ def test_every_goal_that_ends_is_a_goal_event_of_its_server(children, ros_domain
     assert [(e.member, e.data["action"], e.data["status"]) for e in goals] == [
         ("node:/mover", "/move", "succeeded")] * 6, (goals, errors)
     assert errors == []
+
+
+# A node that adds a publisher when told (a file appears) and removes it when told again.
+GROWER = """
+import os, sys, time, rclpy
+from rclpy.node import Node
+from std_msgs.msg import String
+rclpy.init()
+n = Node('grower')
+def wait(path):
+    while not os.path.exists(path):
+        time.sleep(0.05)
+wait(sys.argv[1] + '/add')
+p = n.create_publisher(String, '/grown', 10)
+wait(sys.argv[1] + '/remove')
+n.destroy_publisher(p)
+time.sleep(60)
+"""
+
+
+def test_the_graph_is_read_again_when_it_changed_and_only_then(children, ros_domain, tmp_path):
+    """The graph change signal (rcl's graph guard condition) is set up on a real node; the graph's
+    structure is read again when a publisher comes or goes, seen at the first sample after the
+    graph shows it (or the one after: the signal follows the graph's update), and reused between."""
+    children.python(GROWER, str(tmp_path), name="grower")
+    with Collector(ros_domain) as col:
+        assert col.structure.signal.available, col.structure.signal.why
+        col.structure.every_s = 3600.0  # the backstop read aside: only the signal reads again
+        wait_for(lambda: "node:/grower" in col.sample().graph, timeout=20, period=0.3)
+        listed, modelled, reads = [], [], []
+        for i in range(36):
+            if i in (8, 22):
+                (tmp_path / ("add" if i == 8 else "remove")).touch()
+            listed.append(any(t == "/grown" for t, _ in col.node.get_topic_names_and_types()))
+            modelled.append("topic:/grown" in col.sample().graph)
+            reads.append(col.structure.reads)
+            time.sleep(0.25)
+    pattern = "".join("LM"[m] if g else "-m"[m] for g, m in zip(listed, modelled, strict=True))
+    assert pattern.startswith("-" * 8) and pattern.endswith("-" * 6), pattern  # came, and went
+    assert "M" * 6 in pattern, pattern
+    # The model follows the graph within a sample (either may see a change first).
+    for i, m in enumerate(modelled):
+        assert m in listed[max(0, i - 1): i + 2], (i, pattern, reads)
+    # 36 samples: read again at each change (a change can take a few graph updates), not each sample.
+    assert reads[-1] - reads[0] <= 8, (reads, pattern)
+    assert reads[-1] > reads[0], (reads, pattern)
