@@ -75,7 +75,8 @@ def test_message_age_of_stamps_lagging_300ms(children, tmp_path, run_of):
     sick = _theta(run, "topic:/robot/imu")
     # the data's age, beside a transport latency that did not change
     assert 280.0 <= sick["stamp_age_ms"] <= 400.0 and sick["latency_ms"] < 50.0, sick
-    assert 280.0 <= sick["stamp_age_recent_ms"] <= sick["stamp_age_ms"], sick  # the youngest is late too
+    # the youngest is late too (it may be a hair older than the mean: both are ~300 ms plus jitter)
+    assert 280.0 <= sick["stamp_age_recent_ms"] <= 400.0, sick
 
 
 DEVICE_CLOCK = """
