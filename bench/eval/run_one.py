@@ -27,7 +27,7 @@ from bench.eval.baseline import culprits, flag_times
 from bench.eval.export import SKIP_TOPICS, service_name, wide_table
 from bench.eval.metrics import tie_blocks
 from bench.eval.provenance import code_version, machine
-from bench.eval.suites import DEFAULT_TIMING, TIMING
+from bench.eval.suites import DEFAULT_TIMING, INJECT_PHASE, TIMING
 from bench.eval.systems import expand_map, fault_reach, sink_watchlist, system_topology, truth_sets
 from stream_viz.testing import own_domain
 
@@ -92,6 +92,8 @@ def _live(spec: dict, topo: Topology, config: Config, domain: int, out: Path) ->
 
     w0, p0 = TIMING.get(spec["system"], DEFAULT_TIMING)
     warmup, post = float(spec.get("warmup", w0)), float(spec.get("post", p0))
+    if spec.get("fault"):
+        warmup += INJECT_PHASE * config.monitor.period
     fault = spec.get("fault")
     tmp = Path(tempfile.mkdtemp(prefix="stream_eval_"))
     me = psutil.Process()

@@ -76,6 +76,9 @@ SWEEP: tuple[tuple[str, str, tuple[float, ...]], ...] = (
 # its one-shot job's exit (25 s after start) falls in the healthy part, before the injection.
 TIMING: dict[str, tuple[float, float]] = {"amr": (25.0, 20.0)}
 DEFAULT_TIMING = (20.0, 25.0)
+# A fault fires half a sample period after its warm-up: the monitor samples on the warm-up's
+# whole seconds, and a fault firing on a sample's start was seen by a sample stamped before it.
+INJECT_PHASE = 0.5
 
 
 def plan(suite: str, warmup: float | None = None, post: float | None = None, sizes: Sequence[int] = (),
