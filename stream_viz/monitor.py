@@ -101,6 +101,8 @@ class Monitor:
         # A replay passes its own collector (the recorded samples) in place of the live one.
         self.collector = collector or Collector(domain_id, topic_metrics=config.monitor.topic_metrics)
         self.collector.start()
+        self._limits: dict[str, str] = {}
+        self._say_limits()
         self.samples_file = SamplesWriter(samples, run_header(config, self.started_at)) if samples else None
         # Everything loaded so far (rclpy, numpy, networkx, Rerun, plugins) lives as long as the
         # process: frozen, a full collection no longer walks it each time (cost in
@@ -124,6 +126,7 @@ class Monitor:
         result = self.engine.update(self.shadow.seen, alerts, found.new_evidence, t=sample.t)
         self.view.update(sample.t, sample, self.shadow.seen, alerts, result, self.shadow.structure)
         self._tell(sample.t, alerts, found.problems, result)
+        self._say_limits()
 
     # -- what the run has so far (public: the evaluation reads it) -------------------------------
     @property
@@ -150,6 +153,17 @@ class Monitor:
         self.n_alerts += len(alerts)
         self._say_problems(problems)
         self.progress.update(self._status(t, result))
+
+    def _say_limits(self) -> None:
+        """Say each new fallback of the collector once (another rmw or ROS release may lack what
+        it reads through rcl); the database keeps them (meta ``collector_limits``)."""
+        limits = getattr(self.collector, "limits", dict)()  # a replay's collector has none
+        new = {k: v for k, v in limits.items() if self._limits.get(k) != v}
+        for what, why in new.items():
+            self.progress.say(f"collector: no {what}: {why}")
+        if new:
+            self._limits.update(new)
+            self.store.set_meta("collector_limits", self._limits)
 
     def _say_problems(self, problems: Iterable[Any]) -> None:
         for p in problems:

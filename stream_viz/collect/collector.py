@@ -344,6 +344,23 @@ class Collector:
                 for waited, cg, sg in st.open_calls[:10]]
         return stats, calls
 
+    def limits(self) -> dict[str, str]:
+        """What this collector cannot do on this system, and why (empty when it does it all).
+
+        Each is a fallback the samples go on with: the graph read in full every sample (no graph
+        change signal), topics taken through rclpy without their publishers' gids (a topic's
+        rate and age are not split per publisher, so all its publishers share its symptoms).
+        """
+        out: dict[str, str] = {}
+        signal = self.structure.signal
+        if signal is not None and not signal.available:
+            out["graph change signal"] = f"{signal.why}; the graph is read in full every sample"
+        rcl = self.topics.rcl if self.topics is not None else None
+        if rcl is not None and not rcl.available:
+            out["publisher gids"] = (f"{rcl.why}; a topic's rate and message age are not split per "
+                                     "publisher")
+        return out
+
     def close(self) -> None:
         """Stop observing: end the drain thread, destroy the node, shut our own Context. Idempotent."""
         if self._closed:

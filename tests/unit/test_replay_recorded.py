@@ -81,3 +81,32 @@ def test_a_recorded_simulation_fault_is_named(tmp_path, name, cause, symptom):
     # injected 100 s after the start; a sensor on simulated time comes in bursts, one per /clock
     # tick, yet its steady rate per simulated second makes it regular: no 15 s irregular hold
     assert seen and seen[0] <= 100.0 + 6.0, report["alerts"]
+
+
+def test_a_collector_fallback_is_said_once_and_kept_in_the_database(tmp_path):
+    """A collector that lost a capability mid-run (another rmw's message layout, say) is told to
+    the user once, when it happens, and the alert database keeps it."""
+    import io
+
+    from stream_viz.detect.store import AlertStore
+    from stream_viz.monitor import Monitor
+    from stream_viz.progress import Progress
+
+    class Limited(ReplayCollector):
+        def limits(self) -> dict[str, str]:
+            return {"publisher gids": "layout not as expected"} if self.at > 3 else {}
+
+    source = Limited(DATA / "demo_crash.jsonl.gz")
+    source.at = 0
+    said = io.StringIO()
+    mon = Monitor(replay_config(None, source.header), db=tmp_path / "a.sqlite", collector=source,
+                  started_at=source.header["started_at"], progress=Progress(said, every=1e9))
+    for _ in range(8):
+        source.at += 1
+        mon.step()
+    mon.close()
+    lines = [ln for ln in said.getvalue().splitlines() if ln.startswith("collector:")]
+    assert lines == ["collector: no publisher gids: layout not as expected"]
+    store = AlertStore(tmp_path / "a.sqlite")
+    assert store.get_meta("collector_limits") == {"publisher gids": "layout not as expected"}
+    store.close()
