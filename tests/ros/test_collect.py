@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 import time
 
+import psutil
 import pytest
 
 from stream_viz.collect.collector import Collector
@@ -311,3 +313,41 @@ def test_the_graph_is_read_again_when_it_changed_and_only_then(children, ros_dom
     # 36 samples: read again at each change (a change can take a few graph updates), not each sample.
     assert reads[-1] - reads[0] <= 8, (reads, pattern)
     assert reads[-1] > reads[0], (reads, pattern)
+
+
+CONTAINED = """
+import rclpy
+from std_msgs.msg import String
+rclpy.init()
+n = rclpy.create_node('contained')
+pub = n.create_publisher(String, '/contained/out', 10)
+n.create_timer(0.1, lambda: pub.publish(String(data='x')))
+rclpy.spin(n)
+"""
+
+
+def test_a_node_in_a_container_s_pid_namespace_is_mapped_to_its_process(children, ros_domain, tmp_path):
+    """A container with its own PID namespace and the host's network (Docker's default with
+    ``--network host``): the node's GUID carries its PID in there (1), not ours. The collector
+    maps it to its process as we see it, confirmed, and notices from the OS when it is killed."""
+    script = tmp_path / "contained.py"
+    script.write_text(CONTAINED)
+    outer = children.run(["unshare", "-r", "-p", "--fork", "--mount-proc", sys.executable, str(script)],
+                         name="container")
+    try:
+        proc = wait_for(lambda: [c for c in psutil.Process(outer.pid).children(recursive=True)
+                                 if c.name().startswith("python")], timeout=10)[0]
+    except (TimeoutError, psutil.Error):
+        pytest.skip(f"cannot start a process in a new PID namespace here: {children.workdir}")
+    with Collector(ros_domain) as col:
+        def mapped():
+            G = col.sample().graph
+            return G if "node:/contained" in G and G.nodes["node:/contained"]["pid"] is not None else None
+        G = wait_for(mapped, timeout=20, period=0.3)
+        assert G.nodes["node:/contained"]["pid"] == proc.pid, (proc.pid, G.nodes["node:/contained"])
+        assert G.nodes["node:/contained"]["pid_status"] == "confirmed"
+        proc.kill()
+        exits = wait_for(lambda: [e for e in col.sample().events if e.kind == "exit"], timeout=5, period=0.3)
+        # (its container's `unshare` may end in the same sample: the namespace's init is gone)
+        assert {"node:/contained", f"process:{proc.pid}"} <= {e.member for e in exits}, exits
+        assert [e.level for e in exits if e.member == "node:/contained"] == ["error"], exits

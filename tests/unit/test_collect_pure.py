@@ -423,3 +423,15 @@ def test_threads_that_ran_are_above_a_core_share_and_a_share_of_the_busiest():
     # Nothing over 0.1 % of a core over 2 s: none ran.
     assert threads_that_ran(before, {1: 1_001_500_000, 2: 5_100_000}, 2.0) == []
     assert threads_that_ran({}, {}, 1.0) == []
+
+
+def test_a_guid_pid_is_matched_against_each_process_s_own_pid():
+    from stream_viz.collect.pidmap import candidates
+
+    # ours → its own: 9736 is pid 7 in a container; 65543 has the low bits of 7 (a GUID keeps 16)
+    inner = {1: 1, 7: 7, 9736: 7, 65543: 65543, 4242: 4242}
+    assert candidates(7, inner) == [7, 9736, 65543]
+    assert candidates(7, inner, exclude=7) == [9736, 65543]
+    assert candidates(1, inner) == [1]
+    assert candidates(4242, inner) == [4242]
+    assert candidates(99, inner) == []
