@@ -151,6 +151,10 @@ class QosCache:
 class GidCache:
     """Each node's /rosout publisher gid (what maps a node to its process), read only when due.
 
+    A node without /rosout (``enable_rosout=False``, ``--disable-rosout-logs``) is known by its
+    /parameter_events publisher, which every node has by default, read only while such a node is
+    listed: any endpoint's gid starts with its participant's GUID prefix.
+
     ``get_publishers_info_by_topic`` scans every endpoint and rclpy builds a QoS object for each
     one found (a large part of a graph read: bench/bench_monitor_cpu.py, figures in docs/collector.md),
     for gids that change only when a node is created again. They are read when a node appears
@@ -181,9 +185,13 @@ class GidCache:
         if (self._read_at is None or now - self._read_at >= self.every_s
                 or (missing and now - self._changed_at < self.settle_s)):
             self._gids = {}
-            for ep in _endpoints(node.get_publishers_info_by_topic("/rosout"), "/rosout", nodes):
-                self._gids.setdefault(ep.node, ep.gid)
-            self._read_at, self.reads = now, self.reads + 1
+            for topic in ("/rosout", "/parameter_events"):
+                for ep in _endpoints(node.get_publishers_info_by_topic(topic), topic, nodes):
+                    self._gids.setdefault(ep.node, ep.gid)
+                self.reads += 1
+                if names <= self._gids.keys():
+                    break
+            self._read_at = now
         return {n: g for n, g in self._gids.items() if n in names}
 
 

@@ -351,3 +351,27 @@ def test_a_node_in_a_container_s_pid_namespace_is_mapped_to_its_process(children
         # (its container's `unshare` may end in the same sample: the namespace's init is gone)
         assert {"node:/contained", f"process:{proc.pid}"} <= {e.member for e in exits}, exits
         assert [e.level for e in exits if e.member == "node:/contained"] == ["error"], exits
+
+
+WITHOUT_ROSOUT = """
+import rclpy
+from std_msgs.msg import String
+rclpy.init()
+n = rclpy.create_node('quiet_one', enable_rosout=False)
+pub = n.create_publisher(String, '/quiet/out', 10)
+n.create_timer(0.1, lambda: pub.publish(String(data='x')))
+rclpy.spin(n)
+"""
+
+
+def test_a_node_without_rosout_is_mapped_to_its_process(children, ros_domain):
+    """A node created with ``enable_rosout=False`` (as ``--disable-rosout-logs`` does) has no
+    /rosout publisher to map it by; its /parameter_events publisher carries the same prefix."""
+    quiet = children.python(WITHOUT_ROSOUT, name="quiet")
+    with Collector(ros_domain) as col:
+        def mapped():
+            G = col.sample().graph
+            return G if "node:/quiet_one" in G and G.nodes["node:/quiet_one"]["pid"] is not None else None
+        G = wait_for(mapped, timeout=20, period=0.3)
+    assert G.nodes["node:/quiet_one"]["pid"] == quiet.pid
+    assert G.nodes["node:/quiet_one"]["pid_status"] == "confirmed"
