@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import socket
 import time
+from collections.abc import MutableMapping
 from typing import Any
 
 import networkx as nx
@@ -69,8 +70,25 @@ class ObserverNode(Node):
         raise CollectError(f"the observer node never publishes (asked to publish on {topic})")
 
 
+def observe_as_super_client(environ: MutableMapping[str, str]) -> bool:
+    """Set ``ROS_SUPER_CLIENT`` in ``environ`` where a Fast DDS discovery server is used and the
+    user left it unset; return whether the graph can be seen whole.
+
+    A plain client of a discovery server learns only the endpoints that match its own: the graph
+    would show the nodes but not the topics this observer does not subscribe. Fast DDS reads the
+    variable when a participant is created, as ``ros2`` CLI users set it. False: the user chose a
+    plain client.
+    """
+    if not environ.get("ROS_DISCOVERY_SERVER", "").strip():
+        return True
+    value = environ.setdefault("ROS_SUPER_CLIENT", "TRUE")
+    return value.strip().lower() in ("true", "1")
+
+
 def new_node(cls: type[Node], name: str, domain_id: int) -> tuple[Context, Node]:
-    """Return a Context of our own on ``domain_id`` (nothing global touched) and a node of it."""
+    """Return a Context of our own on ``domain_id`` (nothing global touched but, with a discovery
+    server, ``ROS_SUPER_CLIENT``: `observe_as_super_client`) and a node of it."""
+    observe_as_super_client(os.environ)
     ctx = Context()
     rclpy.init(args=[], context=ctx, domain_id=domain_id)
     try:
@@ -355,6 +373,9 @@ class Collector:
         signal = self.structure.signal
         if signal is not None and not signal.available:
             out["graph change signal"] = f"{signal.why}; the graph is read in full every sample"
+        if not observe_as_super_client(dict(os.environ)):
+            out["whole graph"] = ("ROS_SUPER_CLIENT is false with a discovery server: only the endpoints "
+                                  "this observer matches are discovered")
         rcl = self.topics.rcl if self.topics is not None else None
         if rcl is not None and not rcl.available:
             out["publisher gids"] = (f"{rcl.why}; a topic's rate and message age are not split per "

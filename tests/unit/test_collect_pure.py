@@ -435,3 +435,16 @@ def test_a_guid_pid_is_matched_against_each_process_s_own_pid():
     assert candidates(1, inner) == [1]
     assert candidates(4242, inner) == [4242]
     assert candidates(99, inner) == []
+
+
+def test_with_a_discovery_server_the_observer_is_a_super_client_unless_told_not():
+    from stream_viz.collect.collector import observe_as_super_client
+
+    env = {"ROS_DOMAIN_ID": "3"}
+    assert observe_as_super_client(env) and env == {"ROS_DOMAIN_ID": "3"}  # no server: untouched
+    env = {"ROS_DISCOVERY_SERVER": "127.0.0.1:11811"}
+    assert observe_as_super_client(env) and env["ROS_SUPER_CLIENT"] == "TRUE"
+    env = {"ROS_DISCOVERY_SERVER": "127.0.0.1:11811", "ROS_SUPER_CLIENT": "False"}
+    assert not observe_as_super_client(env) and env["ROS_SUPER_CLIENT"] == "False"  # the user's
+    env = {"ROS_DISCOVERY_SERVER": " ", "ROS_SUPER_CLIENT": "False"}
+    assert observe_as_super_client(env)  # set but empty: no server
