@@ -40,6 +40,8 @@ STOPPING_PERIODS = 3.0  # a quiet this many usual periods long: the topic is sto
 # On simulated time a sensor's messages come in bursts, one per /clock tick: its intervals spread
 # however steady its rate per simulated second is (σ within this share of it): then it is regular.
 STEADY_PER_SIM = 0.1
+# A drop's run not looked at for this long (a silence judged meanwhile) ended unseen: not learned.
+RUN_LAPSE_S = 5.0
 
 
 class TopicRate(Plugin):
@@ -74,7 +76,10 @@ class TopicRate(Plugin):
       irregular topic (see silence) ``irregular_drop_s``: its rate follows what reaches its
       publisher (a lossy stream halves for seconds as the host's load changes); the rate compared
       is the recent one (``rate_recent_hz``, the last few intervals) where measured, so a slowed
-      topic shows before the collector's window has turned over;
+      topic shows before the collector's window has turned over; not while within one of the
+      topic's own modes (`in_mode`): a lower rate it showed and left by itself before, its
+      publishers the same processes (a downlink throttled while the link is poor), no deeper
+      than half that and no longer than ``gap_margin`` × its longest — the first time, a drop;
     * below expectation (warn): ``rate < (1 - expected_tolerance) × expected_rate_hz`` from the
       config, for ``confirm`` samples;
     * a slowed simulation (warn, on ``/clock``): its pace (``sim_pace``, its real-time factor)
@@ -608,8 +613,14 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     low = low and not _lost_on_the_way(ctx, topic, rate, med)
     # A drop lasts longer than any healthy pause of the topic (its recent rate counts a pause).
     samples, lasted = streak(ctx.state, (topic, "drop"), low), held(ctx.state, (topic, "drop"), low, ctx.t)
+    modes = ctx.state.setdefault("modes", {}).setdefault(topic, [])
+    run = _drop_run(ctx, topic, low, now_rate / expect if expect > 0 else 1.0, quieting)
+    if run is not None:  # a drop that ended by itself, the topic back at its rate: one of its modes
+        modes[:] = learn_mode(modes, *run)
     if samples < s["confirm"] or lasted < r.longest:
         return None
+    if in_mode(modes, now_rate / expect if expect > 0 else 1.0, lasted, s["gap_margin"]):
+        return None  # a lower rate it has shown and left by itself (a link throttled, a mode)
     steady = per_sim is not None and per_sim[1] <= STEADY_PER_SIM * per_sim[0]
     if lasted < s["irregular_drop_s"] and not steady and _irregular(ctx, topic, med):
         return None  # its rate follows a lossy or event-driven input: it halves for seconds by chance
@@ -617,6 +628,51 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     usual = expect if per_sim is not None else med
     return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {usual:.3g} Hz{sim}",
                      symptom="rate_drop", rate_hz=now_rate, baseline_hz=usual, sim_pace_ratio=pace)
+
+
+def _drop_run(ctx: PluginContext, topic: str, low: bool, ratio: float,
+              quieting: bool) -> tuple[float, float] | None:
+    """Follow the topic's current run of low samples; return ``(lowest ratio, seconds)`` of one
+    that just ended by itself: the topic back above ``drop_ratio`` of its rate, not gone quiet,
+    its publishers the same processes (a node restarted by hand ends its drop by the restart)."""
+    runs = ctx.state.setdefault("drop_runs", {})
+    pids = tuple(sorted(str(ctx.attr(n, "pid")) for n in ctx.publishers(topic)))
+    run = runs.get(topic)
+    if run is not None and ctx.t - run["last"] > RUN_LAPSE_S:  # not followed a while: unknown end
+        del runs[topic]
+        run = None
+    if low:
+        if run is None:
+            runs[topic] = {"start": ctx.t, "lowest": ratio, "pids": pids, "samples": 1, "last": ctx.t}
+        else:
+            run["lowest"], run["samples"] = min(run["lowest"], ratio), run["samples"] + 1
+            run["last"] = ctx.t
+        return None
+    if run is None:
+        return None
+    del runs[topic]
+    back = not quieting and ratio >= ctx.settings["drop_ratio"] and pids == run["pids"]
+    if back and run["samples"] >= ctx.settings["confirm"]:
+        return run["lowest"], ctx.t - run["start"]
+    return None
+
+
+def learn_mode(modes: list[tuple[float, float]], lowest: float, seconds: float,
+               keep: int = 8) -> list[tuple[float, float]]:
+    """Return ``modes`` (``(lowest ratio to the usual rate, seconds)`` of the drops a topic showed
+    and left by itself) with one more, the newest ``keep``.
+
+    A topic that throttles itself for a while (a telemetry link at low quality, a camera in a
+    power-saving mode) shows the same lower rate again; a degraded one does not leave it.
+    """
+    return [*modes, (lowest, seconds)][-keep:]
+
+
+def in_mode(modes: list[tuple[float, float]], ratio: float, lasted: float, margin: float) -> bool:
+    """True when a drop to ``ratio`` of the usual rate, ``lasted`` s so far, is within one of the
+    topic's own ``modes`` (`learn_mode`): no deeper than half its lowest ratio, and no longer than
+    ``margin`` × the longest it lasted. A drop that outlasts it is judged as any drop is."""
+    return any(ratio >= 0.5 * lowest and lasted <= margin * seconds for lowest, seconds in modes)
 
 
 def _pace(ctx: PluginContext, topic: str) -> float:

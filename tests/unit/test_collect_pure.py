@@ -257,14 +257,19 @@ class _Info:
 
 
 class _GraphNode:
-    """Answers the one graph call GidCache makes; counts the calls."""
+    """Answers the graph calls GidCache makes (/rosout's publishers, /parameter_events'); counts
+    them (``calls``: /rosout, ``param_calls``: /parameter_events)."""
 
     def __init__(self) -> None:
         self.pubs: dict[str, int] = {}
-        self.calls = 0
+        self.params: dict[str, int] = {}
+        self.calls = self.param_calls = 0
 
     def get_publishers_info_by_topic(self, topic: str) -> list[_Info]:
-        assert topic == "/rosout"
+        assert topic in ("/rosout", "/parameter_events")
+        if topic == "/parameter_events":
+            self.param_calls += 1
+            return [_Info(n.lstrip("/"), g) for n, g in self.params.items()]
         self.calls += 1
         return [_Info(n.lstrip("/"), g) for n, g in self.pubs.items()]
 
@@ -295,6 +300,7 @@ def test_gid_cache_reads_the_graph_only_when_due():
     assert g.calls == 5
     cache.get(g, _nodes("/a", "/b", "/c"), 8.5)  # complete again: no call
     assert g.calls == 5
+    assert g.param_calls == 2  # /parameter_events only while a node had no /rosout gid (6.0, 7.0)
     # A node that never gets a gid (enable_rosout=False) is not re-read for after settling.
     cache.get(g, _nodes("/a", "/b", "/c", "/quiet"), 9.0)
     for t in (10.0, 11.0, 11.9):
@@ -308,6 +314,11 @@ def test_gid_cache_reads_the_graph_only_when_due():
     cache.invalidate()
     assert cache.get(g, _nodes("/a", "/b", "/c", "/quiet"), 13.5)["/a"] == bytes([7] * 16)
     assert g.calls == 10
+    # ... and is known by its /parameter_events publisher where it has one
+    g.params["/quiet"] = 9
+    cache.invalidate()
+    assert cache.get(g, _nodes("/a", "/b", "/c", "/quiet"), 14.0)["/quiet"] == bytes([9] * 16)
+    assert g.param_calls == 8
 
 
 def test_parse_proc_stat_and_fields():

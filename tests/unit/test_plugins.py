@@ -256,6 +256,37 @@ def test_topic_rate_an_irregular_topic_s_drop_must_outlast_irregular_drop_s():
     assert drive("topic_rate", frames(0.02, 10))[0] == (31.0, "topic:/img", "warn")
 
 
+def test_topic_rate_a_lower_rate_the_topic_showed_and_left_by_itself_is_its_own_mode():
+    # 10 Hz, throttled to 1 Hz for 15 s at 30 s (a telemetry link at low quality): a drop, the
+    # first time; back at 10 Hz by itself. The same throttle at 90 s is the topic's own mode. At
+    # 150 s it stays at 1 Hz: a drop again once it outlasts twice the longest throttle (30 s).
+    def rate(t):
+        return 1.0 if 30 <= t < 45 or 90 <= t < 105 or t >= 150 else noisy(10.0)
+
+    frames = [(float(t), model(rate=rate(t), recent=rate(t), age=0.05), []) for t in range(200)]
+    times = [t for t, _, _ in drive("topic_rate", frames)]
+    assert times[0] == 31.0 and max(t for t in times if t < 90) == 44.0  # the first throttle
+    assert not [t for t in times if 45 <= t < 181]  # the mode, and a drop no longer than it
+    assert times[-1] == 199.0 and min(t for t in times if t >= 150) == 181.0
+    # a deeper drop than the mode (0.3 Hz: under half its lowest) is judged at once
+    deep = [(float(t), model(rate=r, recent=r, age=0.05), [])
+            for t, r in ((t, 0.3 if 90 <= t < 105 else rate(t)) for t in range(110))]
+    assert next(t for t, _, _ in drive("topic_rate", deep) if t >= 90) == 91.0
+
+
+def test_topic_rate_modes_are_lower_rates_shown_and_left():
+    from plugins.topic_rate import in_mode, learn_mode
+
+    modes = learn_mode([], 0.1, 15.0)
+    assert modes == [(0.1, 15.0)]
+    assert in_mode(modes, 0.1, 29.0, 2.0) and in_mode(modes, 0.5, 10.0, 2.0)  # as low or less so
+    assert not in_mode(modes, 0.1, 31.0, 2.0)  # longer than twice the longest
+    assert not in_mode(modes, 0.04, 5.0, 2.0)  # deeper than half its lowest
+    assert not in_mode([], 0.1, 1.0, 2.0)
+    many = [(0.1, float(i)) for i in range(10)]
+    assert learn_mode(many, 0.2, 3.0, keep=8) == [*many[3:], (0.2, 3.0)]
+
+
 def test_topic_rate_slow_topic_needs_three_periods():
     # A 0.2 Hz topic: silence only after 3 periods (15 s) without a message.
     rates = [0.2] * 20 + [0.0] * 20
