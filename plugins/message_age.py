@@ -28,6 +28,8 @@ from stream_viz.detect.startup import standing
 from stream_viz.model.ids import name_of
 from stream_viz.records import Alert
 
+JUMP_SAID_S = 60.0  # a clock's jump back is said in the stale alerts this long after it
+
 
 class MessageAge(Plugin):
     """Alerts on watched topics whose messages arrive with old or impossible header stamps.
@@ -45,9 +47,11 @@ class MessageAge(Plugin):
     On a topic several nodes publish (``/tf``), the alert names those whose own messages are late
     (``publisher_ages``; data ``publishers``) when the others' are not: the RCA charges them.
 
-    A topic whose stamps went back (a ``stamp_reset`` event: a recording that looped, a
-    simulation reset) learns its age afresh from then on: its data are as old as its new time
-    makes them, which is no delay.
+    A topic whose stamps went back to about where they began (a ``stamp_reset`` event at least
+    ``loop_share`` of the time it has been stamping: a recording that looped, a simulation reset,
+    `looped`) learns its age afresh from then on: its data are as old as its new time makes them,
+    which is no delay. Stamps that went back less, mid-stream, are a clock that jumped (a
+    device's clock reset by a brown-out): judged as any rise of the age, the jump said.
 
     A skew the topic shows within ``learn_s`` of its first stamped message, and keeps, is its
     normal (a device that stamps with its own clock, a recording's old stamps): no alert, and a
@@ -70,21 +74,32 @@ class MessageAge(Plugin):
         "skew_ms": 20.0,
         "implausible_s": 3600.0,
         "learn_s": 10.0,
+        "loop_share": 0.3,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         s = ctx.settings
         alerting = ctx.state.setdefault("alerting", set())
         since = ctx.since_last_call()
+        stamped = ctx.state.setdefault("stamped", {})  # topic -> since when (its last loop)
+        jumped = ctx.state.setdefault("jumped", {})  # topic -> how far its clock went back (s)
         for e in ctx.events:
-            if e.kind == "stamp_reset":  # its stamps went back: the age is learnt anew from then
-                relearn_from(ctx, e.member, "stamp_age_ms", e.t)
+            if e.kind != "stamp_reset":
+                continue
+            back = float(e.data.get("back_s", 0.0))
+            if looped(back, e.t - stamped.get(e.member, e.t), s["loop_share"]):
+                relearn_from(ctx, e.member, "stamp_age_ms", e.t)  # the age is learnt anew from then
                 alerting.discard((e.member, "stamp_age_ms"))
                 held(ctx.state, e.member, False, ctx.t)
+                stamped[e.member] = e.t
+                jumped.pop(e.member, None)
+            else:
+                jumped[e.member] = (back, e.t)
         for topic in ctx.watched():
             age = ctx.value(topic, "stamp_age_ms")
             if math.isnan(age):
                 continue
+            stamped.setdefault(topic, ctx.t)
             newest = ctx.value(topic, "age_s")
             fresh = math.isnan(newest) or newest < since  # a message since the last sample
             ahead, implausible = age < -s["skew_ms"], age > s["implausible_s"] * 1000.0
@@ -121,10 +136,21 @@ class MessageAge(Plugin):
         floor = max(s["min_rise_ms"], s["rise_ratio"] * abs(seen[1] if seen else 0.0))
         late = _late_publishers(ctx, topic, floor)
         whose = f", from {', '.join(name_of(p) for p in late)} (the others' on time)" if late else ""
+        back, when = ctx.state.get("jumped", {}).get(topic, (0.0, -math.inf))
+        back = back if ctx.t - when <= JUMP_SAID_S else 0.0
+        clock = f"; its stamps went back {back:.1f} s mid-stream (its clock jumped)" if back else ""
         yield ctx.alert(topic, "warn", f"stale data: messages arrive {age:.0f} ms after their header "
-                        f"stamp{usual}{whose}", symptom="stale", value_ms=age,
+                        f"stamp{usual}{whose}{clock}", symptom="stale", value_ms=age,
                         baseline_ms=None if risen is None else risen[1],
-                        **({"publishers": late} if late else {}))
+                        **({"publishers": late} if late else {}), **({"stamps_back_s": back} if back else {}))
+
+
+def looped(back_s: float, stamping_s: float, share: float = 0.3) -> bool:
+    """True when stamps that went back ``back_s`` after ``stamping_s`` of stamping (since the
+    topic's first stamp seen, or its last loop) went back to about where they began — at least
+    ``share`` of that time: a recording that looped, a simulation reset. A live clock that went
+    back less, mid-stream, jumped (a device's clock reset): its data now arrive older."""
+    return back_s >= share * stamping_s
 
 
 def _late_publishers(ctx: PluginContext, topic: str, floor: float) -> list[str]:

@@ -689,6 +689,24 @@ def test_a_stamp_reset_restarts_what_a_topics_age_is_judged_against():
     assert {a.data["symptom"] for a in drive_alerts("message_age", looped)} == {"stale"}
 
 
+def test_a_live_clock_that_jumps_back_mid_stream_makes_its_data_stale():
+    # a rangefinder stamped by its own clock, 300 ms behind ours; 100 s on, a brown-out resets the
+    # clock 2 s further back: the same reset event as a loop's, but 2 s of 100 s is no loop
+    live = [_aged(300.0 + (t % 3) + (2000.0 if t >= 100 else 0.0), t) for t in range(110)]
+    jump = Event(99.5, "stamp_reset", "topic:/img", "info", "header stamps went back 2.0 s", {"back_s": 2.0})
+    alerts = drive_alerts("message_age", [(t, G, [jump] if t == 100.0 else ev) for t, G, ev in live])
+    assert alerts and {a.data["symptom"] for a in alerts} == {"stale"}
+    assert alerts[0].data["stamps_back_s"] == 2.0 and "its clock jumped" in alerts[0].message
+
+
+def test_stamps_that_went_back_to_where_they_began_looped():
+    from plugins.message_age import looped
+
+    assert looped(47.0, 30.0) and looped(7.0, 7.5) and looped(30.0, 100.0)  # back to the start
+    assert not looped(2.0, 100.0) and not looped(29.0, 100.0)  # a clock that jumped mid-stream
+    assert looped(0.5, 0.0)  # no stamping seen before: nothing to tell it by
+
+
 def test_window_tells_stamps_going_back_per_publisher():
     from stream_viz.collect.window import TopicWindow
 
