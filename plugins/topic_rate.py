@@ -614,12 +614,13 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     # A drop lasts longer than any healthy pause of the topic (its recent rate counts a pause).
     samples, lasted = streak(ctx.state, (topic, "drop"), low), held(ctx.state, (topic, "drop"), low, ctx.t)
     modes = ctx.state.setdefault("modes", {}).setdefault(topic, [])
-    run = _drop_run(ctx, topic, low, now_rate / expect if expect > 0 else 1.0, quieting)
+    ratio = now_rate / expect if expect > 0 else 1.0
+    run = _drop_run(ctx, topic, low, ratio, quieting)
     if run is not None:  # a drop that ended by itself, the topic back at its rate: one of its modes
         modes[:] = learn_mode(modes, *run)
     if samples < s["confirm"] or lasted < r.longest:
         return None
-    if in_mode(modes, now_rate / expect if expect > 0 else 1.0, lasted, s["gap_margin"]):
+    if in_mode(modes, ratio, lasted, s["gap_margin"]):
         return None  # a lower rate it has shown and left by itself (a link throttled, a mode)
     steady = per_sim is not None and per_sim[1] <= STEADY_PER_SIM * per_sim[0]
     if lasted < s["irregular_drop_s"] and not steady and _irregular(ctx, topic, med):
@@ -636,8 +637,10 @@ def _drop_run(ctx: PluginContext, topic: str, low: bool, ratio: float,
     that just ended by itself: the topic back above ``drop_ratio`` of its rate, not gone quiet,
     its publishers the same processes (a node restarted by hand ends its drop by the restart)."""
     runs = ctx.state.setdefault("drop_runs", {})
-    pids = tuple(sorted(str(ctx.attr(n, "pid")) for n in ctx.publishers(topic)))
     run = runs.get(topic)
+    if run is None and not low:  # most topics, most samples: nothing to follow
+        return None
+    pids = tuple(sorted(str(ctx.attr(n, "pid")) for n in ctx.publishers(topic)))
     if run is not None and ctx.t - run["last"] > RUN_LAPSE_S:  # not followed a while: unknown end
         del runs[topic]
         run = None
@@ -648,7 +651,7 @@ def _drop_run(ctx: PluginContext, topic: str, low: bool, ratio: float,
             run["lowest"], run["samples"] = min(run["lowest"], ratio), run["samples"] + 1
             run["last"] = ctx.t
         return None
-    if run is None:
+    if run is None:  # lapsed
         return None
     del runs[topic]
     back = not quieting and ratio >= ctx.settings["drop_ratio"] and pids == run["pids"]

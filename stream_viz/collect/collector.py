@@ -154,6 +154,7 @@ class Collector:
         self._left: dict[str, float] = {}  # node fqn → when it left the graph
         self._dead: dict[int, ProcessReading] = {}
         self._closed = False
+        self._whole_graph = True  # False: a plain client of a discovery server (the user's choice)
 
     def start(self) -> None:
         """Create our own rclpy Context and observer node, subscribe to the event topics."""
@@ -165,6 +166,7 @@ class Collector:
             self.close()
             raise CollectError(f"cannot start the ROS 2 observer on domain {self.domain_id}: {e}") from e
         self.structure = StructureCache(GraphSignal(self.node))
+        self._whole_graph = observe_as_super_client(os.environ)  # as new_node set it up
         self.topics = TopicMonitor(self.node, self.window_s, metrics=self.topic_metrics)
         self.topics.start()
         self.resolver = PidResolver(self.domain_id, self._own_host())
@@ -373,7 +375,7 @@ class Collector:
         signal = self.structure.signal
         if signal is not None and not signal.available:
             out["graph change signal"] = f"{signal.why}; the graph is read in full every sample"
-        if not observe_as_super_client(dict(os.environ)):
+        if not self._whole_graph:
             out["whole graph"] = ("ROS_SUPER_CLIENT is false with a discovery server: only the endpoints "
                                   "this observer matches are discovered")
         rcl = self.topics.rcl if self.topics is not None else None
