@@ -170,6 +170,19 @@ def alive() -> bool:
     return rclpy.ok()
 
 
+def published(*sends: tuple) -> bool:
+    """Publish each ``(publisher, message)`` from a thread of ours; False once the context is
+    going down (the thread then ends), any other failure raised."""
+    try:
+        for pub, msg in sends:
+            pub.publish(msg)
+    except Exception:
+        if alive():
+            raise
+        return False
+    return True
+
+
 # --- the flight controller bridge ------------------------------------------------------------------
 
 
@@ -385,13 +398,8 @@ class CameraDriver(DroneNode):
             img.data = self.frames[k % len(self.frames)]
             k += 1
             self.info.header.stamp = img.header.stamp
-            try:
-                self.image_pub.publish(img)
-                self.info_pub.publish(self.info)
-            except Exception:
-                if not alive():
-                    return
-                raise
+            if not published((self.image_pub, img), (self.info_pub, self.info)):
+                return
             self.sent += 1
 
     def on_second(self) -> None:
@@ -430,12 +438,8 @@ class Rangefinder(DroneNode):
             m.header.frame_id = "rangefinder_link"
             self.height = max(0.1, self.height + random.gauss(0.0, 0.01))
             m.range = self.height if self.height < 12.0 else float("inf")
-            try:
-                self.pub.publish(m)
-            except Exception:
-                if not alive():
-                    return
-                raise
+            if not published((self.pub, m)):
+                return
 
 
 # --- visual-inertial odometry (multi-threaded executor) ------------------------------------------
@@ -1000,12 +1004,8 @@ class OffboardController(DroneNode):
             m.header.stamp, m.header.frame_id = self.get_clock().now().to_msg(), "odom"
             m.pose.position.x, m.pose.position.y, m.pose.position.z = self.sp
             m.pose.orientation.w = 1.0
-            try:
-                self.pub.publish(m)
-            except Exception:
-                if not alive():
-                    return
-                raise
+            if not published((self.pub, m)):
+                return
 
 
 # --- safety (single-threaded executor) -----------------------------------------------------------
