@@ -37,6 +37,8 @@ CLOCK = "topic:/clock"  # simulated time (`stream_viz.collect.simclock`)
 PAUSED = 0.05  # the simulation's pace under this share of its usual: paused
 STEADY_SAMPLES = 15  # a publisher that sent in this many samples in a row sends continuously
 STOPPING_PERIODS = 3.0  # a quiet this many usual periods long: the topic is stopping, not slower
+THREADS_STEADY = 8  # samples before a quiet with one thread count: the process's threads are steady
+THREAD_END_S = 1.0  # a thread that stops publishing on an error ends within this (or a period) after
 # On simulated time a sensor's messages come in bursts, one per /clock tick: its intervals spread
 # however steady its rate per simulated second is (σ within this share of it): then it is regular.
 STEADY_PER_SIM = 0.1
@@ -320,6 +322,8 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     again = f"; silent {flaps} times in {s['flap_window_s']:.0f} s" if flaps > 1 else ""
     if stalled:
         again += "; its executor stopped while its input arrives"
+    if ended := _this_quiet(ctx, topic, r).get("ended"):
+        again += f"; {ended} lost a thread as it stopped"
     return ctx.alert(topic, "error", f"silent for {quiet:.1f} s ({usual}){again}", symptom="silence",
                      silent_s=quiet, baseline_hz=ref, limit_s=limit, flaps=flaps,
                      episode_hold_s=s["flap_window_s"])
@@ -428,7 +432,7 @@ def _withheld(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhyt
     q = _this_quiet(ctx, topic, r)
     dip = False
     for node in pubs:
-        if ctx.called_servers(node):
+        if ctx.called_servers(node) or _thread_ended(ctx, node, q, r):
             return False
         fed = _fed(ctx, topic, node, r.newest, rhythms)
         ratio = _executor_ratio(ctx, node, q) if fed > 0 else math.nan
@@ -444,6 +448,31 @@ def _withheld(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhyt
         return q["dips"] < STOP_CONFIRM
     q["withheld"] = True
     return True
+
+
+def _thread_ended(ctx: PluginContext, node: str, q: dict[str, Any], r: Rhythm) -> bool:
+    """True when the process of ``node`` ran a steady number of threads (the same in its last
+    ``THREADS_STEADY`` samples) before the quiet, and fewer in every sample from ``THREAD_END_S``
+    or one period of the topic after its last message (the thread's last loop) on: the thread
+    that published, or fed what did, has ended (a driver's reader thread died on an exception)
+    while the executor goes on. A node withholding its output keeps its threads. Decided once a
+    quiet (kept in ``q``), when the quiet is first judged: a thread ending later is not this
+    quiet's."""
+    proc = ctx.process_of(node)
+    if proc is None:
+        return False
+    ended = q.setdefault("threads_ended", {})
+    if proc not in ended:
+        times, past = ctx.past(proc, "threads", last=PROCESS_SETTINGS["window"])
+        ok = np.isfinite(past)
+        before = past[ok & (times < q["since"])][-THREADS_STEADY:]
+        after = q["since"] + max(THREAD_END_S, 1.0 / r.rate if r.rate > 0 else 0.0)
+        since = np.append(past[ok & (times >= after)], ctx.value(proc, "threads"))
+        steady = len(before) == THREADS_STEADY and before.min() == before.max()
+        ended[proc] = bool(steady and np.all(since < before[-1]))  # NaN now compares False
+        if ended[proc]:
+            q["ended"] = proc
+    return ended[proc]
 
 
 def _on_request(ctx: PluginContext, topic: str, r: Rhythm) -> bool:

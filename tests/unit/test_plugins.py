@@ -526,15 +526,17 @@ def test_topic_rate_a_stalled_executor_silences_its_nodes_together_not_one_after
     assert drive("topic_rate", frames) == []
 
 
-def withholding_model(det, t, main=None, img_until=40.0, status=None, client=False, running=1, sibling=False):
+def withholding_model(det, t, main=None, img_until=40.0, status=None, client=False, running=1, sibling=False,
+                      threads=lambda t: 4):
     """`chain_model` with /img at 10 Hz until ``img_until``; the detector's process's executor (one
     thread running, or ``running``) at ``main(t)`` % (None: not measured), its own /det_status at
-    ``status``, a call to a server (``client``); ``sibling``: another node in its process."""
+    ``status``, a call to a server (``client``); ``sibling``: another node in its process; the
+    process's thread count ``threads(t)``."""
     img = [i / 10 for i in range(int(img_until * 10))]
     G = chain_model(img, det, t)
     if main is not None:
         G.nodes["process:200"]["theta"] = make_theta("process", {
-            "cpu_percent": 3.0, "rss_mb": 60.0, "threads": 4, "executor_cpu_percent": main(t),
+            "cpu_percent": 3.0, "rss_mb": 60.0, "threads": threads(t), "executor_cpu_percent": main(t),
             "running_threads": running})
     if sibling:
         add_member(G, "node:/tracker", pid=200, alive=True)
@@ -581,6 +583,30 @@ def test_topic_rate_an_output_withheld_by_a_working_node_is_its_rhythm():
     idles = lambda t: noisy(3.0, 0.3) if t < 25 else 1.2 if t < 26 else 0.0  # noqa: E731
     frames = [(t, withholding_model(det, t, main=idles, img_until=25), []) for t in HALF[:40]]
     assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img"}
+
+
+def test_topic_rate_an_output_whose_thread_ended_is_silent_while_its_node_works():
+    # /det stops at 20 s while the executor goes on: withheld, unless the process lost a thread
+    # as it stopped (its publishing thread died on an exception).
+    det = [m + 0.05 for m in [i / 10 for i in range(200)]]
+    going = lambda t: noisy(3.0, 0.3)  # noqa: E731
+    died = lambda t: 5 if t < 20 else 4  # noqa: E731
+    alerts = drive("topic_rate", [(t, withholding_model(det, t, main=going, threads=died), [])
+                                  for t in HALF[:40]], full=True)
+    assert [(a.t, a.member) for a in alerts][:1] == [(21.5, "topic:/det")]
+    assert "process:200 lost a thread as it stopped" in alerts[0].message
+    # A thread count that moves by itself says nothing: withheld.
+    churn = lambda t: 5 + int(t) % 2 if t < 20 else 4  # noqa: E731
+    assert drive("topic_rate", [(t, withholding_model(det, t, main=going, threads=churn), [])
+                                for t in HALF[:40]]) == []
+    # A thread ending well after the quiet began is not this quiet's.
+    late = lambda t: 5 if t < 30 else 4  # noqa: E731
+    assert drive("topic_rate", [(t, withholding_model(det, t, main=going, threads=late), [])
+                                for t in HALF[:40]]) == []
+    # Back to its count (a thread restarted) before the quiet was judged: withheld.
+    blip = lambda t: 4 if 20 <= t < 21 else 5  # noqa: E731
+    assert drive("topic_rate", [(t, withholding_model(det, t, main=going, threads=blip), [])
+                                for t in HALF[:40]]) == []
 
 
 def test_topic_rate_learns_a_withheld_quiet_as_a_healthy_gap():
