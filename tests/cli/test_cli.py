@@ -218,7 +218,11 @@ def test_snapshot_prints_the_model_as_json_and_text(children):
         assert out.returncode == 0, out.stderr
         data = json.loads(out.stdout)
         members = {m["id"]: m for m in data["members"]}
-        return (data, members) if {"node:/talker", "node:/listener"} <= set(members) else None
+        edges = {(e["src"], e["dst"], e["kind"]) for e in data["edges"]}
+        flow = {("node:/talker", "topic:/chatter", "pub"), ("topic:/chatter", "node:/listener", "sub")}
+        names = ("node:/talker", "node:/listener")  # their pids and endpoints can come later
+        ok = all(members.get(n, {}).get("pid") for n in names) and flow <= edges
+        return (data, members) if ok else None
 
     data, members = wait_for(snapshot, timeout=90, period=0.5)
     assert members["node:/talker"]["pid"] == talker.pid == members["node:/listener"]["pid"]

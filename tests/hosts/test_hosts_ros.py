@@ -62,7 +62,8 @@ def test_one_model_across_three_hosts_remote_crash_and_agent_killed(lab, tmp_pat
     def merged(s):
         m = s["members"]
         return (all(f"node:/{n}" in m for n in nodes) and m["node:/cam"].get("pid_status") == "confirmed"
-                and m["node:/imu"].get("pid_status") == "confirmed" and "host" in m["node:/lidar"])
+                and m["node:/imu"].get("pid_status") == "confirmed" and "host" in m["node:/lidar"]
+                and m["node:/planner"].get("pid_status") == "confirmed")
 
     s = samples.until(merged, 40.0)
     m, tree = s["members"], {tuple(e) for e in s["tree"]}

@@ -198,6 +198,8 @@ def test_a_node_restarted_under_its_name_is_found_in_its_new_process(children, r
                 return s if node is not None and node["pid"] == pid else None
             return check
         wait_for(on(first.pid), timeout=20, period=0.3)
+        # No periodic read from here on: what finds the new process is the exit and the change.
+        col.gids.every_s = 3600.0
         # Steady state: the graph's /rosout endpoints are not read every sample.
         reads = col.gids.reads
         for _ in range(4):
@@ -207,10 +209,7 @@ def test_a_node_restarted_under_its_name_is_found_in_its_new_process(children, r
         # Restarted at once under the same name (a launch respawn): found in the new process.
         children.end(first)
         second = children.python(PHOENIX, name="phoenix")
-        t0 = time.monotonic()
         s = wait_for(on(second.pid), timeout=15, period=0.5)
-        took = time.monotonic() - t0
-        assert took < 4.0, f"found in the new process after {took:.1f} s (the periodic read is 5 s)"
         assert s.graph.nodes["node:/phoenix"]["pid_status"] == "confirmed"
 
 
@@ -218,7 +217,7 @@ def test_a_node_restarted_under_its_name_is_found_in_its_new_process(children, r
 # server's status array lists every goal it remembers, so it grows past the first bytes the
 # collector copies of most messages.
 GOALS = """
-import time, rclpy
+import os, sys, time, rclpy
 from rclpy.action import ActionClient, ActionServer
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
@@ -237,7 +236,8 @@ ex.add_node(client)
 import threading
 threading.Thread(target=ex.spin, daemon=True).start()
 ac.wait_for_server()
-time.sleep(3.0)  # the monitor follows the status topic before the first goal
+while not os.path.exists(sys.argv[1]):  # the test says when the monitor follows the status topic
+    time.sleep(0.05)
 for k in range(6):
     sent = ac.send_goal_async(Fibonacci.Goal(order=k))
     while not sent.done():
@@ -252,18 +252,28 @@ time.sleep(60)
 
 
 @pytest.mark.skipif(not HAVE_ACTIONS, reason="test_msgs (ros-jazzy-test-msgs) is not installed")
-def test_every_goal_that_ends_is_a_goal_event_of_its_server(children, ros_domain):
-    proc = children.python(GOALS, name="goals")
+def test_every_goal_that_ends_is_a_goal_event_of_its_server(children, ros_domain, tmp_path):
+    go = tmp_path / "go"
+    proc = children.python(GOALS, str(go), name="goals")
     events = []
     with Collector(ros_domain) as col:
+        # The first goal is sent once the collector follows the status topic (and a sample later,
+        # its subscription matched): a goal that ended before then is not seen, by design.
+        status = "/move/_action/status"
+        wait_for(lambda: (events.extend(col.sample().events), status in col.topics._watches)[1],
+                 timeout=20, period=0.5)
+        for _ in range(2):
+            time.sleep(0.5)
+            events += col.sample().events
+        go.touch()
         end = time.monotonic() + 40.0
         while time.monotonic() < end and len([e for e in events if e.kind == "goal"]) < 6:
             events += col.sample().events
             time.sleep(0.5)
     goals = [e for e in events if e.kind == "goal"]
     errors = [e.text for e in events if e.kind == "observe_error"]
-    log = (children.workdir / f"goals_{children.procs.index(proc)}.log").read_text()
-    assert "goal done 5" in log, log
+    log_path = children.workdir / f"goals_{children.procs.index(proc)}.log"
+    wait_for(lambda: "goal done 5" in log_path.read_text(), timeout=10)
     assert [(e.member, e.data["action"], e.data["status"]) for e in goals] == [
         ("node:/mover", "/move", "succeeded")] * 6, (goals, errors)
     assert errors == []
@@ -342,10 +352,9 @@ def test_a_node_in_a_container_s_pid_namespace_is_mapped_to_its_process(children
     with Collector(ros_domain) as col:
         def mapped():
             G = col.sample().graph
-            return G if "node:/contained" in G and G.nodes["node:/contained"]["pid"] is not None else None
+            return G if G.nodes.get("node:/contained", {}).get("pid_status") == "confirmed" else None
         G = wait_for(mapped, timeout=20, period=0.3)
         assert G.nodes["node:/contained"]["pid"] == proc.pid, (proc.pid, G.nodes["node:/contained"])
-        assert G.nodes["node:/contained"]["pid_status"] == "confirmed"
         proc.kill()
         exits = wait_for(lambda: [e for e in col.sample().events if e.kind == "exit"], timeout=5, period=0.3)
         # (its container's `unshare` may end in the same sample: the namespace's init is gone)
@@ -371,7 +380,6 @@ def test_a_node_without_rosout_is_mapped_to_its_process(children, ros_domain):
     with Collector(ros_domain) as col:
         def mapped():
             G = col.sample().graph
-            return G if "node:/quiet_one" in G and G.nodes["node:/quiet_one"]["pid"] is not None else None
+            return G if G.nodes.get("node:/quiet_one", {}).get("pid_status") == "confirmed" else None
         G = wait_for(mapped, timeout=20, period=0.3)
     assert G.nodes["node:/quiet_one"]["pid"] == quiet.pid
-    assert G.nodes["node:/quiet_one"]["pid_status"] == "confirmed"

@@ -399,6 +399,9 @@ def test_diagnostics_updater_status_mapped_to_its_node_by_name(children, run_of)
     children.python(DIAG, name="diag")
     run = run_of(["diagnostics"])
     _ready(run, "node:/robot/my_node", "node:/robot/monitor", "node:/robot/aggregator")
+    # A status is told by its publisher's gid once the publisher's endpoint is discovered.
+    wait_for(lambda: (run.step(), run.G.has_edge("node:/robot/monitor", "topic:/diagnostics"))[1],
+             timeout=20, period=PERIOD)
     events = []
 
     def step_collect():

@@ -144,8 +144,8 @@ n.declare_parameter("quality", 0.0)
 pub = n.create_publisher(String, "/image", 10)
 share, hog = [0.0], [False]
 def tick():
-    end = time.monotonic() + (0.1 if hog[0] else share[0] * 0.1)
-    while time.monotonic() < end:
+    end = time.thread_time() + (0.1 if hog[0] else share[0] * 0.1)  # CPU burned, however loaded
+    while time.thread_time() < end:
         pass
     pub.publish(String(data="frame"))
 n.create_timer(0.1, tick)
