@@ -1,6 +1,7 @@
 """A process's CPU quota from its cgroup: a container's ``docker --cpus``, a Kubernetes limit,
 a systemd ``CPUQuota``, read from cgroup v2 (``cpu.max``, ``cpu.stat``) or v1
-(``cpu.cfs_quota_us``, ``cpu.stat``, ``cpuacct.usage``).
+(``cpu.cfs_quota_us``, ``cpu.stat``, ``cpuacct.usage``); and its memory group, whose count of
+processes the OOM killer ended tells a kill for memory from any other (`memory_group_of`).
 
 A robot held to 1.5 CPUs is saturated when its group uses 1.5, however idle the machine's
 cores: its tasks then wait for the next quota period (throttled), which the machine's own
@@ -60,10 +61,19 @@ def parse_mountinfo(text: str) -> list[Mount]:
         if rest[0] == "cgroup2":
             out.append(Mount(fields[4], fields[3], frozenset({""})))
         elif rest[0] == "cgroup":
-            names = {o for o in rest[2].split(",") if o in ("cpu", "cpuacct")}
+            names = {o for o in rest[2].split(",") if o in ("cpu", "cpuacct", "memory")}
             if names:
                 out.append(Mount(fields[4], fields[3], frozenset(names)))
     return out
+
+
+def read_mounts(path: str = "/proc/self/mountinfo") -> list[Mount]:
+    """Return this machine's cgroup mounts; none where there is no mountinfo (not Linux)."""
+    try:
+        with open(path) as f:
+            return parse_mountinfo(f.read())
+    except OSError:
+        return []
 
 
 def parse_stat(text: str) -> dict[str, int]:
@@ -181,3 +191,66 @@ def quota_use(q: Quota, before: QuotaReading, after: QuotaReading) -> tuple[floa
     periods = after.periods - before.periods
     throttled = (after.throttled - before.throttled) / periods * 100.0 if periods > 0 else float("nan")
     return (min(100.0, used) if used == used else used), throttled
+
+
+NO_LIMIT = 2**60  # v1 writes "no limit" as a page-rounded 2^63 - 1
+
+
+@dataclass(frozen=True)
+class MemoryGroup:
+    """A process's memory cgroup: its directory, the file counting the processes in it that the
+    OOM killer ended (``events``: v2 ``memory.events``, v1 ``memory.oom_control``; their
+    ``oom_kill`` line), and the tightest memory limit over it in bytes (None: none)."""
+
+    path: str
+    events: str
+    limit: int | None
+
+
+def parse_oom_kills(text: str) -> int | None:
+    """Return the ``oom_kill`` count of a ``memory.events`` or ``memory.oom_control`` text (None:
+    a kernel that does not count them, before 4.13)."""
+    return parse_stat(text).get("oom_kill")
+
+
+def memory_group_of(pid: int, mounts: list[Mount], proc: str = "/proc") -> MemoryGroup | None:
+    """Return process ``pid``'s memory cgroup (v1's memory hierarchy, else v2's), or None when no
+    mount shows it or it has no OOM count."""
+    try:
+        with open(f"{proc}/{pid}/cgroup") as f:
+            groups = parse_proc_cgroup(f.read())
+    except OSError:
+        return None
+    where = cgroup_dir(mounts, "memory", groups)
+    if where is None and any("" in m.controllers for m in mounts):
+        where = cgroup_dir(mounts, "", groups)
+    if where is None:
+        return None
+    d, top = where
+    events = next((os.path.join(d, n) for n in ("memory.events", "memory.oom_control")
+                   if os.path.exists(os.path.join(d, n))), None)
+    if events is None:
+        return None
+    limit, at = None, d
+    while True:  # the tightest limit binds: the container's, or one of its own
+        for name in ("memory.max", "memory.limit_in_bytes"):
+            try:
+                with open(os.path.join(at, name)) as f:
+                    value = f.read().strip()
+            except OSError:
+                continue
+            if value.isdigit() and int(value) < NO_LIMIT and (limit is None or int(value) < limit):
+                limit = int(value)
+        if at == top or len(at) <= len(top):
+            break
+        at = os.path.dirname(at)
+    return MemoryGroup(d, events, limit)
+
+
+def read_oom_kills(g: MemoryGroup) -> int | None:
+    """The count of processes in ``g`` the OOM killer ended; None when unreadable or gone."""
+    try:
+        with open(g.events) as f:
+            return parse_oom_kills(f.read())
+    except OSError:
+        return None

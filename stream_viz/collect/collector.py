@@ -20,12 +20,14 @@ from rclpy.parameter import Parameter
 from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 
 from stream_viz.collect.build import build_model
+from stream_viz.collect.cgroups import read_mounts
 from stream_viz.collect.diagnostics import DiagnosticsReader
 from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.goals import STATUS_SUFFIX, GoalTracker
 from stream_viz.collect.graphsignal import GraphSignal
 from stream_viz.collect.hosts import HostReports
 from stream_viz.collect.naming import NodeNames, recently_left
+from stream_viz.collect.oomkills import OomKill, OomWatch
 from stream_viz.collect.params import param_event
 from stream_viz.collect.pidmap import PidResolver
 from stream_viz.collect.processes import ProcessSampler
@@ -143,6 +145,7 @@ class Collector:
         self.resolver: PidResolver | None = None
         self.hosts: HostReports | None = None
         self.sampler = ProcessSampler()
+        self.ooms = OomWatch(read_mounts())
         self.qos = QosCache()
         self.gids = GidCache()
         self.structure = StructureCache()  # without a graph change signal until start()
@@ -195,11 +198,12 @@ class Collector:
             pids.setdefault(fqn, PidInfo(None, "unknown"))
         node_pids = {n: p.pid for n, p in pids.items() if n in reading.nodes}
         ps = self.sampler.sample({p for p in node_pids.values() if p is not None})
+        ooms = self.ooms.update(ps.processes, {p: r.metrics.get("rss_mb", 0.0) for p, r in ps.exited.items()})
         if ps.exited:  # one of its nodes may be back under the same name, with new gids
             self.gids.invalidate()
             self.qos.invalidate()
             self.structure.invalidate()
-        events = self._process_events(t, ps.exited, node_pids)
+        events = self._process_events(t, ps.exited, node_pids, ooms)
         events += self._restarts(t, node_pids)
         # Keep the process of nodes DDS still lists after their process died (SIGKILL: ~20 s).
         self._dead.update(ps.exited)
@@ -245,7 +249,7 @@ class Collector:
         return Sample(t, G, events, d, unreadable)
 
     def _process_events(self, t: float, exited: dict[int, ProcessReading],
-                        node_pids: dict[str, int | None]) -> list[Event]:
+                        node_pids: dict[str, int | None], ooms: dict[int, OomKill]) -> list[Event]:
         out = []
         listed_at_read = {n for n, p in node_pids.items() if p in exited}
         still = self._still_listed(listed_at_read) if listed_at_read else set()
@@ -258,6 +262,8 @@ class Collector:
             data = {"pid": pid, "process": make_id("process", pid), "nodes": nodes, "name": r.name,
                     "still_listed": [make_id("node", n) for n in listed]}
             text = f"process {pid} ({r.name}) exited" + (f" with nodes {', '.join(had)}" if had else "")
+            if (oom := ooms.get(pid)) is not None:  # a kill for memory: an error, with or without nodes
+                level, text, data = "error", f"{text}: {oom.describe()}", data | oom.data()
             for m in [*nodes, make_id("process", pid)]:
                 out.append(Event(t, "exit", m, level, text, data))
         return out

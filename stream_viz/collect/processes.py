@@ -24,7 +24,7 @@ from typing import NamedTuple
 
 import psutil
 
-from stream_viz.collect.cgroups import Quota, QuotaReading, parse_mountinfo, quota_of, quota_use, read_quota
+from stream_viz.collect.cgroups import Quota, QuotaReading, quota_of, quota_use, read_mounts, read_quota
 from stream_viz.collect.readings import ProcessReading
 
 MB = 1024.0 * 1024.0
@@ -152,11 +152,7 @@ class MachineSampler:
         self._affinity: dict[int, frozenset[int]] = {}
         self._quotas: dict[int, Quota | None] = {}
         self._counted: tuple[Quota, QuotaReading] | None = None
-        try:
-            with open("/proc/self/mountinfo") as f:
-                self._mounts = parse_mountinfo(f.read())
-        except OSError:  # not Linux: no cgroups
-            self._mounts = []
+        self._mounts = read_mounts()
 
     def sample(self, pids: Iterable[int] = ()) -> dict[str, float]:
         """CPU and pressure since the last call and memory now, under the host θ names, and the

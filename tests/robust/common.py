@@ -74,17 +74,64 @@ def sample_times(rrd: Path) -> list[int]:
     return sorted(stamps)
 
 
-class QuotaGroup:
+class _Group:
+    """A cgroup made for a test: ``add(pid)`` moves a process into it; ``close()`` moves what is
+    left out and removes it."""
+
+    dirs: list[Path]
+
+    def add(self, pid: int) -> None:
+        for d in self.dirs:
+            (d / "cgroup.procs").write_text(str(pid))
+
+    def close(self) -> None:
+        for d in self.dirs:
+            for pid in (d / "cgroup.procs").read_text().split():
+                try:
+                    (d.parent / "cgroup.procs").write_text(pid)
+                except OSError:
+                    continue  # gone meanwhile
+            d.rmdir()
+
+
+def _hierarchies() -> tuple[list, dict]:
+    with open("/proc/self/mountinfo") as f:
+        mounts = parse_mountinfo(f.read())
+    return [m for m in mounts if "" in m.controllers], {c: m for m in mounts for c in m.controllers if c}
+
+
+class MemoryLimitGroup(_Group):
+    """A cgroup whose memory is limited to ``limit`` bytes, as ``docker --memory`` makes one: in v1's
+    memory hierarchy where there is one, else in v2 (``memory.max``, no swap). Raises OSError where
+    it cannot be made."""
+
+    def __init__(self, limit: int, name: str) -> None:
+        v2, v1 = _hierarchies()
+        if "memory" in v1:
+            d = Path(v1["memory"].point, name)
+            d.mkdir()
+            self.dirs = [d]
+            (d / "memory.limit_in_bytes").write_text(str(limit))
+        elif v2 and "memory" in Path(v2[0].point, "cgroup.controllers").read_text().split():
+            top = Path(v2[0].point)
+            (top / "cgroup.subtree_control").write_text("+memory")
+            d = top / name
+            d.mkdir()
+            self.dirs = [d]
+            (d / "memory.max").write_text(str(limit))
+            if (d / "memory.swap.max").exists():
+                (d / "memory.swap.max").write_text("0")
+        else:
+            raise OSError("no cgroup hierarchy with the memory controller")
+
+
+class QuotaGroup(_Group):
     """A cgroup with a CPU quota of ``cpus``, as a container runtime makes one (``docker --cpus``):
     in cgroup v2 (``cpu.max``) where its cpu controller is, else in v1 (``cpu`` and ``cpuacct``).
-    ``add(pid)`` moves a process into it; ``close()`` moves what is left out and removes it.
     Raises OSError where cgroups cannot be made (not root, no cpu controller)."""
 
     def __init__(self, cpus: float, name: str) -> None:
-        with open("/proc/self/mountinfo") as f:
-            mounts = parse_mountinfo(f.read())
-        v2 = [m for m in mounts if "" in m.controllers]
-        v1 = {c: m for m in mounts for c in m.controllers if c}
+        v2, v1 = _hierarchies()
         self.dirs: list[Path] = []
         period = 100000
         if "cpu" in v1:
@@ -103,16 +150,3 @@ class QuotaGroup:
             (d / "cpu.max").write_text(f"{int(cpus * period)} {period}")
         else:
             raise OSError("no cgroup hierarchy with the cpu controller")
-
-    def add(self, pid: int) -> None:
-        for d in self.dirs:
-            (d / "cgroup.procs").write_text(str(pid))
-
-    def close(self) -> None:
-        for d in self.dirs:
-            for pid in (d / "cgroup.procs").read_text().split():
-                try:
-                    (d.parent / "cgroup.procs").write_text(pid)
-                except OSError:
-                    continue  # gone meanwhile
-            d.rmdir()

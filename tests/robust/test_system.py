@@ -17,7 +17,16 @@ import pytest
 
 from stream_viz.collect.processes import MachineSampler, ProcessSampler
 from stream_viz.testing import TALKER, wait_for
-from tests.robust.common import QuotaGroup, db_rows, monitor_cmd, report, run, sample_times, snapshot_has
+from tests.robust.common import (
+    MemoryLimitGroup,
+    QuotaGroup,
+    db_rows,
+    monitor_cmd,
+    report,
+    run,
+    sample_times,
+    snapshot_has,
+)
 
 pytestmark = pytest.mark.ros
 
@@ -144,6 +153,62 @@ def test_a_host_s_cpu_is_its_quota_s_use_when_a_cgroup_quota_binds(children):
         group.close()
     assert got["cpus"] == 0.5 and got["machine_cpu_percent"] >= 90.0, got
     assert got["cpu_pressure_percent"] >= 50.0, got  # throttled in most periods
+
+
+# A node that, once the file argv[1] exists, takes 10 MiB more every 20 ms until it is stopped.
+HOG = """
+import os, sys, time, rclpy
+rclpy.init()
+n = rclpy.create_node(sys.argv[2])
+print("ready", flush=True)
+while not os.path.exists(sys.argv[1]):
+    rclpy.spin_once(n, timeout_sec=0.1)
+chunks = []
+while True:
+    chunks.append(bytearray(10 * 2**20))  # zero-filled: its pages are touched
+    time.sleep(0.02)
+"""
+
+
+def test_a_process_the_oom_killer_ended_is_said_so_and_another_kill_is_not(children, ros_domain, tmp_path):
+    """Two nodes in a container limited to 200 MiB (as ``docker --memory``): one killed from
+    outside (SIGKILL) exits as a crash; the other, past the limit, as killed by the OOM killer."""
+    from stream_viz.collect.collector import Collector
+
+    try:
+        group = MemoryLimitGroup(200 * 2**20, f"stream-viz-oom-{os.getpid()}")
+    except OSError as e:
+        pytest.skip(f"cannot make a cgroup with a memory limit here: {e}")
+    go = tmp_path / "go"
+    hog = children.python(HOG, str(go), "hog", name="hog")
+    other = children.python(HOG, str(tmp_path / "never"), "other", name="other")
+    exits = []
+    try:
+        group.add(hog.pid)
+        group.add(other.pid)
+        with Collector(ros_domain) as col:
+            def confirmed():
+                nodes = col.sample().graph.nodes
+                return all(nodes.get(f"node:/{n}", {}).get("pid_status") == "confirmed"
+                           for n in ("hog", "other"))
+
+            def ended():
+                return [e for e in col.sample().events if e.kind == "exit"]
+            wait_for(confirmed, timeout=20, period=0.3)
+            other.kill()
+            exits += wait_for(ended, timeout=10, period=0.3)
+            go.touch()
+            exits += wait_for(ended, timeout=20, period=0.3)
+    finally:
+        children.end(hog, signal.SIGKILL)
+        group.close()
+    assert hog.wait(5) == -signal.SIGKILL
+    by = {e.member: e for e in exits}
+    assert not by["node:/other"].data.get("oom_kill"), by["node:/other"]
+    assert "OOM" not in by["node:/other"].text
+    e = by["node:/hog"]
+    assert e.level == "error" and e.data["oom_kill"] is True and e.data["memory_limit_mb"] == 200.0, e
+    assert "killed by the OOM killer at its group's limit of 200 MB" in e.text, e.text
 
 
 def test_ancestors_of_the_nodes_processes_are_read_every_fifth_sample(children):

@@ -6,11 +6,14 @@ import math
 from pathlib import Path
 
 from stream_viz.collect.cgroups import (
+    MemoryGroup,
     Mount,
     Quota,
     QuotaReading,
     cgroup_dir,
+    memory_group_of,
     parse_mountinfo,
+    parse_oom_kills,
     parse_proc_cgroup,
     parse_stat,
     quota_of,
@@ -31,6 +34,7 @@ def test_mounts_and_a_process_s_groups_are_parsed():
     assert parse_mountinfo(MOUNTINFO) == [
         Mount("/sys/fs/cgroup/cpu", "/", frozenset({"cpu"})),
         Mount("/sys/fs/cgroup/cpuacct", "/", frozenset({"cpuacct"})),
+        Mount("/sys/fs/cgroup/memory", "/", frozenset({"memory"})),
         Mount("/sys/fs/cgroup/unified", "/docker/abc", frozenset({""}))]
     groups = parse_proc_cgroup("4:memory:/m\n2:cpu,cpuacct:/robot\n0::/docker/abc/app\n")
     assert groups == {"memory": "/m", "cpu": "/robot", "cpuacct": "/robot", "": "/docker/abc/app"}
@@ -88,3 +92,26 @@ def test_a_quota_s_use_and_throttling_between_two_readings(tmp_path):
     assert idle[0] == 0.0 and math.isnan(idle[1])  # no period enforced: throttling unknown
     stat.unlink()
     assert read_quota(q, 12.0) is None  # the group is gone
+
+
+def test_a_process_s_memory_group_its_oom_count_and_tightest_limit(tmp_path):
+    # v2: the pod limited to 512 MiB, its container to none; memory.events counts the OOM kills.
+    _write(tmp_path, {"proc/7/cgroup": "0::/pod/app\n", "cg/pod/memory.max": f"{512 * 2**20}\n",
+                      "cg/pod/app/memory.max": "max\n",
+                      "cg/pod/app/memory.events": "low 0\nhigh 0\nmax 3\noom 1\noom_kill 1\n"})
+    mounts = [Mount(str(tmp_path / "cg"), "/", frozenset({""}))]
+    g = memory_group_of(7, mounts, proc=str(tmp_path / "proc"))
+    app = tmp_path / "cg/pod/app"
+    assert g == MemoryGroup(str(app), str(app / "memory.events"), 512 * 2**20)
+    # v1: memory.oom_control; "no limit" is a page-rounded 2^63 - 1.
+    _write(tmp_path, {"proc/8/cgroup": "4:memory:/box\n2:cpu:/\n",
+                      "v1mem/box/memory.limit_in_bytes": "9223372036854771712\n",
+                      "v1mem/box/memory.oom_control": "oom_kill_disable 0\nunder_oom 0\noom_kill 2\n"})
+    mounts = [Mount(str(tmp_path / "v1mem"), "/", frozenset({"memory"}))]
+    g = memory_group_of(8, mounts, proc=str(tmp_path / "proc"))
+    assert g == MemoryGroup(str(tmp_path / "v1mem/box"), str(tmp_path / "v1mem/box/memory.oom_control"), None)
+    assert parse_oom_kills((tmp_path / "v1mem/box/memory.oom_control").read_text()) == 2
+    assert parse_oom_kills("oom_kill_disable 0\nunder_oom 0\n") is None  # a kernel before 4.13
+    # No memory mount, or a process gone: none.
+    assert memory_group_of(8, [], proc=str(tmp_path / "proc")) is None
+    assert memory_group_of(9, mounts, proc=str(tmp_path / "proc")) is None
