@@ -37,6 +37,7 @@ CLOCK = "topic:/clock"  # simulated time (`stream_viz.collect.simclock`)
 PAUSED = 0.05  # the simulation's pace under this share of its usual: paused
 STEADY_SAMPLES = 15  # a publisher that sent in this many samples in a row sends continuously
 STOPPING_PERIODS = 3.0  # a quiet this many usual periods long: the topic is stopping, not slower
+FEED_SLACK_S = 0.25  # a feeding node's change of state reaches a publisher within a period and this
 THREADS_STEADY = 8  # samples before a quiet with one thread count: the process's threads are steady
 THREAD_END_S = 1.0  # a thread that stops publishing on an error ends within this (or a period) after
 # On simulated time a sensor's messages come in bursts, one per /clock tick: its intervals spread
@@ -362,7 +363,8 @@ def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[
     if not ctx.settings["judge_latched"] and latched(ctx.attr(topic, "qos")):
         return True
     last = r.newest or ctx.t
-    return _changed_state(ctx, ctx.publishers(topic), last, last, transitions, topic)
+    period = 1.0 / r.rate if r.rate > 0 else None
+    return _changed_state(ctx, ctx.publishers(topic), last, last, transitions, topic, period)
 
 
 def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm],
@@ -844,15 +846,22 @@ def _publisher_stopped(ctx: PluginContext, topic: str, transitions: dict[str, li
 
 
 def _changed_state(ctx: PluginContext, nodes: list[str], since: float, until: float,
-                   transitions: dict[str, list[float]], topic: str) -> bool:
+                   transitions: dict[str, list[float]], topic: str, period: float | None = None) -> bool:
     """True when one of ``nodes`` (publishers of ``topic``), or a node feeding one through another
     topic, changed state from ``transition_grace_s`` before ``since`` to as long after ``until``
     (a lifecycle transition, a goal ended). A node that follows another's goal (a controller
-    driving the path of its planner's goal) stops with it."""
+    driving the path of its planner's goal) stops with it; so, given the topic's ``period``, a
+    feeding node's change comes before the stop, by ``until`` plus a period and ``FEED_SLACK_S``
+    at the latest: one later is the stop's consequence (a mission aborted because its setpoints
+    stopped)."""
     grace = ctx.settings["transition_grace_s"]
     feeding = {u for p in nodes for i in ctx.subscribed_topics(p) if i != topic for u in ctx.publishers(i)}
-    near = (x for p in feeding.union(nodes) for x in transitions.get(p, ()))
-    return any(since - grace <= x <= until + grace for x in near)
+    own = (x for p in nodes for x in transitions.get(p, ()))
+    if any(since - grace <= x <= until + grace for x in own):
+        return True
+    after = grace if period is None else min(grace, period + FEED_SLACK_S)
+    upstream = (x for p in feeding.difference(nodes) for x in transitions.get(p, ()))
+    return any(since - grace <= x <= until + after for x in upstream)
 
 
 def _lost_on_the_way(ctx: PluginContext, topic: str, rate: float, med: float) -> bool:

@@ -447,6 +447,22 @@ def test_topic_rate_a_goal_ending_by_the_last_message_explains_the_quiet():
     assert silences[:1] == [(22.5, "topic:/img", "error")]
 
 
+def test_topic_rate_a_feeding_node_s_goal_ending_after_the_quiet_began_explains_nothing():
+    # /detector computes /det from /camera's /img and stops at 19.95 while /img goes on; /camera
+    # serves an action. Its goal ending first (19.8) is why /det stopped: healthy. Ending 0.75 s
+    # after /det's last message (> a period + 0.25 s), it is /det's consequence (a mission
+    # aborted because its setpoints stopped): /det is silent.
+    img, det = [i / 10 for i in range(400)], [i / 10 + 0.05 for i in range(200)]
+
+    def ended(at):
+        return Event(at, "goal", "node:/camera", "info", "goal 1a2b3c4d of /dock aborted",
+                     {"action": "/dock", "goal": "1a2b3c4d", "status": "aborted"})
+    first = [(t, chain_model(img, det, t), [ended(19.8)] if t == 19.5 + 1 else []) for t in HALF[:40]]
+    assert drive("topic_rate", first) == []
+    after = [(t, chain_model(img, det, t), [ended(20.7)] if t == 20.5 + 1 else []) for t in HALF[:40]]
+    assert drive("topic_rate", after)[:1] == [(21.5, "topic:/det", "error")]
+
+
 def test_topic_rate_a_pause_while_its_process_is_busy_is_the_processs():
     # /camera's process computes for 4 s from 20 s (its executor held: no message 19.9-24.0).
     msgs = [i / 10 for i in range(200)] + [24.0 + i / 10 for i in range(100)]
