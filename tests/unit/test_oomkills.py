@@ -27,12 +27,16 @@ def _tree(root: Path, count: int) -> list[Mount]:
     return [Mount(str(root / "mem"), "/", frozenset({"memory"}))]
 
 
-def test_the_watch_names_a_process_that_ended_as_its_group_counted_a_kill(tmp_path, monkeypatch):
-    mounts = _tree(tmp_path, 0)
+def _watch(tmp_path: Path, monkeypatch) -> OomWatch:
+    """A watch over the literal tree of `_tree` (its /proc under ``tmp_path``), no kill counted."""
     import stream_viz.collect.oomkills as oomkills
     real = oomkills.memory_group_of
     monkeypatch.setattr(oomkills, "memory_group_of", lambda pid, m: real(pid, m, proc=str(tmp_path / "proc")))
-    w = OomWatch(mounts)
+    return OomWatch(_tree(tmp_path, 0))
+
+
+def test_the_watch_names_a_process_that_ended_as_its_group_counted_a_kill(tmp_path, monkeypatch):
+    w = _watch(tmp_path, monkeypatch)
     assert w.update([7, 8], {}) == {}
     # 8 ends while the count is unchanged: not the OOM killer (a crash, a kill by someone).
     assert w.update([7], {8: 500.0}) == {}
@@ -44,11 +48,7 @@ def test_the_watch_names_a_process_that_ended_as_its_group_counted_a_kill(tmp_pa
 
 def test_a_kill_counted_a_sample_before_its_process_is_seen_gone_names_it(tmp_path, monkeypatch):
     # The processes are read before the counts: one killed in between is counted first.
-    mounts = _tree(tmp_path, 0)
-    import stream_viz.collect.oomkills as oomkills
-    real = oomkills.memory_group_of
-    monkeypatch.setattr(oomkills, "memory_group_of", lambda pid, m: real(pid, m, proc=str(tmp_path / "proc")))
-    w = OomWatch(mounts)
+    w = _watch(tmp_path, monkeypatch)
     assert w.update([7, 8], {}) == {}
     _tree(tmp_path, 1)
     assert w.update([7, 8], {}) == {}
