@@ -12,6 +12,7 @@ pressure (PSI) does not count. Parsing is pure (`parse_proc_cgroup`, `parse_moun
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -100,27 +101,40 @@ def cgroup_dir(mounts: list[Mount], controller: str, groups: dict[str, str]) -> 
     return None
 
 
+def _groups_of(pid: int, proc: str) -> dict[str, str] | None:
+    """`parse_proc_cgroup` of process ``pid``; None when it is gone or unreadable."""
+    try:
+        with open(f"{proc}/{pid}/cgroup") as f:
+            return parse_proc_cgroup(f.read())
+    except OSError:
+        return None
+
+
+def _upwards(d: str, top: str) -> Iterator[str]:
+    """``d`` and its ancestors up to the mount point ``top``: where a limit over ``d`` may be set."""
+    while True:
+        yield d
+        if d == top or len(d) <= len(top):
+            return
+        d = os.path.dirname(d)
+
+
 def quota_of(pid: int, mounts: list[Mount], proc: str = "/proc") -> Quota | None:
     """Return the tightest CPU quota over process ``pid`` (on its cgroup or an ancestor), or None
     when it has none (or its cgroup cannot be read)."""
-    try:
-        with open(f"{proc}/{pid}/cgroup") as f:
-            groups = parse_proc_cgroup(f.read())
-    except OSError:
+    groups = _groups_of(pid, proc)
+    if groups is None:
         return None
     v2 = cgroup_dir(mounts, "", groups) if any("" in m.controllers for m in mounts) else None
     where = cgroup_dir(mounts, "cpu", groups) or v2
     if where is None:
         return None
-    d, top = where
+    top = where[1]
     best: tuple[float, str] | None = None
-    while True:
+    for d in _upwards(*where):
         cpus = _cpus_of(d)
         if cpus is not None and (best is None or cpus < best[0]):
             best = (cpus, d)
-        if d == top or len(d) <= len(top):
-            break
-        d = os.path.dirname(d)
     if best is None:
         return None
     cpus, d = best
@@ -216,35 +230,33 @@ def parse_oom_kills(text: str) -> int | None:
 def memory_group_of(pid: int, mounts: list[Mount], proc: str = "/proc") -> MemoryGroup | None:
     """Return process ``pid``'s memory cgroup (v1's memory hierarchy, else v2's), or None when no
     mount shows it or it has no OOM count."""
-    try:
-        with open(f"{proc}/{pid}/cgroup") as f:
-            groups = parse_proc_cgroup(f.read())
-    except OSError:
+    groups = _groups_of(pid, proc)
+    if groups is None:
         return None
     where = cgroup_dir(mounts, "memory", groups)
     if where is None and any("" in m.controllers for m in mounts):
         where = cgroup_dir(mounts, "", groups)
     if where is None:
         return None
-    d, top = where
+    d = where[0]
     events = next((os.path.join(d, n) for n in ("memory.events", "memory.oom_control")
                    if os.path.exists(os.path.join(d, n))), None)
     if events is None:
         return None
-    limit, at = None, d
-    while True:  # the tightest limit binds: the container's, or one of its own
-        for name in ("memory.max", "memory.limit_in_bytes"):
-            try:
-                with open(os.path.join(at, name)) as f:
-                    value = f.read().strip()
-            except OSError:
-                continue
-            if value.isdigit() and int(value) < NO_LIMIT and (limit is None or int(value) < limit):
-                limit = int(value)
-        if at == top or len(at) <= len(top):
-            break
-        at = os.path.dirname(at)
-    return MemoryGroup(d, events, limit)
+    limits = [_memory_limit(at) for at in _upwards(*where)]  # the tightest binds
+    return MemoryGroup(d, events, min((x for x in limits if x is not None), default=None))
+
+
+def _memory_limit(d: str) -> int | None:
+    """The memory limit set on cgroup directory ``d`` in bytes, or None (none, or unreadable)."""
+    for name in ("memory.max", "memory.limit_in_bytes"):
+        try:
+            with open(os.path.join(d, name)) as f:
+                value = f.read().strip()
+        except OSError:
+            continue
+        return int(value) if value.isdigit() and int(value) < NO_LIMIT else None
+    return None
 
 
 def read_oom_kills(g: MemoryGroup) -> int | None:

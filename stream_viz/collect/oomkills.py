@@ -15,8 +15,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 from stream_viz.collect.cgroups import MemoryGroup, Mount, memory_group_of, read_oom_kills
-
-MB = 1024.0 * 1024.0
+from stream_viz.collect.processes import MB
 
 
 @dataclass(frozen=True)
@@ -83,8 +82,7 @@ class OomWatch:
         named = list(killed.values())
         # Only this call's rises wait a sample more (the older ones were named first).
         self._pending = {p: k for p, n in fresh.items() if (k := min(n, rose[p] - named.count(p))) > 0}
-        by_path = {g.path: g for g in self._groups.values() if g is not None}
         self._groups = {p: g for p, g in self._groups.items() if p in live}
-        self._counts = {k: v for k, v in self._counts.items()
-                        if any(g is not None and g.path == k for g in self._groups.values())}
-        return {pid: OomKill(path, by_path[path].limit) for pid, path in killed.items()}
+        kept = {g.path for g in self._groups.values() if g is not None}
+        self._counts = {k: v for k, v in self._counts.items() if k in kept}
+        return {pid: OomKill(path, groups[path].limit) for pid, path in killed.items()}
