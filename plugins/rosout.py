@@ -10,6 +10,8 @@ from stream_viz.detect.startup import STARTUP_S, bring_up_note, hold_back, start
 from stream_viz.records import SEVERITY_RANK as RANK
 from stream_viz.records import Alert
 
+STAMP_SLACK_S = 1.0  # s a line may be stamped before the last call and still be on this clock
+
 
 class Rosout(Plugin):
     """One alert per logging member and sample: its worst level (≥ ``min_level``), the count and
@@ -37,9 +39,13 @@ class Rosout(Plugin):
                 hold_back(ctx, e.member)
                 continue
             seen.setdefault(e.member, []).append(e)
+        # Lines came since the last call: a stamp far outside that is another computer's clock.
+        prev = ctx.t - ctx.since_last_call()
         for member, evs in sorted(seen.items()):
             worst = max(evs, key=lambda e: RANK[e.level])
             more = f" (+{len(evs) - 1} more)" if len(evs) > 1 else ""
             more += bring_up_note(ctx, member)
+            first = min(e.t for e in evs)
+            began = {"since": first} if prev - STAMP_SLACK_S <= first <= ctx.t else {}
             yield ctx.alert(member, worst.level, f"logged {worst.level.upper()}: {evs[0].text}{more}",
-                            symptom="log", lines=len(evs))
+                            symptom="log", lines=len(evs), **began)

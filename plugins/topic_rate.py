@@ -325,9 +325,11 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
         again += "; its executor stopped while its input arrives"
     if ended := _this_quiet(ctx, topic, r).get("ended"):
         again += f"; {ended} lost a thread as it stopped"
+    # When it began: after its last message, by the next one due (the RCA orders causes by it).
+    began = {} if r.newest is None else {"since": r.newest, "since_within": 1.0 / ref if ref > 0 else quiet}
     return ctx.alert(topic, "error", f"silent for {quiet:.1f} s ({usual}){again}", symptom="silence",
                      silent_s=quiet, baseline_hz=ref, limit_s=limit, flaps=flaps,
-                     episode_hold_s=s["flap_window_s"])
+                     episode_hold_s=s["flap_window_s"], **began)
 
 
 def _by_chance(ctx: PluginContext, topic: str, ref_hz: float) -> float:

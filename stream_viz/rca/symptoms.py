@@ -44,7 +44,10 @@ class Symptoms:
     to alert — a node that logs is running, which a starved one is not; ``exited`` when a node's
     process was seen to die (an alert for its process with symptom ``exit``); ``latest`` the latest
     alert time; ``count`` how many alerts they come from; ``began`` when a member's symptom
-    began by its own alerts' word (data ``since``: a host saturated for a while before it alerts);
+    began by its own alerts' word (data ``since``: a host saturated for a while before it alerts,
+    a topic's last message, a log line's stamp) and ``began_by`` the latest it can have begun
+    (``since`` + data ``since_within``: a silence began by the next message due); ``vague`` the
+    first time of its alerts that do not say (their symptom began up to ``tolerance`` before);
     ``culprits`` the publishers a topic's alerts name as the ones whose own messages are the
     symptom (data ``publishers``: stale stamps of one of ``/tf``'s publishers, one stopped).
     """
@@ -62,6 +65,8 @@ class Symptoms:
     logged: dict[str, float] = field(default_factory=dict)
     exited: dict[str, float] = field(default_factory=dict)
     began: dict[str, float] = field(default_factory=dict)
+    began_by: dict[str, float] = field(default_factory=dict)
+    vague: dict[str, float] = field(default_factory=dict)
     culprits: dict[str, set[str]] = field(default_factory=dict)
     latest: float = -INF
     count: int = 0
@@ -126,8 +131,13 @@ def collect_symptoms(
             exited[m] = min(exited.get(m, INF), t)
         if data and isinstance(data.get("publishers"), list) and m.startswith("topic:"):
             s.culprits.setdefault(m, set()).update(p for p in data["publishers"] if isinstance(p, str))
-        if data and isinstance(data.get("since"), int | float):
-            s.began[m] = min(s.began.get(m, INF), float(data["since"]), t)
+        if data and isinstance(since := data.get("since"), int | float):
+            s.began[m] = min(s.began.get(m, INF), float(since), t)
+            within = data.get("since_within", 0.0)
+            within = float(within) if isinstance(within, int | float) and within > 0 else 0.0
+            s.began_by[m] = min(s.began_by.get(m, INF), float(since) + within, t)
+        else:
+            s.vague[m] = min(s.vague.get(m, INF), t)
         if data and not data.keys().isdisjoint(NAME_KEYS):
             for name in names_in(data):
                 t0, w0 = named.get((m, name), (INF, 0.0))
@@ -164,7 +174,9 @@ class NodeView:
     suspected only because a client of it stands unexplained (it excuses nobody). ``process`` and
     ``indistinguishable``: the process it shares with other candidates, and those of them whose
     own changes are the same as its own. ``logged``: when its own log lines began to alert;
-    ``exited``: when its process was seen to die.
+    ``exited``: when its process was seen to die. ``began``/``began_by``/``vague``: the earliest
+    and latest its symptoms can have begun by their alerts' word, and the first time of those that
+    do not say (`Symptoms`): what `_after` compares.
     """
 
     member: str
@@ -190,6 +202,9 @@ class NodeView:
     indistinguishable: list[str] = field(default_factory=list)
     logged: float = INF
     exited: float = INF
+    began: float = INF
+    began_by: float = INF
+    vague: float = INF
 
     def active(self, t0: float, t1: float, own: bool = False) -> float:
         """Its anomaly when one of its symptoms held in ``[t0, t1]``; else its untimed evidence
@@ -205,6 +220,18 @@ def _clip(x: float) -> float:
     return float(min(1.0, max(0.0, x)))
 
 
+Starts = tuple[float, float, float]  # began, began_by, vague (`NodeView`)
+
+
+def _starts_of(s: Symptoms, m: str) -> Starts:
+    return s.began.get(m, INF), s.began_by.get(m, INF), s.vague.get(m, INF)
+
+
+def _start(v: NodeView, starts: Starts) -> None:
+    v.began, v.began_by = min(v.began, starts[0]), min(v.began_by, starts[1])
+    v.vague = min(v.vague, starts[2])
+
+
 def _metric(v: NodeView, e: Evidence, own: bool) -> None:
     v.evidence = max(v.evidence, e.strength)
     ep = e.episode()
@@ -213,16 +240,20 @@ def _metric(v: NodeView, e: Evidence, own: bool) -> None:
     else:
         v.onset = min(v.onset, ep[0])
         v.spans.append(ep)
+        _start(v, (INF, INF, ep[0]))
     if own:
         v.own_evidence = max(v.own_evidence, e.strength)
         v.own_onset = min(v.own_onset, ep[0] if ep else INF)
         v.own_kinds.add("metric")
 
 
-def _charge(v: NodeView, m: str, x: float, onset: float, spans: list[Episode], kind: str) -> None:
-    """Charge the symptom ``m`` (strength ``x``, from ``onset``) to ``v`` as its own change."""
+def _charge(v: NodeView, m: str, x: float, onset: float, spans: list[Episode], kind: str,
+            starts: Starts | None = None) -> None:
+    """Charge the symptom ``m`` (strength ``x``, from ``onset``; ``starts``: when it began by its
+    alerts' word, default ``onset`` without a word) to ``v`` as its own change."""
     v.charged = max(v.charged, x)
     v.onset = min(v.onset, onset)
+    _start(v, (INF, INF, onset) if starts is None else starts)
     v.own_onset = min(v.own_onset, onset)
     v.own_kinds.add(kind)
     v.spans += spans
@@ -302,6 +333,7 @@ def _alert_views(
             v.own.insert(0, m)
             v.plugins |= s.plugins[m]
             v.spans += s.episodes[m]
+            _start(v, _starts_of(s, m))
             v.exited = min(v.exited, s.exited.get(m, INF))
             if m in s.own_anomaly:
                 v.own_direct = max(v.own_direct, s.own_anomaly[m])
@@ -316,12 +348,13 @@ def _alert_views(
                 v.own.append(m)
                 v.plugins |= s.plugins[m]
                 v.spans += s.episodes[m]
+                _start(v, _starts_of(s, m))
         else:
             nodes = charged_nodes(G, m)
             if len(nodes) > 1:
                 shared_by.append((m, nodes))
             for n in nodes if len(nodes) == 1 else ():
-                _charge(_view(views, n), m, a * charge, s.onset[m], s.episodes[m], "output")
+                _charge(_view(views, n), m, a * charge, s.onset[m], s.episodes[m], "output", _starts_of(s, m))
     for (m, name), (t, w) in s.named.items():
         spans = [(max(a, t), b) for a, b in s.episodes[m] if b >= t]
         since = _waited_since(views.get(m), t, tolerance)
@@ -359,7 +392,8 @@ def _charge_shared(
         for n in nodes:
             x = s.anomaly[m] * settings.charge * shares[m][n]
             if x > 0:
-                _charge(views.setdefault(n, NodeView(n)), m, x, s.onset[m], s.episodes[m], "output")
+                _charge(views.setdefault(n, NodeView(n)), m, x, s.onset[m], s.episodes[m], "output",
+                        _starts_of(s, m))
 
 
 def _settle(
@@ -401,7 +435,8 @@ def _imply_servers(
             if srv in views:
                 continue  # it has evidence of its own, or an alert named it
             sv = implied.setdefault(srv, NodeView(srv, implied=True))
-            _charge(sv, n, v.own_anomaly * settings.charge * IMPLIED_SERVER, v.own_onset, v.spans, "client")
+            _charge(sv, n, v.own_anomaly * settings.charge * IMPLIED_SERVER, v.own_onset, v.spans, "client",
+                    (v.began, v.began_by, v.vague))
     views.update(implied)
     _settle(G, implied, views, s, ev_passive, settings)
 
@@ -431,12 +466,14 @@ def _upstream(
     all does not end the search: a fault crosses a node that raised nothing (its output merely
     went on late), so the walk goes on upstream through silent members, up to
     ``max_trajectory`` hops, each silent node passed weakening what is found behind it by
-    `SILENT_DECAY`. ``sources``: the members that can excuse at all (symptoms, candidates,
-    evidence); the walk ends once it has passed every one of them. ``fellows``: nodes that
-    stalled with ``n`` in one executor (`siblings.stalls`) — neither they nor the topics only
-    they publish excuse it. A node of ``n``'s own process excuses it only with its own changes:
-    what they share (the process's CPU, memory, exit) is one symptom of the process, and does
-    not travel along the data flow between them. ``parents``: `causal.causes_in`'s memo.
+    `SILENT_DECAY`. A cause whose symptom is known to have begun after ``n``'s (`_after`: a log
+    line stamped after the next message of ``n``'s silent output was due) does not count.
+    ``sources``: the members that can excuse at all (symptoms, candidates, evidence); the walk
+    ends once it has passed every one of them. ``fellows``: nodes that stalled with ``n`` in one
+    executor (`siblings.stalls`) — neither they nor the topics only they publish excuse it. A
+    node of ``n``'s own process excuses it only with its own changes: what they share (the
+    process's CPU, memory, exit) is one symptom of the process, and does not travel along the data
+    flow between them. ``parents``: `causal.causes_in`'s memo.
     """
     parents = {} if parents is None else parents
     home = process_of_node(G, n)
@@ -444,10 +481,11 @@ def _upstream(
         lo, hi = v.onset - settings.episode_gap, v.onset + settings.tolerance
     else:  # evidence without a time: any time
         lo, hi = -INF, INF
+    latest = min(v.began_by, v.vague)  # the latest its first symptom can have begun
     mine = set(outputs(G, n))
     left = None if sources is None else sources - mine - {n}
     worst = 0.0
-    seen = {n}
+    seen = {n, *mine}  # its own outputs, reached round a feedback loop, are no cause of it
     frontier: list[tuple[str, float]] = [(p, 1.0) for p in causes_in(G, n, parents) if p not in mine]
     for _ in range(settings.max_trajectory):
         if left is not None and not left:
@@ -461,7 +499,8 @@ def _upstream(
                 continue
             if left is not None:
                 left.discard(p)
-            found = _excuse(G, p, n, s, views, ev_passive, lo, hi, home, parents)
+            when = (lo, hi, latest, settings.tolerance)
+            found = _excuse(G, p, n, s, views, ev_passive, when, home, parents)
             worst = max(worst, w * found)
             if found > 0 or w * SILENT_DECAY <= worst:
                 continue  # an alerting member ends its path: the earlier ones are its own causes
@@ -489,25 +528,31 @@ def _excuse(
     s: Symptoms,
     views: dict[str, NodeView],
     ev_passive: dict[str, Evidence],
-    lo: float,
-    hi: float,
+    when: tuple[float, float, float, float],
     home: str | None = None,
     parents: dict[str, list[str]] | None = None,
 ) -> float:
-    """How much the cause ``p`` of ``n`` was anomalous at some time in ``[lo, hi]``; a node of
+    """How much the cause ``p`` of ``n`` was anomalous at some time in ``[lo, hi]``, not known to
+    have begun after ``latest`` (``when``: lo, hi, latest, tolerance; `_after`); a node of
     ``n``'s process ``home`` counts with its own changes only. ``parents``: `causal.causes_in`'s
     memo."""
+    lo, hi, latest, tolerance = when
     if is_node(G, p):  # a server it calls, or a node further upstream
         pv = views.get(p)
         fellow = home is not None and process_of_node(G, p) == home
-        return 0.0 if pv is None or pv.implied else pv.active(lo, hi, own=fellow)
-    worst = s.anomaly[p] if p in s.anomaly and overlaps(s.episodes[p], lo, hi) else 0.0
+        if pv is None or pv.implied or _after(pv.began, pv.vague, latest, tolerance):
+            return 0.0
+        return pv.active(lo, hi, own=fellow)
+    worst = 0.0
+    if p in s.anomaly and overlaps(s.episodes[p], lo, hi) \
+            and not _after(s.began.get(p, INF), s.vague.get(p, INF), latest, tolerance):
+        worst = s.anomaly[p]
     e = ev_passive.get(p)
     if e is not None and e.meets(lo, hi):
         worst = max(worst, e.strength)
     for q in publishers(G, p, parents):
         qv = views.get(q)
-        if q == n or qv is None or qv.implied:
+        if q == n or qv is None or qv.implied or _after(qv.began, qv.vague, latest, tolerance):
             continue
         if home is not None and process_of_node(G, q) == home:
             own = max(qv.own_direct, qv.own_evidence)
@@ -515,3 +560,13 @@ def _excuse(
             own = max(qv.direct, qv.evidence)
         worst = max(worst, own if overlaps(qv.spans, lo, hi) else (0.0 if qv.spans else qv.untimed))
     return worst
+
+
+STAMPED_SLACK = 0.25  # s: two stamped starts, from the clocks of processes on one host
+
+
+def _after(began: float, vague: float, latest: float, tolerance: float) -> bool:
+    """True when a symptom is known to have begun after ``latest`` (+ `STAMPED_SLACK`): its
+    alerts say when it began (``began``), and those that do not (first at ``vague``, begun up to
+    ``tolerance`` before) came later too."""
+    return began < INF and min(began, vague - tolerance) > latest + STAMPED_SLACK

@@ -212,6 +212,9 @@ def test_topic_rate_silence_from_the_age_of_the_newest_message():
     ages = [0.05] * 20 + [0.6, 1.6, 2.6]
     frames = [(float(t), model(rate=10.0, age=a), []) for t, a in enumerate(ages)]
     assert drive("topic_rate", frames) == [(t, "topic:/img", "error") for t in (21.0, 22.0)]
+    # When it began: after its last message (20 − 0.6 s), by the next one due (0.1 s later).
+    got = drive("topic_rate", frames, full=True)
+    assert [(a.data["since"], a.data["since_within"]) for a in got] == [(pytest.approx(19.4), 0.1)] * 2
     # A healthy topic whose newest message is always a little old never counts as silent.
     frames = [(float(t), model(rate=noisy(10.0), age=RNG.uniform(0, 0.3)), []) for t in range(60)]
     assert drive("topic_rate", frames) == []
@@ -1239,6 +1242,11 @@ def test_rosout_levels():
     assert drive("rosout", [(1.0, G, ev)]) == [(1.0, "node:/camera", "error"),
                                                (1.0, "node:/detector", "fatal")]
     assert drive("rosout", [(1.0, G, ev[:1])]) == []
+    # Since the first line's stamp, unless it is far from the calls' times (another clock).
+    late = [Event(t, "log", "node:/camera", "error", "bad") for t in (4.5, 4.2)]
+    far = [Event(99.0, "log", "node:/camera", "error", "ahead")]
+    got = drive("rosout", [(1.0, G, []), (5.0, G, late), (6.0, G, far)], full=True)
+    assert [a.data.get("since") for a in got] == [4.2, None]
     assert drive("rosout", [(1.0, G, ev[:1])], settings={"min_level": "warn"}) == [
         (1.0, "node:/camera", "warn")]
 

@@ -122,3 +122,45 @@ def test_the_engine_stamps_evidence_with_the_update_time():
     res = eng.update(G, [al(PLAN, "rosout", 100)], t=100.0)
     planner = next(rc for rc in res.root_causes if rc.member == PLAN)
     assert planner.evidence["upstream"] == 1.0 and res.root_causes[0].member == PERC
+
+
+MISSION, CTRL, BRIDGE = "node:/mission", "node:/controller", "node:/bridge"
+WP, SP, STATUS = "topic:/waypoints", "topic:/setpoints", "topic:/status"
+
+
+def loop():
+    """A feedback loop: mission → /waypoints → controller → /setpoints → bridge → /status → mission."""
+    g = new_graph()
+    for src, topic, dst in ((MISSION, WP, CTRL), (CTRL, SP, BRIDGE), (BRIDGE, STATUS, MISSION)):
+        for m in (src, topic, dst):
+            if m not in g:
+                add_member(g, m)
+        add_flow_edge(g, src, topic, "pub")
+        add_flow_edge(g, topic, dst, "sub")
+    return g
+
+
+def test_a_cause_stamped_after_the_symptom_began_does_not_excuse_it():
+    # The controller's setpoints stopped after 8.6 (20 Hz: by 8.65); the mission logged at 9.3 that
+    # the vehicle had left its mode. One sample (t=10) holds both alerts.
+    silence = al(SP, "topic_rate", 10, since=8.6, since_within=0.05)
+    v = views(loop(), [silence, al(MISSION, "rosout", 10, since=9.3)])
+    assert v[CTRL].upstream == 0.0  # the log came after; its own setpoints round the loop are none
+    assert v[MISSION].upstream == pytest.approx(0.8 * 0.75)  # /setpoints, through the silent bridge
+    assert v[CTRL].ht > v[MISSION].ht
+    # Within the slack of two clocks, or a line without a stamp: it may be the cause, as before.
+    v = views(loop(), [silence, al(MISSION, "rosout", 10, since=8.8)])
+    assert v[CTRL].upstream == v[MISSION].anomaly > 0
+    v = views(loop(), [silence, al(MISSION, "rosout", 10)])
+    assert v[CTRL].upstream == v[MISSION].anomaly > 0
+    # The next message was due by 9.6 at 1 Hz: the log at 9.3 may have stopped it.
+    slow = al(SP, "topic_rate", 10, since=8.6, since_within=1.0)
+    v = views(loop(), [slow, al(MISSION, "rosout", 10, since=9.3)])
+    assert v[CTRL].upstream == v[MISSION].anomaly > 0
+
+
+def test_a_node_s_own_output_reached_round_a_loop_is_no_cause_of_it():
+    G = loop()
+    add_member(G, "node:/elsewhere")  # a symptom off the loop: the walk round it goes on
+    v = views(G, [al(SP, "topic_rate", 10), al("node:/elsewhere", "rosout", 10)])
+    assert v[CTRL].upstream == 0.0 and v[CTRL].ht == v[CTRL].anomaly > 0
