@@ -18,10 +18,12 @@ from typing import Any
 from rclpy.context import Context
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
+from stream_viz.collect.cgroups import read_mounts
 from stream_viz.collect.collector import ObserverNode, end_node, new_node
 from stream_viz.collect.diagcdr import diagnostic_array
 from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.hostreport import AGENT_TOPIC, HostReport, encode
+from stream_viz.collect.oomkills import OomKill, OomWatch
 from stream_viz.collect.pidmap import PidResolver
 from stream_viz.collect.processes import MachineSampler, ProcessSampler
 from stream_viz.collect.readings import ProcessReading
@@ -73,6 +75,8 @@ class Agent:
         self.host_id: int | None = None
         self.resolver: PidResolver | None = None
         self._dead: dict[int, ProcessReading] = {}
+        self.ooms = OomWatch(read_mounts())
+        self._killed: dict[int, OomKill] = {}  # of the ended processes kept in the reports
         self.last_size = 0  # bytes of the last report published
         self._sent: set[int] = set()  # processes of the last report (their identity was sent)
 
@@ -105,17 +109,20 @@ class Agent:
         ps = self.sampler.sample(set(mine.values()))
         if ps.exited:  # a node restarted under its old name has a new gid
             self._count = -1
+        self._killed.update(self.ooms.update(ps.processes, {p: r.metrics.get("rss_mb", 0.0)
+                                                            for p, r in ps.exited.items()}))
         # An ended process stays (alive=False) while DDS still lists its nodes, as in the monitor.
         self._dead.update(ps.exited)
         listed = set(mine.values())
         self._dead = {p: r for p, r in self._dead.items() if p in listed and p not in ps.processes}
+        self._killed = {p: k for p, k in self._killed.items() if p in self._dead}
         processes = dict(ps.processes)
         for pid, r in self._dead.items():
             r.alive = False
             processes[pid] = r
         self.seq += 1
         return HostReport(self.host, self.host_id, self.seq, self.period_s, mine, processes,
-                          self.machine.sample(mine.values()))
+                          self.machine.sample(mine.values()), dict(self._killed))
 
     def _participants(self) -> dict[str, int]:
         """GUID prefix → pid of this host's participants. The /rosout endpoints are read again

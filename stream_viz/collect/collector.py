@@ -262,8 +262,8 @@ class Collector:
             data = {"pid": pid, "process": make_id("process", pid), "nodes": nodes, "name": r.name,
                     "still_listed": [make_id("node", n) for n in listed]}
             text = f"process {pid} ({r.name}) exited" + (f" with nodes {', '.join(had)}" if had else "")
-            if (oom := ooms.get(pid)) is not None:  # a kill for memory: an error, with or without nodes
-                level, text, data = "error", f"{text}: {oom.describe()}", data | oom.data()
+            if (oom := ooms.get(pid)) is not None:
+                level, text, data = oom.said(text, data)
             for m in [*nodes, make_id("process", pid)]:
                 out.append(Event(t, "exit", m, level, text, data))
         return out

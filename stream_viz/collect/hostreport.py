@@ -10,8 +10,9 @@ key-values ``ppid``, ``participants`` (its GUID prefixes), ``metrics`` (its θ a
 ``cpu_percent=12.5 rss_mb=40 …``: one string, not one key-value each, keeps the report small and
 cheap to build), and its identity,
 ``create_time``, ``cmdline``, ``username``, only when the agent did not send them in its last
-report or every tenth report: a receiver keeps them from the report before). ROS tools display it
-as any diagnostics.
+report or every tenth report: a receiver keeps them from the report before; ``oom_kill`` on an
+ended process the OOM killer ended, as ``<limit bytes, 0: none> <memory cgroup>``). ROS tools
+display it as any diagnostics.
 `encode` and `decode` work on `StatusRow` tuples so this module needs no ROS.
 """
 
@@ -21,6 +22,7 @@ import math
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+from stream_viz.collect.oomkills import OomKill
 from stream_viz.collect.readings import ProcessReading
 from stream_viz.model.theta import SCHEMAS
 
@@ -47,7 +49,7 @@ class HostReport:
 
     ``participants`` maps a GUID prefix (hex of its 12 bytes) to the pid of the process holding
     it; ``processes`` are the nodes' processes and their ancestors, ended ones (``alive=False``)
-    kept while DDS still lists their nodes.
+    kept while DDS still lists their nodes; ``ooms`` those of the ended ones the OOM killer ended.
     """
 
     host: str
@@ -57,6 +59,7 @@ class HostReport:
     participants: dict[str, int] = field(default_factory=dict)
     processes: dict[int, ProcessReading] = field(default_factory=dict)
     machine: dict[str, float] = field(default_factory=dict)  # the host's own θ (`MachineSampler`)
+    ooms: dict[int, OomKill] = field(default_factory=dict)
 
 
 def encode(report: HostReport, known: set[int] | frozenset[int] = frozenset()) -> list[StatusRow]:
@@ -86,6 +89,8 @@ def encode(report: HostReport, known: set[int] | frozenset[int] = frozenset()) -
         metrics = _metrics_text(p.metrics)
         if metrics:
             kv.append(("metrics", metrics))
+        if (oom := report.ooms.get(pid)) is not None:
+            kv.append(("oom_kill", f"{oom.limit or 0} {oom.group}"))
         rows.append(StatusRow(OK if p.alive else ERROR, f"process {pid}", p.name, report.host, kv))
     return rows
 
@@ -100,7 +105,7 @@ def decode(rows: list[StatusRow], before: HostReport | None = None) -> HostRepor
         return None
     report = HostReport(rows[0].hardware_id, int(head["host_id"]), int(head.get("seq", 0)),
                         float(head.get("period_s", 1.0)))
-    report.machine = _metrics(head.get("machine", ""), {*SCHEMAS["host"], "cpus"})
+    report.machine = _metrics(head.get("machine", ""), {*SCHEMAS["host"], "cpus", "mem_limit_mb"})
     names = set(SCHEMAS["process"])
     for row in rows[1:]:
         kv = dict(row.values)
@@ -116,10 +121,17 @@ def decode(rows: list[StatusRow], before: HostReport | None = None) -> HostRepor
                            alive=row.level != ERROR,
                            unreadable=[u for u in kv.get("unreadable", "").split(",") if u])
         report.processes[pid] = p
+        if (oom := _oom_kill(kv.get("oom_kill", ""))) is not None:
+            report.ooms[pid] = oom
         for prefix in kv.get("participants", "").split(","):
             if prefix:
                 report.participants[prefix] = pid
     return report
+
+
+def _oom_kill(text: str) -> OomKill | None:
+    limit, _, group = text.partition(" ")
+    return OomKill(group, int(limit) or None) if limit.isdigit() and group else None
 
 
 def _metrics_text(values: dict[str, float]) -> str:

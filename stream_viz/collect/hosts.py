@@ -151,6 +151,8 @@ def _host_member(G: nx.MultiDiGraph, name: str, host_id: int | None, agent: str,
     values = {k: v for k, v in machine.items() if k in SCHEMAS["host"]}
     if "cpus" in machine:
         attrs["cpus"] = round(machine["cpus"], 2)  # a quota's may be a fraction (1.5 CPUs)
+    if "mem_limit_mb" in machine:  # the memory in use is of this limit (a container's)
+        attrs["mem_limit_mb"] = round(machine["mem_limit_mb"], 1)
     add_member(G, make_id("host", name), theta=make_theta("host", values), agent=agent,
                host_id="?" if host_id is None else f"{host_id:04x}", **attrs)
 
@@ -226,6 +228,8 @@ def remote_exits(t: float, host: str, before: HostReport, now: HostReport,
                 "still_listed": [make_id("node", n) for n in listed]}
         text = f"process {pid} ({p.name}) on host {host} exited" + (
             f" with nodes {', '.join(had)}" if had else "")
+        if (oom := now.ooms.get(pid)) is not None:  # the agent read its memory group's OOM count
+            level, text, data = oom.said(text, data)
         for m in [*nodes, proc]:
             out.append(Event(t, "exit", m, level, text, data))
     return out

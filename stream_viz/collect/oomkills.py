@@ -35,6 +35,11 @@ class OomKill:
         return {"oom_kill": True, "memory_group": self.group,
                 "memory_limit_mb": self.limit / MB if self.limit else None}
 
+    def said(self, text: str, data: dict[str, object]) -> tuple[str, str, dict[str, object]]:
+        """An exit event's level, text and data once it is known to be this kill: an error, with
+        or without nodes."""
+        return "error", f"{text}: {self.describe()}", data | self.data()
+
 
 def attribute(rose: Mapping[str, int], exited: Mapping[int, tuple[str, float]]) -> dict[int, str]:
     """Return pid -> group for the ended processes the OOM killer ended.

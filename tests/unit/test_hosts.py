@@ -6,6 +6,7 @@ import math
 
 from stream_viz.collect.hostreport import HOST_STATUS, HostReport, decode, encode, host_of_prefix
 from stream_viz.collect.hosts import Received, merge_hosts, remote_exits, remote_pids, remote_restarts
+from stream_viz.collect.oomkills import OomKill
 from stream_viz.collect.processes import cores_of, parse_pressure, pressure_percent
 from stream_viz.collect.readings import PidInfo, ProcessReading
 from stream_viz.model.graph import PROCESS_TREE, add_flow_edge, add_member, add_tree_edge, new_graph
@@ -48,6 +49,9 @@ def test_report_rows_round_trip_host_processes_participants():
     assert back.processes[1].ppid is None
     assert decode(encode(_report(alive=False))).processes[10].alive is False
     assert decode(rows[1:]) is None  # not an agent's array (an ordinary /diagnostics one)
+    limited = _report()
+    limited.machine = {"machine_mem_percent": 97.0, "mem_limit_mb": 200.0, "cpus": 1.5}
+    assert decode(encode(limited)).machine == limited.machine
 
 
 def test_host_of_prefix_reads_bytes_2_3():
@@ -122,6 +126,9 @@ def test_one_computer_is_a_host_member_with_its_own_theta():
     assert (host["agent"], host["cpus"], host["host_id"]) == ("local", 2, f"{OWN:04x}")
     theta = theta_dict("host", host["theta"])
     assert (theta["machine_cpu_percent"], theta["cpu_pressure_percent"]) == (97.0, 40.0)
+    assert "mem_limit_mb" not in host
+    merge_hosts(G, pids, (OWN, "a"), {}, now=2.0, machine={**machine, "mem_limit_mb": 200.0})
+    assert G.nodes["host:a"]["mem_limit_mb"] == 200.0
 
 
 def test_without_its_own_host_id_the_monitor_takes_every_node_as_its_own():
@@ -152,6 +159,26 @@ def test_remote_exit_is_an_error_while_dds_still_lists_the_node():
     reused = _report(seq=2)  # the pid taken by a new process
     reused.processes[10].create_time = 250.0
     assert [e.level for e in remote_exits(5.0, "b", _report(), reused, {"/cam": PRE_B})] == ["error"] * 2
+
+
+def test_an_agent_s_oom_kill_travels_in_its_report_and_makes_the_exit_an_oom_kill():
+    dead = _report(alive=False, seq=2)
+    dead.ooms = {10: OomKill("/sys/fs/cgroup/memory/robot", 200 * 2**20)}
+    row = encode(dead)[2]
+    assert ("oom_kill", f"{200 * 2**20} /sys/fs/cgroup/memory/robot") in row.values
+    back = decode(encode(dead))
+    assert back.ooms == dead.ooms
+    ev = remote_exits(5.0, "b", _report(), back, {"/cam": PRE_B})
+    assert [(e.member, e.level) for e in ev] == [("node:/cam", "error"), ("process:b/10", "error")]
+    assert ev[0].text == ("process 10 (python) on host b exited with nodes /cam: killed by the OOM killer at "
+                          "its group's limit of 200 MB (cgroup /sys/fs/cgroup/memory/robot)")
+    assert (ev[0].data["oom_kill"], ev[0].data["memory_limit_mb"]) == (True, 200.0)
+    dead.ooms = {10: OomKill("/", None)}  # the machine's memory ran out: no limit of its own
+    assert decode(encode(dead)).ooms == dead.ooms
+    # a clean exit the OOM killer did not end is still a warning
+    gone = _report(seq=2)
+    del gone.processes[10]
+    assert [e.level for e in remote_exits(5.0, "b", _report(), gone, {})] == ["warn"]
 
 
 def test_tree_of_merge_is_a_tree():
@@ -290,6 +317,18 @@ def test_host_state_alerts_on_a_saturated_host_and_on_a_silent_agent():
     (a,) = drive("host_state", [(1.0, G, [])], full=True)
     assert (a.member, a.severity, a.data["symptom"]) == ("host:b", "warn", "agent_silent")
     assert "silent for 4 s" in a.message
+
+
+def test_a_container_s_memory_near_its_limit_is_said_of_the_limit():
+    def frame(t):
+        G = _hosts_model()
+        G.nodes["host:b"]["theta"] = make_theta("host", {"machine_mem_percent": 97.0 if t >= 5 else 40.0})
+        G.nodes["host:b"]["mem_limit_mb"] = 200.0  # the agent's container: its memory is of its limit
+        return (float(t), G, [])
+
+    got = drive("host_state", [frame(t) for t in range(16)], full=True)
+    assert [(a.t, a.member, a.data["symptom"]) for a in got] == [(15.0, "host:b", "host_memory")]
+    assert "memory 97 % of its group's limit of 200 MB in use for 10 s" in got[0].message, got[0].message
 
 
 def test_full_cpu_is_saturation_only_while_tasks_wait_for_it():
