@@ -56,6 +56,8 @@ class HostState(Plugin):
                 if since is None or ctx.t - since < s["saturated_s"]:
                     continue
                 used = f"{ctx.value(host, attr):.0f} % in use for {ctx.t - since:.0f} s"
+                if what == "memory" and (limit := ctx.attr(host, "mem_limit_mb")):
+                    used = used.replace("in use", f"of its group's limit of {limit:.0f} MB in use", 1)
                 if what == "CPU":
                     used += (f", tasks waited for a CPU {waited:.0f} % of the time" if waited == waited
                              else "") + _busiest(ctx, host, name)

@@ -214,11 +214,13 @@ NO_LIMIT = 2**60  # v1 writes "no limit" as a page-rounded 2^63 - 1
 class MemoryGroup:
     """A process's memory cgroup: its directory, the file counting the processes in it that the
     OOM killer ended (``events``: v2 ``memory.events``, v1 ``memory.oom_control``; their
-    ``oom_kill`` line), and the tightest memory limit over it in bytes (None: none)."""
+    ``oom_kill`` line), the tightest memory limit over it in bytes (None: none) and the directory
+    that sets it (``limited``: its use is what the limit binds)."""
 
     path: str
     events: str
     limit: int | None
+    limited: str | None = None
 
 
 def parse_oom_kills(text: str) -> int | None:
@@ -243,8 +245,9 @@ def memory_group_of(pid: int, mounts: list[Mount], proc: str = "/proc") -> Memor
                    if os.path.exists(os.path.join(d, n))), None)
     if events is None:
         return None
-    limits = [_memory_limit(at) for at in _upwards(*where)]  # the tightest binds
-    return MemoryGroup(d, events, min((x for x in limits if x is not None), default=None))
+    limits = [(x, at) for at in _upwards(*where) if (x := _memory_limit(at)) is not None]
+    limit, limited = min(limits, default=(None, None))  # the tightest binds
+    return MemoryGroup(d, events, limit, limited)
 
 
 def _memory_limit(d: str) -> int | None:
@@ -256,6 +259,30 @@ def _memory_limit(d: str) -> int | None:
         except OSError:
             continue
         return int(value) if value.isdigit() and int(value) < NO_LIMIT else None
+    return None
+
+
+def parse_memory_use(usage: str, stat: str) -> int | None:
+    """Return the bytes a memory cgroup uses that it cannot give back, from its ``memory.current``
+    (v2) or ``memory.usage_in_bytes`` (v1) text and its ``memory.stat`` text: the usage less the
+    inactive file cache, as ``docker stats`` counts it (a group that writes files fills its
+    limit with cache the kernel reclaims before any OOM kill)."""
+    if not usage.strip().isdigit():
+        return None
+    s = parse_stat(stat)
+    cache = s.get("total_inactive_file", s.get("inactive_file", 0))  # v1: the hierarchy's, as its usage
+    return max(0, int(usage) - cache)
+
+
+def read_memory_use(d: str) -> int | None:
+    """The bytes memory cgroup directory ``d`` uses (`parse_memory_use`); None: unreadable."""
+    try:
+        for name in ("memory.current", "memory.usage_in_bytes"):
+            if os.path.exists(usage := os.path.join(d, name)):
+                with open(usage) as f, open(os.path.join(d, "memory.stat")) as st:
+                    return parse_memory_use(f.read(), st.read())
+    except OSError:
+        return None
     return None
 
 

@@ -24,7 +24,17 @@ from typing import NamedTuple
 
 import psutil
 
-from stream_viz.collect.cgroups import Quota, QuotaReading, quota_of, quota_use, read_mounts, read_quota
+from stream_viz.collect.cgroups import (
+    MemoryGroup,
+    Quota,
+    QuotaReading,
+    memory_group_of,
+    quota_of,
+    quota_use,
+    read_memory_use,
+    read_mounts,
+    read_quota,
+)
 from stream_viz.collect.readings import ProcessReading
 
 MB = 1024.0 * 1024.0
@@ -142,7 +152,10 @@ class MachineSampler:
     a robot held to 2 of 8 cores is saturated when those 2 are full, with the machine at 25 %.
     A CPU quota over all of them (one cgroup's: a container's ``--cpus``, `cgroups`) binds the
     same way: when its group uses more of its quota than the cores are used, the CPU is that
-    share (``cpus`` the quota), and its throttled periods count as tasks waiting.
+    share (``cpus`` the quota), and its throttled periods count as tasks waiting. So does a memory
+    limit over all of them (a container's ``--memory``): when its group uses more of its limit
+    than the machine's memory is used, the memory in use is that share (``mem_limit_mb`` the
+    limit; the group's inactive file cache not counted, `cgroups.parse_memory_use`).
     """
 
     def __init__(self, pressure: str = "/proc/pressure/cpu") -> None:
@@ -152,6 +165,7 @@ class MachineSampler:
         self._affinity: dict[int, frozenset[int]] = {}
         self._quotas: dict[int, Quota | None] = {}
         self._counted: tuple[Quota, QuotaReading] | None = None
+        self._memory: dict[int, MemoryGroup | None] = {}
         self._mounts = read_mounts()
 
     def sample(self, pids: Iterable[int] = ()) -> dict[str, float]:
@@ -172,7 +186,23 @@ class MachineSampler:
             out["machine_cpu_percent"], out["cpus"] = used, cpus
         if throttled == throttled and not throttled <= out["cpu_pressure_percent"]:
             out["cpu_pressure_percent"] = throttled
+        held, limit = self._memory_use(pids)
+        if held == held and not held <= out["machine_mem_percent"]:  # the limit binds first
+            out["machine_mem_percent"], out["mem_limit_mb"] = held, limit / MB
         return out
+
+    def _memory_use(self, pids: set[int]) -> tuple[float, float]:
+        """(% of the limit in use, the limit in bytes) of the memory limit that holds every process
+        of ``pids``; NaNs otherwise."""
+        self._memory = {p: g for p, g in self._memory.items() if p in pids}
+        for pid in pids - self._memory.keys():  # read once, as the quota
+            self._memory[pid] = memory_group_of(pid, self._mounts)
+        limits = {(g.limited, g.limit) if g is not None else None for g in self._memory.values()}
+        if len(limits) != 1 or None in limits:
+            return math.nan, math.nan
+        (limited, limit), = limits
+        used = read_memory_use(limited) if limited and limit else None
+        return (math.nan, math.nan) if used is None else (used / limit * 100.0, float(limit))
 
     def _quota_use(self, pids: set[int], now: float) -> tuple[float, float, float]:
         """(% of the quota used, % of its periods throttled, its CPUs) since the last call, when

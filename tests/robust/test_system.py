@@ -6,6 +6,7 @@ timings (figures for the docs come from ``bench/bench_load.py``).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -155,6 +156,49 @@ def test_a_host_s_cpu_is_its_quota_s_use_when_a_cgroup_quota_binds(children):
     assert got["cpu_pressure_percent"] >= 50.0, got  # throttled in most periods
 
 
+# Once the file argv[1] exists: takes argv[2] MiB of memory, writes argv[3] MiB to the file argv[4]
+# (page cache, synced), creates the file argv[5] and waits.
+HOLD = """
+import os, sys, time
+while not os.path.exists(sys.argv[1]):
+    time.sleep(0.05)
+chunk = bytearray(int(sys.argv[2]) * 2**20)  # zero-filled: its pages are touched
+with open(sys.argv[4], "wb") as f:
+    for _ in range(int(sys.argv[3])):
+        f.write(os.urandom(2**20))
+    f.flush()
+    os.fsync(f.fileno())
+open(sys.argv[5], "w").close()
+time.sleep(120)
+"""
+
+
+@pytest.mark.parametrize(("held", "written"), [(184, 0), (16, 184)])
+def test_memory_in_use_is_the_container_s_share_of_its_limit(children, tmp_path, held, written):
+    """A robot in a container limited to 200 MiB (``docker --memory``): the host's memory in use is
+    the group's share of its limit, the machine's being far from full; file cache it wrote (which
+    the kernel gives back before any OOM kill) does not count."""
+    try:
+        group = MemoryLimitGroup(200 * 2**20, f"stream-viz-mem-{os.getpid()}-{held}")
+    except OSError as e:
+        pytest.skip(f"cannot make a cgroup with a memory limit here: {e}")
+    go, held_file = tmp_path / "go", tmp_path / "held"
+    holder = children.run([sys.executable, "-c", HOLD, str(go), str(held), str(written),
+                           str(tmp_path / "data"), str(held_file)], name="holder")
+    try:
+        group.add(holder.pid)
+        go.touch()
+        wait_for(held_file.exists, timeout=60, period=0.2)
+        got = MachineSampler().sample([holder.pid])
+    finally:
+        children.end(holder, signal.SIGKILL)
+        group.close()
+    if written:  # 200 MiB charged to the group, nearly all of it cache
+        assert got["machine_mem_percent"] < 90.0 and got.get("mem_limit_mb") in (None, 200.0), got
+    else:
+        assert got["mem_limit_mb"] == 200.0 and got["machine_mem_percent"] >= 90.0, got
+
+
 # A node that, once the file argv[1] exists, takes 10 MiB more every 20 ms until it is stopped.
 HOG = """
 import os, sys, time, rclpy
@@ -170,11 +214,10 @@ while True:
 """
 
 
-def test_a_process_the_oom_killer_ended_is_said_so_and_another_kill_is_not(children, ros_domain, tmp_path):
-    """Two nodes in a container limited to 200 MiB (as ``docker --memory``): one killed from
-    outside (SIGKILL) exits as a crash; the other, past the limit, as killed by the OOM killer."""
-    from stream_viz.collect.collector import Collector
-
+@contextlib.contextmanager
+def _two_nodes_limited(children, tmp_path):
+    """Two nodes, ``hog`` and ``other``, in a container limited to 200 MiB (as ``docker --memory``);
+    yields them and the file whose creation makes the hog eat memory past the limit."""
     try:
         group = MemoryLimitGroup(200 * 2**20, f"stream-viz-oom-{os.getpid()}")
     except OSError as e:
@@ -182,33 +225,78 @@ def test_a_process_the_oom_killer_ended_is_said_so_and_another_kill_is_not(child
     go = tmp_path / "go"
     hog = children.python(HOG, str(go), "hog", name="hog")
     other = children.python(HOG, str(tmp_path / "never"), "other", name="other")
-    exits = []
     try:
         group.add(hog.pid)
         group.add(other.pid)
-        with Collector(ros_domain) as col:
-            def confirmed():
-                nodes = col.sample().graph.nodes
-                return all(nodes.get(f"node:/{n}", {}).get("pid_status") == "confirmed"
-                           for n in ("hog", "other"))
-
-            def ended():
-                return [e for e in col.sample().events if e.kind == "exit"]
-            wait_for(confirmed, timeout=20, period=0.3)
-            other.kill()
-            exits += wait_for(ended, timeout=10, period=0.3)
-            go.touch()
-            exits += wait_for(ended, timeout=20, period=0.3)
+        yield hog, other, go
     finally:
         children.end(hog, signal.SIGKILL)
         group.close()
     assert hog.wait(5) == -signal.SIGKILL
-    by = {e.member: e for e in exits}
+
+
+def _said_oom(by):
+    """``other`` (killed from outside) exited as a crash, ``hog`` as killed by the OOM killer."""
     assert not by["node:/other"].data.get("oom_kill"), by["node:/other"]
     assert "OOM" not in by["node:/other"].text
     e = by["node:/hog"]
     assert e.level == "error" and e.data["oom_kill"] is True and e.data["memory_limit_mb"] == 200.0, e
-    assert "killed by the OOM killer at its group's limit of 200 MB" in e.text, e.text
+    assert "exited with nodes /hog: killed by the OOM killer at its group's limit of 200 MB" in e.text, e.text
+
+
+def test_a_process_the_oom_killer_ended_is_said_so_and_another_kill_is_not(children, ros_domain, tmp_path):
+    """Two nodes in a container limited to 200 MiB: one killed from outside (SIGKILL) exits as a
+    crash; the other, past the limit, as killed by the OOM killer."""
+    from stream_viz.collect.collector import Collector
+
+    exits = []
+    with _two_nodes_limited(children, tmp_path) as (_, other, go), Collector(ros_domain) as col:
+        def confirmed():
+            nodes = col.sample().graph.nodes
+            return all(nodes.get(f"node:/{n}", {}).get("pid_status") == "confirmed" for n in ("hog", "other"))
+
+        def ended():
+            return [e for e in col.sample().events if e.kind == "exit"]
+        wait_for(confirmed, timeout=20, period=0.3)
+        other.kill()
+        exits += wait_for(ended, timeout=10, period=0.3)
+        go.touch()
+        exits += wait_for(ended, timeout=20, period=0.3)
+    _said_oom({e.member: e for e in exits})
+
+
+def test_an_agent_says_a_process_of_its_host_the_oom_killer_ended(children, ros_domain, tmp_path):
+    """The same on a computer of its own: its agent reads the OOM count, its report carries the kill
+    (encoded and decoded as on the wire), and the monitor's exit event says it."""
+    from stream_viz.collect.agent import Agent
+    from stream_viz.collect.fastdds import decode_gid
+    from stream_viz.collect.hostreport import decode, encode
+    from stream_viz.collect.hosts import remote_exits
+    from stream_viz.model.ids import node_fqn
+
+    exits = []
+    with _two_nodes_limited(children, tmp_path) as (hog, other, go), Agent(ros_domain, 0.5, "b") as agent:
+        def prefixes():
+            infos = agent.node.get_publishers_info_by_topic("/rosout")
+            return {node_fqn(i.node_namespace, i.node_name): decode_gid(bytes(i.endpoint_gid)).prefix
+                    for i in infos if i.node_name in ("hog", "other")}
+
+        def mapped():
+            r = decode(encode(agent.sample()))
+            return r if {hog.pid, other.pid} <= set(r.participants.values()) else None
+        before = wait_for(mapped, timeout=20, period=0.3)
+        node_prefix = prefixes()
+
+        def ended():
+            nonlocal before
+            now = decode(encode(agent.sample(), set(before.processes)), before)
+            out, before = remote_exits(time.time(), "b", before, now, node_prefix), now
+            return [e for e in out if e.member.startswith("node:")]
+        other.kill()
+        exits += wait_for(ended, timeout=10, period=0.3)
+        go.touch()
+        exits += wait_for(ended, timeout=20, period=0.3)
+    _said_oom({e.member: e for e in exits})
 
 
 def test_ancestors_of_the_nodes_processes_are_read_every_fifth_sample(children):

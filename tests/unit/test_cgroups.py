@@ -12,12 +12,14 @@ from stream_viz.collect.cgroups import (
     QuotaReading,
     cgroup_dir,
     memory_group_of,
+    parse_memory_use,
     parse_mountinfo,
     parse_oom_kills,
     parse_proc_cgroup,
     parse_stat,
     quota_of,
     quota_use,
+    read_memory_use,
     read_quota,
 )
 
@@ -102,7 +104,7 @@ def test_a_process_s_memory_group_its_oom_count_and_tightest_limit(tmp_path):
     mounts = [Mount(str(tmp_path / "cg"), "/", frozenset({""}))]
     g = memory_group_of(7, mounts, proc=str(tmp_path / "proc"))
     app = tmp_path / "cg/pod/app"
-    assert g == MemoryGroup(str(app), str(app / "memory.events"), 512 * 2**20)
+    assert g == MemoryGroup(str(app), str(app / "memory.events"), 512 * 2**20, str(tmp_path / "cg/pod"))
     # v1: memory.oom_control; "no limit" is a page-rounded 2^63 - 1.
     _write(tmp_path, {"proc/8/cgroup": "4:memory:/box\n2:cpu:/\n",
                       "v1mem/box/memory.limit_in_bytes": "9223372036854771712\n",
@@ -115,3 +117,16 @@ def test_a_process_s_memory_group_its_oom_count_and_tightest_limit(tmp_path):
     # No memory mount, or a process gone: none.
     assert memory_group_of(8, [], proc=str(tmp_path / "proc")) is None
     assert memory_group_of(9, mounts, proc=str(tmp_path / "proc")) is None
+
+
+def test_a_group_s_memory_use_is_its_usage_less_its_inactive_file_cache(tmp_path):
+    # v2: memory.current and memory.stat's inactive_file; v1: usage_in_bytes and total_inactive_file.
+    _write(tmp_path, {"v2/memory.current": "1000000\n",
+                      "v2/memory.stat": "anon 300000\ninactive_file 600000\n",
+                      "v1/memory.usage_in_bytes": "900\n",
+                      "v1/memory.stat": "cache 500\ninactive_file 100\ntotal_inactive_file 400\n"})
+    assert read_memory_use(str(tmp_path / "v2")) == 400000
+    assert read_memory_use(str(tmp_path / "v1")) == 500  # the hierarchy's total, as the limit counts it
+    assert parse_memory_use("100\n", "inactive_file 300\n") == 0
+    assert parse_memory_use("max\n", "") is None
+    assert read_memory_use(str(tmp_path / "none")) is None
