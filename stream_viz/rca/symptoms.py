@@ -348,7 +348,8 @@ def _alert_views(
                 v.own.append(m)
                 v.plugins |= s.plugins[m]
                 v.spans += s.episodes[m]
-                _start(v, _starts_of(s, m))
+                # A host's or process's "since" is a sample's time (a run of high values): vague.
+                _start(v, (INF, INF, min(s.began.get(m, INF), s.vague.get(m, INF))))
         else:
             nodes = charged_nodes(G, m)
             if len(nodes) > 1:
