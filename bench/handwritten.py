@@ -204,6 +204,7 @@ def main(argv: list[str] | None, doc: str, name: str, make: type[Robot], design:
     ap.add_argument("--out", type=Path, default=Path(f"bench/out/{name}"))
     ap.add_argument("--samples", type=Path, help="keep each run's samples here (<run>.jsonl.gz)")
     args = ap.parse_args(argv)
+    code = code_version()  # the code this process loads now, not the checkout when a run ends
     own_domain()
     args.out.mkdir(parents=True, exist_ok=True)
     if args.samples:
@@ -219,7 +220,7 @@ def main(argv: list[str] | None, doc: str, name: str, make: type[Robot], design:
         print(f"  logs {tmp}", flush=True)
         rec = run(make(design, tmp / "faults", tmp), fault, args.healthy if fault is None else args.warmup,
                   args.post, keep)
-        rec["code"] = code_version()
+        rec["code"] = code
         runs.append(rec)
         with open(args.out / "runs.jsonl", "a") as f:
             f.write(json.dumps(rec) + "\n")

@@ -53,6 +53,7 @@ def main(argv: list[str] | None = None) -> int:
 def run(spec: dict, out: Path) -> dict:
     """Run ``spec`` live, then rank offline; write the peers' files to ``out``; return run.json's record."""
     domain = own_domain()  # no test run or other benchmark holds it
+    code = code_version()  # the code this process loads, not the checkout when the run ends
     from stream_viz.config import load_config
 
     topo = system_topology(spec["system"], spec.get("seed", 0))
@@ -65,7 +66,7 @@ def run(spec: dict, out: Path) -> dict:
     series, times, services = _export_metrics(out / "metrics.csv", mon, live.pids)
     flags, rankings["baseline"] = _baseline(series, times, expand)
     _write_meta(out / "meta.json", topo, live.pids, expand, services, injected.get("t"))
-    return _record(spec, domain, topo, live, injected, expand, rankings, flags)
+    return _record(spec, domain, topo, live, injected, expand, rankings, flags, code)
 
 
 @dataclasses.dataclass
@@ -218,7 +219,7 @@ def _write_meta(path: Path, topo: Topology, pids: dict[str, str], expand: dict[s
 
 
 def _record(spec: dict, domain: int, topo: Topology, live: Live, injected: dict,
-            expand: dict[str, list[str]], rankings: dict, flags: dict) -> dict:
+            expand: dict[str, list[str]], rankings: dict, flags: dict, code: dict) -> dict:
     """The run's record (``run.json``): truth, rankings, alerts, latencies, cost."""
     t_inj = injected.get("t")
     faulty = bool(spec.get("fault"))
@@ -258,7 +259,7 @@ def _record(spec: dict, domain: int, topo: Topology, live: Live, injected: dict,
         "peak_rss_mb": max((x["rss"] for x in live.ticks), default=0) / 2**20,
         "ru_maxrss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "loadavg": os.getloadavg(),
-        "code": code_version(),
+        "code": code,
         "machine": machine(),
         "alive_at_end": live.alive,
     }
