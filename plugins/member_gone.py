@@ -23,7 +23,10 @@ class MemberGone(Plugin):
       episode for ``loop_window_s`` (``episode_hold_s``). A node that lived ``cycle_life_s`` in
       its process, left it cleanly and was away ``cycle_away_s`` before it came back ran its
       course (a tool an operator closes and opens again, a job run again): no restart;
-    * not alive (error, every sample while it lasts): DDS lists the node, its process is gone;
+    * not alive (error, every sample while it lasts): DDS lists the node, its process is gone —
+      at once after an unclean exit seen, else once it lasted ``not_alive_s``: a process that
+      ended before it was ever read may have ended cleanly (a one-shot job), and on a loaded
+      computer its node's deregistration reaches the graph a sample or two later;
     * left (``left_severity``): the node left the graph and its process cannot be seen (no
       pid): clean or not cannot be told. A node of a known process that leaves deregistered
       (destroyed on purpose, or its process is ending cleanly) and raises nothing; so does one
@@ -40,7 +43,7 @@ class MemberGone(Plugin):
     settings: ClassVar[dict[str, Any]] = {
         "left_severity": "warn", "watched_only": False,
         "loop_window_s": 60.0, "loop_min": 3, "loop_fatal": 6,
-        "cycle_life_s": 30.0, "cycle_away_s": 5.0, "brief_s": 10.0,
+        "cycle_life_s": 30.0, "cycle_away_s": 5.0, "brief_s": 10.0, "not_alive_s": 3.0,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -79,9 +82,13 @@ class MemberGone(Plugin):
                 yield ctx.alert(m, s["left_severity"], "left the graph; its process is not visible here",
                                 symptom="left")
         exited.difference_update(ctx.diff.added_members)  # back again: a later departure is news
-        for m in ctx.members("node"):
-            if ctx.attr(m, "alive") is False and m not in said and ok(m):
-                yield ctx.alert(m, "error", "not alive", symptom="not_alive", **hold)
+        dead = ctx.state.get("dead_since", {})
+        ctx.state["dead_since"] = dead = {m: dead.get(m, ctx.t) for m in ctx.members("node")
+                                          if ctx.attr(m, "alive") is False}
+        for m, since in dead.items():
+            if m in said or not ok(m) or (m not in crashed and ctx.t - since < s["not_alive_s"]):
+                continue
+            yield ctx.alert(m, "error", "not alive", symptom="not_alive", **hold)
 
 
 def _listed_since(ctx: PluginContext) -> dict[str, float]:

@@ -1054,6 +1054,19 @@ def test_member_gone_exit_restart_left_and_not_alive():
     assert drive("member_gone", [(float(t), G, []) for t in range(5)]) == []
 
 
+def test_member_gone_a_process_never_read_is_not_alive_only_once_that_lasted():
+    # A one-shot job's process ended (exit 0) before the sampler read it; under load DDS listed its
+    # node one sample more: no alert. A node listed 3 s with its process gone is not alive.
+    G, G_dead, G_gone = model(), model(alive=False), model()
+    G_gone.remove_nodes_from(["node:/camera", "process:100"])
+    lag = [(1.0, G, []), (2.0, G_dead, []), (3.0, G_gone, [])]
+    assert drive("member_gone", lag) == []
+    stays = [(1.0, G, [])] + [(float(t), G_dead, []) for t in range(2, 7)]
+    assert drive("member_gone", stays) == [(t, "node:/camera", "error") for t in (5.0, 6.0)]
+    assert drive("member_gone", stays, settings={"not_alive_s": 0.0}) == [
+        (float(t), "node:/camera", "error") for t in range(2, 7)]
+
+
 def test_member_gone_a_node_listed_briefly_without_a_process_deregistered():
     # A spawner (no pid found: it ended before its process was) joins at 5 s and leaves at 8 s:
     # a crashed node stays listed until its DDS lease ends, so it deregistered. Listed from 5 s
