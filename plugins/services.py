@@ -37,7 +37,10 @@ class Services(Plugin):
       taken; before any answer, ``first_wait_s``: some services take seconds); or (at the
       line's level) the client logged (≥ ``log_level``, WARN) a line naming the service or its
       server, after the client's first ``startup_s`` (its bring-up, when it waits for servers
-      still coming up: the WARNs about a service not ready yet);
+      still coming up: the WARNs about a service not ready yet) and not while the servers come
+      up: none yet, and the service never had one, in the client's first ``missing_s``; or one
+      whose process started less than ``startup_s`` before (on a loaded computer a robot's
+      bring-up outlasts a client's first seconds);
     * ``slow_response`` (warn): the service's mean response time rose above its own baseline by
       ``max(k·σ, min_rise_ms)`` for ``confirm`` samples;
     * ``server_gone`` (warn): the service had a server and has none while clients remain;
@@ -63,6 +66,7 @@ class Services(Plugin):
         "min_rise_ms": 200.0,
         "log_level": "warn",
         "startup_s": STARTUP_S,
+        "missing_s": 60.0,
         "server_gone": True,
         "goal_quiet_s": 3.0,
         "goal_margin": 3.0,
@@ -134,6 +138,16 @@ class _Goals:
     last: float | None = None  # its last feedback
 
 
+def _coming_up(ctx: PluginContext, client: str, service: str, servers: list[str], had: bool,
+               t: float) -> bool:
+    """True when ``service``'s servers were coming up at ``t``: none yet and none ever (``had``)
+    in ``client``'s first ``missing_s``, or one whose process started ``startup_s`` before."""
+    s = ctx.settings
+    if not servers:
+        return not had and starting(ctx, client, t, s["missing_s"])
+    return any(starting(ctx, n, t, s["startup_s"]) for n in servers)
+
+
 def _called(ctx: PluginContext) -> list[str]:
     """The services and actions of the graph."""
     return [*ctx.members("service"), *ctx.members("action")]
@@ -195,6 +209,7 @@ def _slow(ctx: PluginContext, service: str, servers: list[str], clients: list[st
 def _logged(ctx: PluginContext) -> Iterator[Alert]:
     """A client's log line naming one of its services, or a server of one: it waits on it."""
     floor = RANK.get(ctx.settings["log_level"], RANK["warn"])
+    served = ctx.state.get("servers", {})  # the services that had a server
     worst: dict[tuple[str, str], tuple[Any, str | None]] = {}  # the worst line per client and service
     for e in ctx.events:
         if e.kind != "log" or RANK.get(e.level, -1) < floor:
@@ -211,6 +226,8 @@ def _logged(ctx: PluginContext) -> Iterator[Alert]:
             servers = ctx.servers(service)
             hit = [n for n in servers if n in named_nodes]
             if service not in named_services and not hit:
+                continue
+            if _coming_up(ctx, e.member, service, servers, bool(served.get(service)), e.t):
                 continue
             had = worst.get((e.member, service))
             if had is None or RANK.get(e.level, 0) > RANK.get(had[0].level, 0):

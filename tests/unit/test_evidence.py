@@ -40,7 +40,7 @@ from stream_viz.collect.rosgraph import INFINITE_NS, qos_dict
 from stream_viz.collect.services import ServiceCalls, party
 from stream_viz.collect.topics import log_event
 from stream_viz.collect.window import TopicWindow, window_metrics
-from stream_viz.model.graph import add_flow_edge, add_member
+from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge
 from stream_viz.model.theta import make_theta
 from stream_viz.rca import RcaSettings, analyze
 from stream_viz.records import Alert, Event
@@ -582,6 +582,31 @@ def test_services_client_log_naming_its_service_or_server():
     # at an ERROR floor the WARN is not read
     strict = drive_alerts("services", [(1.0, G, logs[:1])], settings={"log_level": "error"})
     assert strict == []
+
+
+def test_services_a_client_waiting_while_its_servers_come_up_is_their_bring_up():
+    # The client's process started at 0 s, the planner's at 20 s (a loaded computer: bring-up
+    # outlasts the client's first 10 s). "waiting for /plan" at 25 s is the planner coming up.
+    def graph(servers=("/planner",)):
+        G = _service_model(servers)
+        for proc, node, created in (("process:1", "node:/bt", 0.0), ("process:2", "node:/planner", 20.0)):
+            add_member(G, proc, create_time=created)
+            add_tree_edge(G, proc, node)
+        return G
+
+    def waits(t, G, before=()):
+        line = Event(t, "log", "node:/bt", "warn", "waiting for service /plan",
+                     {"services": ["service:/plan"]})
+        return [(a.t, a.data["symptom"]) for a in drive_alerts("services", [*before, (t, G, [line])])]
+
+    assert waits(25.0, graph()) == []
+    assert waits(35.0, graph()) == [(35.0, "waiting")]  # the planner up 15 s: it waits on it
+    # No server yet and never one: the robot still coming up, for the client's first 60 s.
+    assert waits(25.0, graph(servers=())) == []
+    assert waits(70.0, graph(servers=())) == [(70.0, "waiting")]
+    # A server it had and lost: waiting on it is a symptom at once (beside server_gone).
+    lost = waits(36.0, graph(servers=()), before=[(35.0, graph(), [])])
+    assert lost == [(36.0, "server_gone"), (36.0, "waiting")]
 
 
 # --------------------------------------------------------------------------- message age
