@@ -26,6 +26,7 @@ from stream_viz.records import Alert
 
 Baseline = tuple[float, float, int] | None
 TRANSITIONS_KEPT = 8  # per node: enough for the changes around one quiet
+STATE_GAP_S = 10.0  # a latched topic's message this long after its last is a state published on change
 EXECUTOR_CPU = "executor_cpu_percent"
 INERT_AFTER = 2  # changes of a parameter in a row that moved no rate: one can be missed (timing)
 PROMPT_INTERVALS = 6  # a reconfigured rate shows in the collector's recent rate within this many intervals
@@ -166,11 +167,13 @@ class TopicRate(Plugin):
 
 
 def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, Rhythm]) -> list[tuple]:
-    """Topics whose publisher was reconfigured follow a new normal (parameters changed at run time:
+    """Topics whose publisher was reconfigured, or latched a new state of its own (a command gate
+    switched to its operator: `_transitions`), follow a new normal (parameters changed at run time:
     a camera's frame rate, a controller's frequency); return ``followed`` with their rhythms and
     baselines learned anew.
 
-    A *cause* is a ``param`` event of a publisher, or an input of a publisher that follows one
+    A *cause* is a ``param`` event of a publisher or a state it latched anew, or an input of a
+    publisher that follows one
     (data computed from a reconfigured input changes with it), up to ``reconfigure_s`` ago. After
     a cause, a topic whose recent rate departs from its baseline (below ``drop_ratio`` × it, or
     above it / ``drop_ratio``) in messages sent after it, promptly (within ``PROMPT_INTERVALS``
@@ -188,6 +191,8 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
     changed: dict[str, float] = ctx.state.setdefault("reconfigured", {})  # node -> its newest param event
     relearn: dict[str, float] = ctx.state["relearn"]
     _note_changes(ctx, changed, relearn, window)
+    for node, at in ctx.state.pop("state_changes", {}).items():  # its mode latched anew: a new normal
+        changed[node] = max(at, changed.get(node, at))
     causes: dict[str, float] = ctx.state.setdefault("reconfig_causes", {})  # topic -> the cause it follows
     # topic -> (judged again at, the last message before its quiet)
     deferred: dict[str, tuple[float, float]] = ctx.state.setdefault("reconfig_deferred", {})
@@ -366,6 +371,8 @@ def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[
         return True
     last = r.newest or ctx.t
     period = 1.0 / r.rate if r.rate > 0 else None
+    if r.gaps:  # its next message may be due only after its longest healthy gap
+        period = max(period or 0.0, max(r.gaps))
     return _changed_state(ctx, ctx.publishers(topic), last, last, transitions, topic, period)
 
 
@@ -595,7 +602,10 @@ def latched(qos: Any) -> bool:
 def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
     """Node → times of its recent changes of state (the newest `TRANSITIONS_KEPT`), kept across
     samples: a message on a ``…/transition_event`` topic it publishes (a lifecycle transition),
-    a goal of an action it serves ending (a ``goal`` event: `stream_viz.collect.goals`)."""
+    a goal of an action it serves ending (a ``goal`` event: `stream_viz.collect.goals`), a
+    message on a latched topic it publishes `STATE_GAP_S` or more after the last one (a state
+    published on change: a route set, a mission arrived, a mode; not a map republished every
+    second)."""
     last: dict[str, list[float]] = ctx.state.setdefault("transitions", {})
 
     def note(node: str, at: float) -> None:
@@ -605,11 +615,25 @@ def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
 
     lifecycle = ctx.structural(lambda: [m for m in ctx.members("topic") if m.endswith("/transition_event")],
                                key="lifecycle")
+    states = ctx.structural(lambda: [m for m in ctx.members("topic") if latched(ctx.attr(m, "qos"))],
+                            key="states", token=ctx.graph.graph.get("qos_version"))
     for topic in lifecycle:
         age = ctx.value(topic, "age_s")
         if age == age:
             for node in ctx.publishers(topic):
                 note(node, ctx.t - age)
+    newest: dict[str, float] = ctx.state.setdefault("state_newest", {})
+    for topic in states:
+        age = ctx.value(topic, "age_s")
+        if age != age:
+            continue
+        at, before = ctx.t - age, newest.get(topic)
+        if before is None or at - before > SAME_MESSAGE_S:  # a message not seen before
+            newest[topic] = at
+            if before is None or at - before >= STATE_GAP_S:
+                for node in ctx.publishers(topic):
+                    note(node, at)
+                    ctx.state.setdefault("state_changes", {})[node] = at  # a new mode: `_reconfigured`
     for e in ctx.events:
         if e.kind == "goal":
             note(e.member, e.t)
@@ -851,15 +875,18 @@ def _changed_state(ctx: PluginContext, nodes: list[str], since: float, until: fl
                    transitions: dict[str, list[float]], topic: str, period: float | None = None) -> bool:
     """True when one of ``nodes`` (publishers of ``topic``), or a node feeding one through another
     topic, changed state from ``transition_grace_s`` before ``since`` to as long after ``until``
-    (a lifecycle transition, a goal ended). A node that follows another's goal (a controller
-    driving the path of its planner's goal) stops with it; so, given the topic's ``period``, a
-    feeding node's change comes before the stop, by ``until`` plus a period and ``FEED_SLACK_S``
-    at the latest: one later is the stop's consequence (a mission aborted because its setpoints
-    stopped)."""
+    (a lifecycle transition, a goal ended, a new state latched); a publisher's own change also
+    while its next message was not due yet (``until`` plus the topic's ``period`` and
+    ``FEED_SLACK_S``: an ETA published every 10 s stops when its route arrives). A node that
+    follows another's goal (a controller driving the path of its planner's goal) stops with it;
+    so a feeding node's change comes before the stop, by ``until`` plus a period and
+    ``FEED_SLACK_S`` at the latest: one later is the stop's consequence (a mission aborted because
+    its setpoints stopped)."""
     grace = ctx.settings["transition_grace_s"]
     feeding = {u for p in nodes for i in ctx.subscribed_topics(p) if i != topic for u in ctx.publishers(i)}
     own = (x for p in nodes for x in transitions.get(p, ()))
-    if any(since - grace <= x <= until + grace for x in own):
+    due = until + (period + FEED_SLACK_S if period is not None else 0.0)
+    if any(since - grace <= x <= max(until + grace, due) for x in own):
         return True
     after = grace if period is None else min(grace, period + FEED_SLACK_S)
     upstream = (x for p in feeding.difference(nodes) for x in transitions.get(p, ()))

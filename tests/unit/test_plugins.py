@@ -466,6 +466,55 @@ def test_topic_rate_a_feeding_node_s_goal_ending_after_the_quiet_began_explains_
     assert drive("topic_rate", after)[:1] == [(21.5, "topic:/det", "error")]
 
 
+def test_topic_rate_a_new_state_latched_by_a_feeding_node_explains_a_quiet():
+    # /detector publishes /det while /mission's latched /state says so; /mission latches a new state
+    # (ARRIVED) 70 ms after /det's last message, 18 s after its last one: /det stopping is healthy.
+    # Later than a period + 0.25 s after it, or a latched topic republished every second, says
+    # nothing of why /det stopped: silent.
+    img, det = [i / 10 for i in range(400)], [i / 10 + 0.05 for i in range(200)]
+
+    def frames(states):
+        out = []
+        for t in HALF[:40]:
+            G = chain_model(img, det, t)
+            st = seen(states, t)
+            add_member(G, "node:/mission")
+            add_member(G, "topic:/state", qos=[_qos("/mission", "pub", dur="transient_local"),
+                                               _qos("/detector", "sub", dur="transient_local")],
+                       theta=make_theta("topic", {"rate_hz": st["rate"], "publishers": 1,
+                                                  **({"age_s": st["age"]} if "age" in st else {})}))
+            add_flow_edge(G, "node:/mission", "topic:/state", "pub")
+            add_flow_edge(G, "topic:/state", "node:/detector", "sub")
+            out.append((t, G, []))
+        return out
+
+    assert drive("topic_rate", frames([2.0, 20.02])) == []
+    assert drive("topic_rate", frames([2.0, 21.0]))[:1] == [(21.5, "topic:/det", "error")]
+    every_second = [float(i) for i in range(40)]
+    assert drive("topic_rate", frames(every_second))[:1] == [(21.5, "topic:/det", "error")]
+
+
+def test_topic_rate_its_publisher_s_new_state_before_its_next_message_was_due_explains_a_quiet():
+    # Bursts every 8 s (learned gaps 6.6 s), the last ending at 49.9. /camera latches a new state
+    # (its route arrived) at 54, before its next burst was due (49.9 + 6.6 s): healthy. At 59, after
+    # it was due, the state explains nothing: silent at 63.5, as without it.
+    hung = bursts(range(0, 49, 8))
+
+    def frames(states):
+        out = []
+        for t, G, ev in sampled(hung, HALF[:70]):
+            st = seen(states, t)
+            add_member(G, "topic:/state", qos=[_qos("/camera", "pub", dur="transient_local")],
+                       theta=make_theta("topic", {"rate_hz": st["rate"], "publishers": 1,
+                                                  **({"age_s": st["age"]} if "age" in st else {})}))
+            add_flow_edge(G, "node:/camera", "topic:/state", "pub")
+            out.append((t, G, ev))
+        return out
+
+    assert drive("topic_rate", frames([1.0, 54.0])) == []
+    assert drive("topic_rate", frames([1.0, 59.0]))[:1] == [(63.5, "topic:/img", "error")]
+
+
 def test_topic_rate_a_pause_while_its_process_is_busy_is_the_processs():
     # /camera's process computes for 4 s from 20 s (its executor held: no message 19.9-24.0).
     msgs = [i / 10 for i in range(200)] + [24.0 + i / 10 for i in range(100)]
@@ -715,6 +764,26 @@ def test_topic_rate_a_reconfigured_rate_is_the_new_normal_a_drop_without_a_chang
     slowed = msgs[:300 + 120] + [60 + i for i in range(30)]
     frames = [(t, model(**seen(slowed, t)), [set_rate] if t == 30.5 else []) for t in HALF[:90]]
     assert drive("topic_rate", frames)[:1] == [(63.5, "topic:/img", "warn")]
+
+
+def test_topic_rate_a_new_state_its_publisher_latched_is_a_new_normal_as_a_reconfiguration():
+    # A command gate: 10 Hz, 4 Hz from 30.0 as it latches its new mode (an operator took over) at
+    # 30.1, its last mode latched at 1.0: learned anew. The same drop with no new state: a drop.
+    msgs = [i / 10 for i in range(300)] + [30 + i / 4 for i in range(240)]
+
+    def frames(states):
+        out = []
+        for t in HALF[:90]:
+            G, st = model(**seen(msgs, t)), seen(states, t)
+            add_member(G, "topic:/mode", qos=[_qos("/camera", "pub", dur="transient_local")],
+                       theta=make_theta("topic", {"rate_hz": st["rate"], "publishers": 1,
+                                                  **({"age_s": st["age"]} if "age" in st else {})}))
+            add_flow_edge(G, "node:/camera", "topic:/mode", "pub")
+            out.append((t, G, []))
+        return out
+
+    assert drive("topic_rate", frames([1.0, 30.1])) == []
+    assert drive("topic_rate", frames([1.0]))[:1] == [(32.5, "topic:/img", "warn")]
 
 
 def test_topic_rate_a_parameter_that_moved_no_rate_is_no_cause_when_it_changes_again():
