@@ -326,6 +326,8 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     flaps = len(ctx.state["flaps"][topic])
     usual = f"was {ref:.3g} Hz" if not r.gaps else f"its longest healthy gap {max(r.gaps):.1f} s"
     again = f"; silent {flaps} times in {s['flap_window_s']:.0f} s" if flaps > 1 else ""
+    # Its executor stopped: every node it runs stops with it (the RCA ties them, `siblings.stalls`).
+    stalled = stalled or _stalled(ctx, topic, r, rhythms)
     if stalled:
         again += "; its executor stopped while its input arrives"
     if ended := _this_quiet(ctx, topic, r).get("ended"):
@@ -334,7 +336,7 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     began = {} if r.newest is None else {"since": r.newest, "since_within": 1.0 / ref if ref > 0 else quiet}
     return ctx.alert(topic, "error", f"silent for {quiet:.1f} s ({usual}){again}", symptom="silence",
                      silent_s=quiet, baseline_hz=ref, limit_s=limit, flaps=flaps,
-                     episode_hold_s=s["flap_window_s"], **began)
+                     episode_hold_s=s["flap_window_s"], executor_stopped=stalled, **began)
 
 
 def _by_chance(ctx: PluginContext, topic: str, ref_hz: float) -> float:

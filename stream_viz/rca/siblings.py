@@ -40,6 +40,7 @@ class OwnChange(Protocol):
     implied: bool
     logged: float
     exited: float
+    executor_stopped: bool
 
 
 @dataclass
@@ -79,7 +80,9 @@ def stalls(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> di
     Nodes of one process whose outputs went silent together (own onsets within ``tol``) are one
     stall of their executor when at least two of them are independent: neither is fed, through
     the data flow, by another of them (a lidar and an IMU driver that share nothing but the
-    thread). Then the data flow between them explains nothing — a hung merger starves the
+    thread); or when an output's alert said its executor stopped while its input arrived
+    (``executor_stopped``: a pipeline of filters in one container, each fed by the one before).
+    Then the data flow between them explains nothing — a hung merger starves the
     drivers that feed it — and only their own log lines at the stall tell them apart. The nodes
     of a process seen to die (``exited``) are fellows too: each output of theirs stops when the
     process ends, however late its silence is noticed.
@@ -97,7 +100,8 @@ def stalls(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> di
             group = {n for n in silent if _close(views[n].own_onset, start, tol)}
             free = (n for n in group if not _fed_by(G, n, group - {n}, parents))
             # A lone node is no stall; two independent ones are enough to tell, the rest not walked.
-            if len(group) > 1 and len(list(itertools.islice(free, 2))) == 2:
+            if len(group) > 1 and (any(views[n].executor_stopped for n in group)
+                                   or len(list(itertools.islice(free, 2))) == 2):
                 for n in group:
                     out[n] = group - {n}
         dead = {n for n in nodes if views[n].exited < INF}

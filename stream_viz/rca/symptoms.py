@@ -49,7 +49,9 @@ class Symptoms:
     (``since`` + data ``since_within``: a silence began by the next message due); ``vague`` the
     first time of its alerts that do not say (their symptom began up to ``tolerance`` before);
     ``culprits`` the publishers a topic's alerts name as the ones whose own messages are the
-    symptom (data ``publishers``: stale stamps of one of ``/tf``'s publishers, one stopped).
+    symptom (data ``publishers``: stale stamps of one of ``/tf``'s publishers, one stopped);
+    ``executor_stopped`` the members an alert said stopped with their publisher's executor (data
+    ``executor_stopped``: its thread idle while its input arrives).
     """
 
     times: dict[str, np.ndarray] = field(default_factory=dict)
@@ -68,6 +70,7 @@ class Symptoms:
     began_by: dict[str, float] = field(default_factory=dict)
     vague: dict[str, float] = field(default_factory=dict)
     culprits: dict[str, set[str]] = field(default_factory=dict)
+    executor_stopped: set[str] = field(default_factory=set)
     latest: float = -INF
     count: int = 0
 
@@ -129,6 +132,8 @@ def collect_symptoms(
                 logged[m] = min(logged.get(m, INF), t)
         elif data.get("symptom") == "exit":
             exited[m] = min(exited.get(m, INF), t)
+        if data and data.get("executor_stopped") is True:
+            s.executor_stopped.add(m)
         if data and isinstance(data.get("publishers"), list) and m.startswith("topic:"):
             s.culprits.setdefault(m, set()).update(p for p in data["publishers"] if isinstance(p, str))
         if data and isinstance(since := data.get("since"), int | float):
@@ -174,7 +179,8 @@ class NodeView:
     suspected only because a client of it stands unexplained (it excuses nobody). ``process`` and
     ``indistinguishable``: the process it shares with other candidates, and those of them whose
     own changes are the same as its own. ``logged``: when its own log lines began to alert;
-    ``exited``: when its process was seen to die. ``began``/``began_by``/``vague``: the earliest
+    ``exited``: when its process was seen to die; ``executor_stopped``: an output of its stopped
+    with its executor (`Symptoms`). ``began``/``began_by``/``vague``: the earliest
     and latest its symptoms can have begun by their alerts' word, and the first time of those that
     do not say (`Symptoms`): what `_after` compares.
     """
@@ -205,6 +211,7 @@ class NodeView:
     began: float = INF
     began_by: float = INF
     vague: float = INF
+    executor_stopped: bool = False
 
     def active(self, t0: float, t1: float, own: bool = False) -> float:
         """Its anomaly when one of its symptoms held in ``[t0, t1]``; else its untimed evidence
@@ -356,6 +363,7 @@ def _alert_views(
                 shared_by.append((m, nodes))
             for n in nodes if len(nodes) == 1 else ():
                 _charge(_view(views, n), m, a * charge, s.onset[m], s.episodes[m], "output", _starts_of(s, m))
+                views[n].executor_stopped |= m in s.executor_stopped
     for (m, name), (t, w) in s.named.items():
         spans = [(max(a, t), b) for a, b in s.episodes[m] if b >= t]
         since = _waited_since(views.get(m), t, tolerance)

@@ -626,9 +626,13 @@ def test_topic_rate_an_output_withheld_by_a_working_node_is_its_rhythm():
     hung = lambda t: noisy(3.0, 0.3) if t < 20 else 0.0  # noqa: E731  blocked from 20 s
     frames = [(t, withholding_model(det, t, main=going), []) for t in HALF[:40]]
     assert drive("topic_rate", frames) == []
-    # Its executor stopped (a hang): /det is silent, as without the main thread measured.
-    assert drive("topic_rate", [(t, withholding_model(det[:200], t, main=hung), []) for t in HALF[:40]])[:1] \
-        == [(21.5, "topic:/det", "error")]
+    # Its executor stopped (a hang): /det is silent, as without the main thread measured; the alert
+    # says so (the RCA then ties the nodes that executor runs).
+    frames = [(t, withholding_model(det[:200], t, main=hung), []) for t in HALF[:40]]
+    got = drive("topic_rate", frames, full=True)
+    assert [(a.t, a.member, a.severity) for a in got][:1] == [(21.5, "topic:/det", "error")]
+    assert got[0].data["executor_stopped"] is True
+    assert "its executor stopped while its input arrives" in got[0].message
     assert drive("topic_rate", [(t, withholding_model(det, t), []) for t in HALF[:40]])[:1] \
         == [(21.5, "topic:/det", "error")]
     # A single-threaded executor vouches for every node it runs; busy threads of a multi-threaded
@@ -636,7 +640,9 @@ def test_topic_rate_an_output_withheld_by_a_working_node_is_its_rhythm():
     frames = [(t, withholding_model(det, t, main=going, sibling=True), []) for t in HALF[:40]]
     assert drive("topic_rate", frames) == []
     frames = [(t, withholding_model(det, t, main=going, running=3), []) for t in HALF[:40]]
-    assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/det", "error")]
+    got = drive("topic_rate", frames, full=True)
+    assert [(a.t, a.member) for a in got][:1] == [(21.5, "topic:/det")]
+    assert got[0].data["executor_stopped"] is False
     # Its own other output going on shows it working (no main thread needed) ...
     status = [float(k) for k in range(40)]
     assert drive("topic_rate", [(t, withholding_model(det, t, status=status), []) for t in HALF[:40]]) == []

@@ -154,7 +154,8 @@ def test_fed_by_with_memo_is_the_breadth_first_definition():
 
 
 def stalls_ref(G, views, tol):
-    """`siblings.stalls` as first written: every node of a group walked, lone nodes too."""
+    """`siblings.stalls` as first written: every node of a group walked, lone nodes too (a lone
+    node is one group of one: no stall)."""
     by_process: dict[str, list[str]] = {}
     for n, v in views.items():
         if not v.implied and (p := process_of_node(G, n)) is not None:
@@ -165,7 +166,8 @@ def stalls_ref(G, views, tol):
         if silent:
             start = min(views[n].own_onset for n in silent)
             group = {n for n in silent if siblings._close(views[n].own_onset, start, tol)}
-            if len([n for n in group if not fed_by_ref(G, n, group - {n})]) >= 2:
+            if (len(group) > 1 and any(views[n].executor_stopped for n in group)) \
+                    or len([n for n in group if not fed_by_ref(G, n, group - {n})]) >= 2:
                 for n in group:
                     out[n] = group - {n}
         dead = {n for n in nodes if views[n].exited < INF}
@@ -192,6 +194,7 @@ def random_stalls(seed: int) -> tuple[dict, dict]:
             v.own_kinds.add("output")
         if rng.random() < 0.3:
             v.exited = 12.0
+        v.executor_stopped = rng.random() < 0.15
         views[n] = v
     return siblings.stalls(g, views, 2.0), stalls_ref(g, views, 2.0)
 
