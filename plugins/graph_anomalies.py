@@ -16,7 +16,10 @@ from stream_viz.records import Alert
 class GraphAnomalies(Plugin):
     """Alerts on:
 
-    * two nodes with one name (node attribute ``instances`` > 1, as the collector counts them): error;
+    * two nodes with one name (node attribute ``instances`` > 1, as the collector counts them) for
+      ``duplicate_s``: error. Longer than a DDS lease (Fast DDS: 20 s): a node restarted by its
+      launcher shows twice until its old instance's lease ends, when the old process ended
+      without saying goodbye (the blind shuttle's operator console, relaunched);
     * a subscriber whose topic has had no publisher for ``grace_s``, when that is a fault: its
       publisher died uncleanly (its process ended while DDS listed it, or it was seen not alive).
       A topic whose publishers left cleanly (deregistered: a job done, a node destroyed on
@@ -35,7 +38,7 @@ class GraphAnomalies(Plugin):
     name = "graph_anomalies"
     kinds = ("node", "topic")
     settings: ClassVar[dict[str, Any]] = {
-        "grace_s": 5.0, "ignore_topics": [], "duplicates": True, "no_publisher": True,
+        "grace_s": 5.0, "ignore_topics": [], "duplicates": True, "duplicate_s": 25.0, "no_publisher": True,
         "never_published": False,
         "recheck_s": 10.0, "burst_min": 5, "burst_ratio": 0.05,
     }
@@ -43,11 +46,15 @@ class GraphAnomalies(Plugin):
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         s = ctx.settings
         if s["duplicates"]:
-            for node in ctx.watched("node"):
-                n = ctx.attr(node, "instances", 1)
-                if isinstance(n, int) and n > 1:
-                    yield ctx.alert(node, "error", f"{n} nodes share this name", symptom="duplicate_name",
-                                    instances=n)
+            twins = ctx.state.get("twins", {})  # node -> since when it has shown twice
+            ctx.state["twins"] = twins = {
+                node: twins.get(node, ctx.t) for node in ctx.watched("node")
+                if isinstance(n := ctx.attr(node, "instances", 1), int) and n > 1}
+            for node, since in twins.items():
+                if ctx.t - since >= s["duplicate_s"]:
+                    n = ctx.attr(node, "instances")
+                    yield ctx.alert(node, "error", f"{n} nodes share this name (for {ctx.t - since:.0f} s)",
+                                    symptom="duplicate_name", instances=n)
         orphan_since = ctx.state.setdefault("orphan_since", {})
         if discovery_burst(ctx.graph, ctx.diff.added_members, s["burst_min"], s["burst_ratio"]):
             ctx.state["settled_from"] = ctx.t

@@ -1413,9 +1413,14 @@ def test_graph_anomalies_a_publisher_that_died_leaves_an_orphan_fault():
 
 
 def test_graph_anomalies_duplicate_names():
-    G = model()
-    G.nodes["node:/camera"]["instances"] = 2
-    assert drive("graph_anomalies", [(1.0, G, [])]) == [(1.0, "node:/camera", "error")]
+    # Twice for longer than a DDS lease: two launches of one node. For 15 s: a restarted node's
+    # old instance lingering until its lease ends.
+    G, twice = model(), model()
+    twice.nodes["node:/camera"]["instances"] = 2
+    lasting = [(float(t), twice, []) for t in range(30)]
+    assert drive("graph_anomalies", lasting) == [(float(t), "node:/camera", "error") for t in range(25, 30)]
+    restarted = [(float(t), twice if 5 <= t < 20 else G, []) for t in range(40)]
+    assert drive("graph_anomalies", restarted) == []
 
 
 def test_topic_latency_jitter_of_two_publishers_interleaving_is_not_judged():
