@@ -33,9 +33,7 @@ from outside. RUN_FOR > 0 ends the process cleanly (exit 0) after that many seco
 
 from __future__ import annotations
 
-import hashlib
 import math
-import os
 import random
 import signal
 import socket
@@ -84,6 +82,10 @@ from sensor_msgs.msg import (
 )
 from std_msgs.msg import Bool, Float32, String
 from std_srvs.srv import Trigger
+
+from stream_viz.demo.child import burn, leak
+
+LEAK_MB_S = 2.5  # the tracker's history never trimmed
 
 OK, WARN, ERROR, STALE = (
     DiagnosticStatus.OK,
@@ -314,27 +316,10 @@ def watch(nodes: list, fault_dir: Path, process: str) -> None:
             except OSError:
                 word = None
             n.fault = word
-        for how, target in (("cpu", burn), ("leak", leak)):
+        for how, target, arg in (("cpu", burn, 1.0), ("leak", leak, LEAK_MB_S)):
             if how not in started and (fault_dir / f"{process}.{how}").exists():
-                started.add(how)
-                threading.Thread(target=target, daemon=True, name=how).start()
-
-
-def burn() -> None:
-    """A runaway worker thread (hashing in C, the GIL released): a core busy."""
-    block = os.urandom(1 << 20)
-    while True:
-        hashlib.sha256(block).digest()
-
-
-def leak() -> None:
-    """A history never trimmed: 2.5 MB/s, every page written."""
-    kept = []
-    i = 0
-    while True:
-        i += 1
-        kept.append(bytes([i % 251 + 1]) * (5 << 19))
-        time.sleep(1.0)
+                started.add(how)  # the demo's own burner and leak, until the process ends
+                threading.Thread(target=target, args=(threading.Event(), arg), daemon=True, name=how).start()
 
 
 # --- sensing: drivers ---------------------------------------------------------------------------------
