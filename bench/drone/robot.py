@@ -27,9 +27,7 @@ from outside. RUN_FOR > 0 ends the process cleanly (exit 0) after that many seco
 
 from __future__ import annotations
 
-import hashlib
 import math
-import os
 import random
 import socket
 import sys
@@ -57,6 +55,8 @@ from sensor_msgs.msg import BatteryState, CameraInfo, Image, Imu, LaserScan, Ran
 from std_msgs.msg import Header, String
 from test_msgs.action import Fibonacci  # stands in for a mission action
 
+from stream_viz.demo.child import burn, leak
+
 OK, WARN, ERROR, STALE = (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
                           DiagnosticStatus.STALE)
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -65,6 +65,7 @@ BEST_EFFORT = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 RANGEFINDER_CLOCK_OFFSET = 0.3  # the rangefinder's own clock runs this far behind the computer's
 PAD = (0.0, 0.0)  # the landing pad, in the local frame
+LEAK_MB_S = 3.0  # a cache never trimmed
 
 
 def now_s() -> float:
@@ -143,27 +144,10 @@ def watch(nodes: list, fault_dir: Path, process: str) -> None:
             if word != n.fault:
                 n.fault = word
                 n.fault_set.trigger()
-        for how, target in (("cpu", burn), ("leak", leak)):
+        for how, target, arg in (("cpu", burn, 1.0), ("leak", leak, LEAK_MB_S)):
             if how not in started and (fault_dir / f"{process}.{how}").exists():
-                started.add(how)
-                threading.Thread(target=target, daemon=True, name=how).start()
-
-
-def burn() -> None:
-    """A runaway worker thread (hashing in C, the GIL released): a core busy."""
-    block = os.urandom(1 << 20)
-    while True:
-        hashlib.sha256(block).digest()
-
-
-def leak() -> None:
-    """A cache never trimmed: 3 MB/s, every page written."""
-    kept = []
-    i = 0
-    while True:
-        i += 1
-        kept.append(bytes([i % 251 + 1]) * (3 << 20))
-        time.sleep(1.0)
+                started.add(how)  # the demo's own burner and leak, until the process ends
+                threading.Thread(target=target, args=(threading.Event(), arg), daemon=True, name=how).start()
 
 
 def alive() -> bool:

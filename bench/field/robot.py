@@ -48,7 +48,6 @@ RUN_FOR, ends the process cleanly after that many seconds (the console).
 
 from __future__ import annotations
 
-import hashlib
 import math
 import os
 import random
@@ -92,6 +91,9 @@ from std_msgs.msg import Bool, Float32MultiArray, Float64MultiArray, String
 from std_srvs.srv import Trigger
 from test_msgs.action import Fibonacci  # stands in for a navigate-row action
 
+from stream_viz.demo.child import burn, leak
+
+LEAK_MB_S = 3.0  # a cache never trimmed
 NS = "/field"
 OK, WARN = DiagnosticStatus.OK, DiagnosticStatus.WARN
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
@@ -179,27 +181,10 @@ def watch(nodes: list[FieldNode], fault_dir: Path, process: str) -> None:
             if word != n.fault:
                 n.fault = word
                 n.fault_set.trigger()
-        for how, target in (("cpu", burn), ("leak", leak)):
+        for how, target, arg in (("cpu", burn, 1.0), ("leak", leak, LEAK_MB_S)):
             if how not in started and (fault_dir / f"{process}.{how}").exists():
-                started.add(how)
-                threading.Thread(target=target, daemon=True, name=how).start()
-
-
-def burn() -> None:
-    """A runaway worker thread (hashing in C, the GIL released): a core busy."""
-    block = os.urandom(1 << 20)
-    while True:
-        hashlib.sha256(block).digest()
-
-
-def leak() -> None:
-    """A cache never trimmed: 3 MB/s, every page written."""
-    kept = []
-    i = 0
-    while True:
-        i += 1
-        kept.append(bytes([i % 251 + 1]) * (3 << 20))
-        time.sleep(1.0)
+                started.add(how)  # the demo's own burner and leak, until the process ends
+                threading.Thread(target=target, args=(threading.Event(), arg), daemon=True, name=how).start()
 
 
 # --- the controller manager (one process, multi-threaded) --------------------------------------
