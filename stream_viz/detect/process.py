@@ -69,6 +69,7 @@ SETTINGS: dict[str, Any] = {
     "growth_min_samples": 4,
     "startup_s": 120.0,
     "cpu_hold_s": 3.0,
+    "reconfigure_cpu_s": 4.0,
     "burst_max_s": 10.0,
     "burst_margin": 1.5,
 }
@@ -76,6 +77,7 @@ SETTINGS: dict[str, Any] = {
 # The attributes a rise is looked for in: (θ attribute, the setting of its floor, symptom, unit).
 RESOURCES = (("cpu_percent", "cpu_min_rise", "cpu", "%"), ("rss_mb", "rss_min_rise_mb", "memory", " MB"))
 _CPU = SCHEMAS["process"].index("cpu_percent")
+EXECUTOR = "executor_cpu_percent"
 _RSS = SCHEMAS["process"].index("rss_mb")
 
 
@@ -122,7 +124,12 @@ def _symptoms(ctx: PluginContext, proc: str, alerting: set, changes: bool) -> li
     nodes = ctx.nodes_of(proc, by_pid=True) if changes else ()
     for attr, floor, what, unit in RESOURCES:
         seen = excess(ctx, proc, attr, ctx.settings[floor], alerting, since=learnt_since(ctx, proc, attr))
-        if reconfigured(ctx, proc, attr, nodes, seen):
+        # a parameter takes effect at the node's next callback: the CPU it costs shows within two
+        # samples, and on the executor's thread; memory may grow for a while (a finer map filled in)
+        within = ctx.settings["reconfigure_cpu_s"] if what == "cpu" else None
+        if what == "cpu" and _beside_executor(ctx, proc, seen):
+            nodes = ()
+        if reconfigured(ctx, proc, attr, nodes, seen, within):
             seen = None  # a parameter change brought it: learnt anew from the change
         if what == "cpu":
             seen = _beyond_bursts(ctx, proc, seen)
@@ -134,6 +141,21 @@ def _symptoms(ctx: PluginContext, proc: str, alerting: set, changes: bool) -> li
     if rate is not None:
         found.append(("memory_growth", f"memory growing {rate:.1f} MB/s", {"mb_per_s": rate}))
     return found
+
+
+def _beside_executor(ctx: PluginContext, proc: str, seen: tuple[float, float, bool] | None) -> bool:
+    """True when a CPU rise of the process is known to be beside its executor: the one thread
+    that runs its callbacks (``executor_cpu_percent``, read for a single-threaded executor) rose
+    by less than half as much, over the same window. A parameter change works through the
+    node's callbacks, so such a rise (a runaway worker thread) is not the change's."""
+    if seen is None or not seen[2]:
+        return False
+    now = ctx.value(proc, EXECUTOR)
+    _, before = ctx.past(proc, EXECUTOR, last=int(ctx.settings["window"]))
+    before = before[np.isfinite(before)]
+    if now != now or len(before) == 0:  # not read (a multi-threaded executor): not known
+        return False
+    return now - float(np.median(before)) < 0.5 * (seen[0] - seen[1])
 
 
 def _beyond_bursts(ctx: PluginContext, proc: str,

@@ -52,13 +52,14 @@ def relearn_from(ctx: Any, member: str, attr: str, at: float) -> None:
 
 @reads_settings(*RECONFIGURE_SETTINGS)
 def reconfigured(ctx: Any, member: str, attr: str, nodes: Iterable[str],
-                 seen: tuple[float, float, bool] | None) -> bool:
+                 seen: tuple[float, float, bool] | None, within: float | None = None) -> bool:
     """Return True when `excess` ``seen`` of ``member``'s ``attr`` is a rise a parameter change of
     one of ``nodes`` brought: its baseline is then learnt anew from the change.
 
-    The rise must begin (its first exceeding sample) after the change and within
-    ``reconfigure_s`` of it; each change counts once. Call every sample, with `param_changes`
-    called first in the same check; ``excess`` takes `learnt_since` as its ``since``.
+    The rise must begin (its first exceeding sample) after the change and within ``within`` s of
+    it (default ``reconfigure_s``); each change counts once. Call every sample, with
+    `param_changes` called first in the same check; ``excess`` takes `learnt_since` as its
+    ``since``.
     """
     key = (member, attr)
     began = ctx.state.setdefault("_rise_began", {})
@@ -69,7 +70,8 @@ def reconfigured(ctx: Any, member: str, attr: str, nodes: Iterable[str],
     changes = ctx.state.get("_param_changes", {})
     at = max((changes[n] for n in nodes if n in changes), default=None)
     relearn = ctx.state.setdefault("_relearn", {})
-    prompt = at is not None and at <= start <= at + ctx.settings["reconfigure_s"]
+    window = ctx.settings["reconfigure_s"] if within is None else within
+    prompt = at is not None and at <= start <= at + window
     if not prompt or relearn.get(key, -float("inf")) >= at:
         return False
     relearn_from(ctx, member, attr, at)

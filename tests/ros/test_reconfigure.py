@@ -181,3 +181,63 @@ def test_a_node_tuned_to_use_more_cpu_is_its_new_normal_and_a_hog_is_not(childre
         assert "node:/camera" in {a.member for a in cpu_alerts}, mon.store.alerts()
     finally:
         mon.close()
+
+
+# A camera working ~3 % of a core in its callback; SIGUSR1: its exposure is set (a parameter event,
+# as from `ros2 param set`), and 1 s later a runaway worker thread burns a core beside its executor.
+RUNAWAY = HEAD + """
+import hashlib, threading
+from rclpy.parameter import Parameter
+n = Node("camera")
+n.declare_parameter("exposure", 0.01)
+pub = n.create_publisher(String, "/image", 10)
+flag, step = [False], [0]
+def burn():
+    buf = b"x" * 2**20
+    while True:
+        hashlib.sha256(buf).digest()  # releases the GIL: the executor goes on
+def tick():
+    end = time.thread_time() + 0.003
+    while time.thread_time() < end:
+        pass
+    pub.publish(String(data="frame"))
+    if flag[0]:
+        step[0] += 1
+        if step[0] == 1:
+            n.set_parameters([Parameter("exposure", value=0.02)])
+        elif step[0] == 10:
+            threading.Thread(target=burn, daemon=True).start()
+n.create_timer(0.1, tick)
+signal_ = __import__("signal")
+signal_.signal(signal_.SIGUSR1, lambda *a: flag.__setitem__(0, True))
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+
+def test_a_cpu_rise_beside_the_executor_is_no_parameter_change_s(children, tmp_path):
+    # A parameter takes effect in the node's callbacks: a rise on another thread, a second after
+    # a change, is a hog (the rule's unit test: test_plugins.py).
+    camera = children.python(RUNAWAY, name="camera")
+    cfg = tmp_path / "stream-viz.toml"
+    cfg.write_text(CONFIG)
+    mon = Monitor(load_config(cfg), db=tmp_path / "alerts.sqlite", viewer="none",
+                  domain_id=int(children.env["ROS_DOMAIN_ID"]), progress=Progress(open(os.devnull, "w")))
+    try:
+        wait_for(lambda: (mon.step(), "node:/camera" in mon.seen)[1], timeout=20, period=1.0)
+        _observe(mon, 15.0)  # the CPU baseline learnt
+        _no_alerts(mon, "a camera at work")
+        sample, seen = mon.collector.sample, []
+        mon.collector.sample = lambda: (s := sample(), seen.extend(s.events))[0]  # the events it read
+        t_fault = time.time()
+        os.kill(camera.pid, signal.SIGUSR1)
+        _observe(mon, 12.0)
+        pid = mon.seen.nodes["node:/camera"]["pid"]
+        executor = mon.shadow.history.values(f"process:{pid}", last=5)[:, SCHEMAS["process"].index(
+            "executor_cpu_percent")]
+        assert max(executor) < 25.0, executor  # the rise was beside the executor
+        assert any(e.kind == "param" and e.member == "node:/camera" for e in seen), seen
+        cpu_alerts = [a for a in mon.store.alerts() if a.t > t_fault and a.plugin == "process_resources"]
+        assert "node:/camera" in {a.member for a in cpu_alerts}, mon.store.alerts()
+    finally:
+        mon.close()

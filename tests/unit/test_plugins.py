@@ -19,11 +19,13 @@ RNG = np.random.default_rng(7)
 
 
 def model(rate=10.0, latency=2.0, jitter=1.0, drops=0.0, cpu=5.0, rss=80.0, alive=True, recent=None,
-          age=None, subscribers=1):
-    """camera (pid 100) -> /img -> detector (pid 200); ``recent``/``age``: the fast rate signals."""
+          age=None, subscribers=1, executor=None):
+    """camera (pid 100) -> /img -> detector (pid 200); ``recent``/``age``: the fast rate signals;
+    ``executor``: the camera process's executor thread's CPU."""
     G = new_graph()
+    ex = {} if executor is None else {"executor_cpu_percent": executor}
     add_member(G, "process:100", pid=100, alive=alive,
-               theta=make_theta("process", {"cpu_percent": cpu, "rss_mb": rss, "threads": 4}))
+               theta=make_theta("process", {"cpu_percent": cpu, "rss_mb": rss, "threads": 4, **ex}))
     add_member(G, "process:200", pid=200, alive=True,
                theta=make_theta("process", {"cpu_percent": 3.0, "rss_mb": 60.0, "threads": 4}))
     add_member(G, "node:/camera", pid=100, alive=alive)
@@ -1031,6 +1033,23 @@ def test_process_resources_a_rise_a_parameter_change_brought_is_the_new_normal()
         frames = [(float(t), model(cpu=c), [events[t]] if t in events else [])
                   for t, c in enumerate(cpu[:36])]
         assert drive("process_resources", frames)[:1] == [(34.0, "node:/camera", "warn")], events
+    # A CPU rise shows within two samples of the change that brings it (reconfigure_cpu_s, 4 s):
+    # one 5.5 s later is a hog's, though a memory step as late is still the change's (a finer map
+    # filled in takes a while).
+    late = {25: Event(24.5, "param", "node:/camera", "info", "x")}
+    frames = [(float(t), model(cpu=c), [late[t]] if t in late else []) for t, c in enumerate(cpu[:36])]
+    assert drive("process_resources", frames)[:1] == [(34.0, "node:/camera", "warn")]
+    rss = [80.0 + RNG.normal(0, 0.2) for _ in range(30)] + [200.0 + RNG.normal(0, 0.2) for _ in range(6)]
+    frames = [(float(t), model(rss=r), [late[t]] if t in late else []) for t, r in enumerate(rss)]
+    assert drive("process_resources", frames) == []
+    # With its single executor's thread read: a rise on that thread is the change's; the same rise
+    # beside it (a runaway worker thread, the executor at its usual 4 %) is not.
+    inside = [(float(t), model(cpu=c, executor=c - 1.0), [change] if t == 30 else [])
+              for t, c in enumerate(cpu)]
+    assert drive("process_resources", inside) == []
+    beside = [(float(t), model(cpu=c, executor=noisy(4.0, 0.2)), [change] if t == 30 else [])
+              for t, c in enumerate(cpu[:36])]
+    assert drive("process_resources", beside)[:1] == [(34.0, "node:/camera", "warn")]
 
 
 def test_process_resources_memory_growth():
