@@ -35,7 +35,7 @@ from stream_viz.rca.cooccurrence import cooccurrence
 from stream_viz.rca.episodes import Evidence
 from stream_viz.rca.hosts import lift_hosts
 from stream_viz.rca.settings import RcaSettings
-from stream_viz.rca.symptoms import NodeView, Symptoms, collect_symptoms, gone_members, node_views
+from stream_viz.rca.symptoms import NodeView, Symptoms, _after, collect_symptoms, gone_members, node_views
 from stream_viz.rca.timelag import LagDistribution
 from stream_viz.records import Alert
 
@@ -122,7 +122,7 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
     # A symptom that began before the candidate's own (beyond the tolerance) is not its effect.
     onset = ctx.views[c].onset if c in ctx.views else np.inf
     since = onset - settings.tolerance if np.isfinite(onset) else -np.inf  # metric evidence only: no time
-    explained = [m for m in cost if m in s.times and s.onset[m] >= since]
+    explained = [m for m in cost if m in s.times and s.onset[m] >= since and not _before(ctx, c, m)]
     coverage = len(explained) / len(s.times) if s.times else 0.0
     first = ctx.first or s.first
     own = ctx.views[c].own if c in ctx.views else []
@@ -155,6 +155,15 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
         float(np.mean(lag)) if lag else None,
         coverage,
     )
+
+
+def _before(ctx: Context, c: str, m: str) -> bool:
+    """True when ``m``'s symptom is known to have begun before the candidate ``c``'s own did, by
+    their alerts' own word (`symptoms._after`: a stamp, a silence's last message): an effect
+    comes after its cause, however they were sampled together."""
+    v, s = ctx.views.get(c), ctx.symptoms
+    latest = min(s.began_by.get(m, np.inf), s.vague.get(m, np.inf))
+    return v is not None and _after(v.began, v.vague, latest, ctx.settings.tolerance)
 
 
 def _cheap(ctx: Context, v: NodeView) -> float:

@@ -164,3 +164,18 @@ def test_a_node_s_own_output_reached_round_a_loop_is_no_cause_of_it():
     add_member(G, "node:/elsewhere")  # a symptom off the loop: the walk round it goes on
     v = views(G, [al(SP, "topic_rate", 10), al("node:/elsewhere", "rosout", 10)])
     assert v[CTRL].upstream == 0.0 and v[CTRL].ht == v[CTRL].anomaly > 0
+
+
+def test_a_candidate_does_not_explain_a_symptom_stamped_before_its_own_began():
+    from stream_viz.rca.trajectories import make_context, trajectory_of
+
+    # The setpoints stopped by 8.65 and the mission logged at 9.3; one sample (t=10) holds both.
+    # Round the loop the setpoints are downstream of the mission, but began before its log did.
+    silence = al(SP, "topic_rate", 10, since=8.6, since_within=0.05)
+    ctx = make_context(loop(), [silence, al(MISSION, "rosout", 10, since=9.3)], RcaSettings())
+    assert trajectory_of(ctx, MISSION).explained == [MISSION]
+    assert SP in trajectory_of(ctx, CTRL).explained
+    # A log within the slack of two clocks, or without a stamp, may still have come first.
+    for log in (al(MISSION, "rosout", 10, since=8.8), al(MISSION, "rosout", 10)):
+        ctx = make_context(loop(), [silence, log], RcaSettings())
+        assert sorted(trajectory_of(ctx, MISSION).explained) == [MISSION, SP]
