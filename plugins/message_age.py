@@ -53,6 +53,10 @@ class MessageAge(Plugin):
     which is no delay. Stamps that went back less, mid-stream, are a clock that jumped (a
     device's clock reset by a brown-out): judged as any rise of the age, the jump said.
 
+    Its normal age is learnt from ``min_messages`` messages at least (samples holding the same
+    message, on a slow or aperiodic topic, say nothing new): the blind AUV's USBL fixes, stamped
+    0.2–0.6 s before they arrive every 2–6 s, were judged against their first two.
+
     A skew the topic shows within ``learn_s`` of its first stamped message, and keeps, is its
     normal (a device that stamps with its own clock, a recording's old stamps): no alert, and a
     plausible standing skew (stamps ahead) is checked for staleness against its own baseline, the
@@ -75,6 +79,7 @@ class MessageAge(Plugin):
         "implausible_s": 3600.0,
         "learn_s": 10.0,
         "loop_share": 0.3,
+        "min_messages": 8,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -89,6 +94,7 @@ class MessageAge(Plugin):
             back = float(e.data.get("back_s", 0.0))
             if looped(back, e.t - stamped.get(e.member, e.t), s["loop_share"]):
                 relearn_from(ctx, e.member, "stamp_age_ms", e.t)  # the age is learnt anew from then
+                ctx.state.setdefault("messages", {}).pop(e.member, None)
                 alerting.discard((e.member, "stamp_age_ms"))
                 held(ctx.state, e.member, False, ctx.t)
                 stamped[e.member] = e.t
@@ -102,6 +108,9 @@ class MessageAge(Plugin):
             stamped.setdefault(topic, ctx.t)
             newest = ctx.value(topic, "age_s")
             fresh = math.isnan(newest) or newest < since  # a message since the last sample
+            if fresh:
+                counted = ctx.state.setdefault("messages", {})
+                counted[topic] = counted.get(topic, 0) + 1
             ahead, implausible = age < -s["skew_ms"], age > s["implausible_s"] * 1000.0
             skew = "ahead" if ahead else "implausible" if implausible else None
             if standing(ctx.state, topic, ctx.t, skew, s["learn_s"]):
@@ -118,6 +127,8 @@ class MessageAge(Plugin):
     @staticmethod
     def _stale(ctx: PluginContext, topic: str, age: float, fresh: bool, alerting: set) -> Iterator[Alert]:
         s = ctx.settings
+        if ctx.state.get("messages", {}).get(topic, 0) < s["min_messages"]:
+            return  # a USBL fix every 4 s is in four samples: its normal age is learnt from messages
         since = learnt_since(ctx, topic, "stamp_age_ms")
         seen = excess(ctx, topic, "stamp_age_ms", s["min_rise_ms"], alerting, since=since)
         if seen is not None:

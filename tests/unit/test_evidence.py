@@ -658,6 +658,24 @@ def test_message_age_stale_against_its_own_baseline():
     assert drive("message_age", once) == []
 
 
+def test_message_age_learns_a_slow_topic_s_normal_from_its_messages_not_its_samples():
+    # A USBL fix every 4 s (each in four 1 s samples), stamped 0.2-0.6 s before it arrives: after
+    # two fixes of 222 and 276 ms, three of ~490 ms are its spread, not stale data.
+    # (t, age ms, age of the newest s) as the AUV's monitor sampled them (none between fixes
+    # 3 s apart: nothing in its window).
+    seen = [(16, 222, 0.7), (17, 222, 1.7), (18, 222, 2.7), (21, 276, 0.1), (22, 276, 1.1), (23, 276, 2.1),
+            (24, 484, 0.9), (25, 484, 1.9), (26, 492, 0.5), (27, 500, 1.5), (28, 500, 2.5), (30, 462, 0.8),
+            (31, 462, 1.8), (32, 462, 2.8), (35, 465, 0.5), (36, 465, 1.5), (37, 465, 2.5), (41, 416, 1.0),
+            (42, 416, 2.0), (43, 416, 3.0), (46, 285, 0.7), (47, 285, 1.7), (50, 411, 0.4), (51, 411, 1.4)]
+    frames = [_aged(float("nan"), t, newest=float("nan")) for t in range(5, 16)]  # known, no fix yet
+    frames += [_aged(float(ms), t, newest=newest, young=float(ms)) for t, ms, newest in seen]
+    assert drive("message_age", frames) == []
+    assert drive("message_age", frames, settings={"min_messages": 1})[:1] == [(26.0, "topic:/img", "warn")]
+    # Once eight fixes are in, 2.5 s old ones are stale.
+    late = frames + [_aged(2500.0, t, newest=0.1 + t % 4, young=2500.0) for t in range(52, 68)]
+    assert [a.data["symptom"] for a in drive_alerts("message_age", late)][:1] == ["stale"]
+
+
 def test_message_age_names_the_publishers_whose_own_stamps_are_late():
     # /img from the camera and a replay node: the camera's stamps froze, the replay's are on time
     def two(t, camera_ms):
