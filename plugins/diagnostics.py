@@ -6,10 +6,12 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.startup import standing
+from stream_viz.detect.startup import STARTUP_S, standing, starting
 from stream_viz.records import SEVERITY_RANK as RANK
 from stream_viz.records import Alert, Event
 
+INF = float("inf")
+TRANSITION_GRACE_S = 2.0  # a status stops within this of its node's transition (a 1 Hz updater)
 # DiagnosticStatus levels: OK=0, WARN=1, ERROR=2, STALE=3.
 _BY_NUMBER = {0: "ok", 1: "warn", 2: "error", 3: "stale"}
 
@@ -45,6 +47,13 @@ class Diagnostics(Plugin):
     themselves: a tank or battery running low until refilled, a temperature peak); an ERROR or a
     STALE at once.
 
+    A status in its node's bring-up (the process's first ``startup_s``: a filter waiting for its
+    first GPS fix, a driver opening its device) is not news, as `rosout`'s lines are not; one that
+    holds alerts after it. So is a status of a node not discovered yet in the monitor's own first
+    ``startup_s`` (mapped to nothing: monitor and robot started together). A STALE of a node
+    whose lifecycle transition came as its statuses stopped (deactivated: its updater stops, and
+    an aggregator says STALE) is the transition's.
+
     Event plugins alert whether or not the member is watched (``watched_only`` to change it):
     a reported fault is evidence, not an attribute to screen.
     """
@@ -52,22 +61,31 @@ class Diagnostics(Plugin):
     name = "diagnostics"
     kinds = ("node",)
     settings: ClassVar[dict[str, Any]] = {"stale_severity": "warn", "watched_only": False, "hardware": [],
-                                          "learn_s": 10.0, "warn_hold_s": 60.0}
+                                          "learn_s": 10.0, "warn_hold_s": 60.0, "startup_s": STARTUP_S}
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         s = ctx.settings
         worst: dict[str, tuple[str, str, list[dict[str, Any]]]] = {}
+        changed = _lifecycle(ctx)
+        first = ctx.state.setdefault("first_t", ctx.t)  # the monitor's start: who says what not known yet
+        live = ctx.state.setdefault("live", {})  # node -> when it last published a status of its own
         for e in ctx.events:
             if e.kind != "diag":
                 continue
             level = diag_level(e)
             standing = _standing(ctx, e, level, s["learn_s"])  # every status: when it was first seen
             held = _warned_for(ctx, e, level)  # every status: how long it has been WARN
+            member, by = _mapped(ctx, e)
+            if level != "stale" and e.data.get("publisher") == member:  # not an aggregator's copy
+                live[member] = max(e.t, live.get(member, e.t))
             if level == "ok" or (level == "warn" and (standing or held < s["warn_hold_s"])):
                 continue
-            member, by = _mapped(ctx, e)
             if s["watched_only"] and member not in ctx.watch:
                 continue
+            if starting(ctx, member, e.t, s["startup_s"]) or (by == "none" and e.t - first < s["startup_s"]):
+                continue  # its bring-up: waiting for a fix, a device, a peer (as rosout's lines)
+            if level == "stale" and changed.get(member, -INF) >= live.get(member, INF) - TRANSITION_GRACE_S:
+                continue  # deactivated as its statuses stopped: an aggregator's STALE is the transition's
             sev = s["stale_severity"] if level == "stale" else level
             sev = sev if sev in RANK else "warn"
             prev_sev, prev_by, statuses = worst.get(member, ("info", by, []))
@@ -81,6 +99,20 @@ class Diagnostics(Plugin):
             more = f" (+{len(texts) - 3} more)" if len(texts) > 3 else ""
             yield ctx.alert(member, sev, "diagnostics " + "; ".join(texts[:3]) + more + f" (mapped by {by})",
                             symptom="diagnostics", statuses=statuses, mapped_by=by)
+
+
+def _lifecycle(ctx: PluginContext) -> dict[str, float]:
+    """Node → the time of its newest lifecycle transition (a message on its ``…/transition_event``
+    topic), kept across samples."""
+    newest: dict[str, float] = ctx.state.setdefault("transitions", {})
+    topics = ctx.structural(lambda: [m for m in ctx.members("topic") if m.endswith("/transition_event")],
+                            key="lifecycle")
+    for topic in topics:
+        age = ctx.value(topic, "age_s")
+        if age == age:
+            for node in ctx.publishers(topic):
+                newest[node] = max(ctx.t - age, newest.get(node, -INF))
+    return newest
 
 
 def _standing(ctx: PluginContext, e: Event, level: str, learn_s: float) -> bool:

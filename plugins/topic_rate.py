@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterator
 from typing import Any, ClassVar
 
@@ -26,6 +27,7 @@ from stream_viz.records import Alert
 
 Baseline = tuple[float, float, int] | None
 TRANSITIONS_KEPT = 8  # per node: enough for the changes around one quiet
+_NUMBER = re.compile(r"[-+]?\d[\d.,:]*")  # a reading in a status's message, not its mode
 STATE_GAP_S = 10.0  # a latched topic's message this long after its last is a state published on change
 EXECUTOR_CPU = "executor_cpu_percent"
 INERT_AFTER = 2  # changes of a parameter in a row that moved no rate: one can be missed (timing)
@@ -383,9 +385,12 @@ def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhy
     """True when every publisher of ``topic`` has an input that went quiet just before it did.
 
     An input counts when its last message came at most ``input_grace_s`` before the topic's last
-    one (data computed from it, or forwarded until a mux's timeout) and it is quiet by its own
-    base limit now. The topic's quiet is then the input's: judged on the input, as a symptom or
-    as healthy (a burst ending, a lifecycle transition), never twice. Not an input published in
+    one (data computed from it, or forwarded until a mux's timeout), or before its next was due
+    (one of its periods after its last: a node passing on every other image), and it is quiet by
+    its own base limit now; while its quiet is shorter than that, the topic waits for it (its own
+    last message came first, so its limit comes first too). The topic's quiet is then the
+    input's: judged on the input, as a symptom or as healthy (a burst ending, a lifecycle
+    transition), never twice. Not an input published in
     the node's own process when that process's single-threaded executor has stopped
     (`_starved_together`), unless the input's quiet has a cause of its own outside that stall.
     """
@@ -395,14 +400,21 @@ def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhy
     s, grace = ctx.settings, ctx.settings["input_grace_s"]
     seen = set() if seen is None else seen  # each topic asked once: the walk stays linear
     seen.add(topic)
+    # a node that passes on every n-th input (an image decimated to half its rate) stops with its
+    # input, whose last messages may come up to one of its own periods after its last one
+    due = r.newest + (1.0 / r.rate if r.rate > 0 else 0.0)
 
     def stopped(node: str) -> bool:
         for name in ctx.subscribed_topics(node):
             i = rhythms.get(name)
             if name in seen or i is None or i.newest is None:
                 continue
-            stopped_at = r.newest - grace <= i.newest <= r.newest
-            if not (stopped_at and ctx.t - i.newest >= _base_limit(s, _ref_hz(i, None))):
+            if not r.newest - grace <= i.newest <= due:
+                continue
+            if ctx.t - i.newest < _base_limit(s, _ref_hz(i, None)):
+                # quiet with it, not judged yet (the output's last message came first): after it
+                if not _starved_together(ctx, topic, r, node, name):
+                    return True
                 continue
             if not _starved_together(ctx, topic, r, node, name) \
                     or _healthy_quiet(ctx, name, i, transitions) \
@@ -636,10 +648,31 @@ def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
                 for node in ctx.publishers(topic):
                     note(node, at)
                     ctx.state.setdefault("state_changes", {})[node] = at  # a new mode: `_reconfigured`
+    said = ctx.state.setdefault("modes_said", {})
     for e in ctx.events:
         if e.kind == "goal":
             note(e.member, e.t)
+        elif e.kind == "diag" and e.member.startswith("node:") and e.member == _publisher(e):
+            mode = announced_mode(e)
+            before = said.get((e.member, e.data.get("name")))
+            said[(e.member, e.data.get("name"))] = mode
+            if mode is not None and before is not None and mode != before:
+                note(e.member, e.t)
     return last
+
+
+def announced_mode(e: Any) -> str | None:
+    """The mode a node's own OK status says it is in (``camera_status: OK idle``; numbers left
+    out, so a reading that changes is no new mode), or None for a status not OK."""
+    name = str(e.data.get("name", ""))
+    if e.data.get("level") != 0:
+        return None
+    text = e.text.removeprefix(f"{name}:").strip().removeprefix("OK").strip()
+    return _NUMBER.sub("#", text)
+
+
+def _publisher(e: Any) -> str | None:
+    return e.data.get("publisher")
 
 
 def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: float,

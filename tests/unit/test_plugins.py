@@ -452,6 +452,28 @@ def test_topic_rate_a_goal_ending_by_the_last_message_explains_the_quiet():
     assert silences[:1] == [(22.5, "topic:/img", "error")]
 
 
+def test_topic_rate_a_mode_the_node_announces_in_its_own_status_explains_the_quiet():
+    # /camera captures only while low over the seabed; its own status says "capturing", then, at
+    # 20.3 (its 1 Hz updater), "idle": its output stopped at 19.9 for a new mode, no silence.
+    msgs = [i / 10 for i in range(200)]
+
+    def said(t, words, level=0, by="node:/camera"):  # its status of 0.2 s before each sample
+        text = f"camera_status: {'OK' if level == 0 else 'ERROR'} {words(t - 0.2)}"
+        return [Event(t - 0.2, "diag", "node:/camera", "info", text,
+                      {"name": "camera_status", "level": level, "publisher": by})]
+
+    idle = [(t, model(**seen(msgs, t)), said(t, lambda u: "capturing" if u < 20 else "idle"))
+            for t in HALF[:60]]
+    assert drive("topic_rate", idle) == []
+    # A reading that changes ("12.0 fps" -> "0.0 fps") is no new mode; nor is a status another
+    # node publishes about it (an aggregator's copy), nor one no longer OK: a silence each time.
+    for words, kw in ((lambda u: f"{4.0 if u < 20 else 0.0:.1f} fps", {}),
+                      (lambda u: "capturing" if u < 20 else "idle", {"by": "node:/agg"}),
+                      (lambda u: "capturing" if u < 20 else "no frames", {"level": 2})):
+        frames = [(t, model(**seen(msgs, t)), said(t, words, **kw)) for t in HALF[:60]]
+        assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/img", "error")], kw
+
+
 def test_topic_rate_a_feeding_node_s_goal_ending_after_the_quiet_began_explains_nothing():
     # /detector computes /det from /camera's /img and stops at 19.95 while /img goes on; /camera
     # serves an action. Its goal ending first (19.8) is why /det stopped: healthy. Ending 0.75 s
@@ -553,6 +575,16 @@ def test_topic_rate_a_quiet_that_follows_its_inputs_is_the_inputs():
     # An input that stopped long before /det did (> input_grace_s) does not explain it.
     frames = [(t, chain_model(img[:120], det, t, latched_img=True), []) for t in HALF[:40]]
     assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/det", "error")]
+    # /det is every other /img (5 Hz of 10): /img's last message, 19.9, came after /det's, 19.85,
+    # and before /det's next was due: /det stops with it, its silence is /img's.
+    halved = [m + 0.05 for m in img[::2]]
+    frames = [(t, chain_model(img, halved, t), []) for t in HALF[:40]]
+    assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img"}
+    # Every fifth (2 Hz): /det's last, 19.55, is 0.35 s before /img's, so /det passes its limit
+    # first (at 21.25 /img is quiet 1.35 s of its 1.5): it waits for its input to be judged.
+    fifth = [m + 0.05 for m in img[::5]]
+    frames = [(t + 0.25, chain_model(img, fifth, t + 0.25), []) for t in range(40)]
+    assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img"}
 
 
 def one_thread_model(img, det, t, main, running=1, latched_img=False):
@@ -1338,6 +1370,45 @@ def test_diagnostics_a_warning_that_came_and_went_by_itself_is_shown_once():
                    settings={"warn_hold_s": 0.0})
     assert [t for t, _, sev in alerts if sev == "warn"] == [float(t) for t in range(20, 30)]
     assert [t for t, _, sev in alerts if sev == "error"] == [float(t) for t in range(60, 65)]
+
+
+def test_diagnostics_in_a_node_s_bring_up_are_not_news():
+    # The filter's process started at 0: "ERROR waiting for GPS" at 7 s is its bring-up, as a line
+    # logged then; still ERROR at 11 s, it alerts.
+    G = model()
+    G.nodes["process:100"]["create_time"] = 0.0
+    frames = [(float(t), G, [Event(float(t), "diag", "node:/camera", "error", "nav: ERROR WAITING_FOR_GPS",
+                                   {"name": "nav", "level": 2})]) for t in range(5, 13)]
+    assert drive("diagnostics", frames) == [(10.0, "node:/camera", "error"), (11.0, "node:/camera", "error"),
+                                            (12.0, "node:/camera", "error")]
+    # A status of a node not discovered yet (mapped to nothing) in the monitor's own first 10 s:
+    # the robot starting with it; later, such a status alerts on the topic as before.
+    def lost(t):
+        return [Event(t, "diag", "topic:/diagnostics", "error", "nav: ERROR lost",
+                      {"name": "nav", "level": 2, "mapped_by": "none"})] if t in (3.0, 12.0) else []
+    unknown = [(float(t), model(), lost(float(t))) for t in range(0, 13)]
+    assert drive("diagnostics", unknown) == [(12.0, "topic:/diagnostics", "error")]
+
+
+def test_diagnostics_an_aggregator_s_stale_after_its_node_was_deactivated_is_the_transition_s():
+    # /camera's own status (1 Hz) until 19.5; deactivated at 20.0; the aggregator (/agg) says its
+    # copy is STALE from 25 s. With the transition: no alert; without one, or with one long before
+    # its statuses stopped: STALE alerts (warn).
+    def frames(transitions):
+        out = []
+        for t in range(10, 30):
+            ev = [Event(t - 0.5, "diag", "node:/camera", "info", "cam: OK", {"name": "cam", "level": 0,
+                                                                              "publisher": "node:/camera"})]
+            ev = ev if t < 20 else []
+            ev += [Event(float(t), "diag", "node:/camera", "warn", "/robot/cam: STALE",
+                         {"name": "/robot/cam", "level": 3 if t >= 25 else 0, "publisher": "node:/agg"})]
+            out.append((float(t), lifecycle_model(transitions, float(t)), ev))
+        return out
+
+    assert drive("diagnostics", frames([20.0])) == []
+    stale = [(float(t), "node:/camera", "warn") for t in range(25, 30)]
+    assert drive("diagnostics", frames([])) == stale
+    assert drive("diagnostics", frames([5.0])) == stale
 
 
 def test_rosout_levels():
