@@ -21,7 +21,7 @@ from stream_viz.monitor import Monitor
 from stream_viz.progress import Progress
 from stream_viz.testing import wait_for
 from stream_viz.viz import paths
-from tests.ros.test_dynamics import CONFIG, HEAD, _no_alerts, _observe, _plugin
+from tests.ros.test_dynamics import CONFIG, HEAD, _monitor, _no_alerts, _observe, _plugin
 from tests.viz.rrd import rows
 
 pytestmark = pytest.mark.ros
@@ -159,10 +159,7 @@ def on_set(params):
 
 def test_a_node_tuned_to_use_more_cpu_is_its_new_normal_and_a_hog_is_not(children, tmp_path):
     encoder = children.python(ENCODER, name="encoder")
-    cfg = tmp_path / "stream-viz.toml"
-    cfg.write_text(CONFIG)
-    mon = Monitor(load_config(cfg), db=tmp_path / "alerts.sqlite", viewer="none",
-                  domain_id=int(children.env["ROS_DOMAIN_ID"]), progress=Progress(open(os.devnull, "w")))
+    mon = _monitor(children, tmp_path)
     try:
         wait_for(lambda: (mon.step(), "node:/camera" in mon.seen)[1], timeout=20, period=1.0)
         # quality 0 -> 0.4 after the CPU baseline is learnt: ~2 % -> ~40 % of a core, for good
@@ -219,10 +216,7 @@ def test_a_cpu_rise_beside_the_executor_is_no_parameter_change_s(children, tmp_p
     # A parameter takes effect in the node's callbacks: a rise on another thread, a second after
     # a change, is a hog (the rule's unit test: test_plugins.py).
     camera = children.python(RUNAWAY, name="camera")
-    cfg = tmp_path / "stream-viz.toml"
-    cfg.write_text(CONFIG)
-    mon = Monitor(load_config(cfg), db=tmp_path / "alerts.sqlite", viewer="none",
-                  domain_id=int(children.env["ROS_DOMAIN_ID"]), progress=Progress(open(os.devnull, "w")))
+    mon = _monitor(children, tmp_path)
     try:
         wait_for(lambda: (mon.step(), "node:/camera" in mon.seen)[1], timeout=20, period=1.0)
         _observe(mon, 15.0)  # the CPU baseline learnt
