@@ -182,7 +182,7 @@ class NodeView:
     ``exited``: when its process was seen to die; ``executor_stopped``: an output of its stopped
     with its executor (`Symptoms`). ``began``/``began_by``/``vague``: the earliest
     and latest its symptoms can have begun by their alerts' word, and the first time of those that
-    do not say (`Symptoms`): what `_after` compares.
+    do not say (`Symptoms`): what `began_after` compares.
     """
 
     member: str
@@ -475,7 +475,7 @@ def _upstream(
     all does not end the search: a fault crosses a node that raised nothing (its output merely
     went on late), so the walk goes on upstream through silent members, up to
     ``max_trajectory`` hops, each silent node passed weakening what is found behind it by
-    `SILENT_DECAY`. A cause whose symptom is known to have begun after ``n``'s (`_after`: a log
+    `SILENT_DECAY`. A cause whose symptom is known to have begun after ``n``'s (`began_after`: a log
     line stamped after the next message of ``n``'s silent output was due) does not count.
     ``sources``: the members that can excuse at all (symptoms, candidates, evidence); the walk
     ends once it has passed every one of them. ``fellows``: nodes that stalled with ``n`` in one
@@ -542,26 +542,26 @@ def _excuse(
     parents: dict[str, list[str]] | None = None,
 ) -> float:
     """How much the cause ``p`` of ``n`` was anomalous at some time in ``[lo, hi]``, not known to
-    have begun after ``latest`` (``when``: lo, hi, latest, tolerance; `_after`); a node of
+    have begun after ``latest`` (``when``: lo, hi, latest, tolerance; `began_after`); a node of
     ``n``'s process ``home`` counts with its own changes only. ``parents``: `causal.causes_in`'s
     memo."""
     lo, hi, latest, tolerance = when
     if is_node(G, p):  # a server it calls, or a node further upstream
         pv = views.get(p)
         fellow = home is not None and process_of_node(G, p) == home
-        if pv is None or pv.implied or _after(pv.began, pv.vague, latest, tolerance):
+        if pv is None or pv.implied or began_after(pv.began, pv.vague, latest, tolerance):
             return 0.0
         return pv.active(lo, hi, own=fellow)
     worst = 0.0
     if p in s.anomaly and overlaps(s.episodes[p], lo, hi) \
-            and not _after(s.began.get(p, INF), s.vague.get(p, INF), latest, tolerance):
+            and not began_after(s.began.get(p, INF), s.vague.get(p, INF), latest, tolerance):
         worst = s.anomaly[p]
     e = ev_passive.get(p)
     if e is not None and e.meets(lo, hi):
         worst = max(worst, e.strength)
     for q in publishers(G, p, parents):
         qv = views.get(q)
-        if q == n or qv is None or qv.implied or _after(qv.began, qv.vague, latest, tolerance):
+        if q == n or qv is None or qv.implied or began_after(qv.began, qv.vague, latest, tolerance):
             continue
         if home is not None and process_of_node(G, q) == home:
             own = max(qv.own_direct, qv.own_evidence)
@@ -574,7 +574,7 @@ def _excuse(
 STAMPED_SLACK = 0.25  # s: two stamped starts, from the clocks of processes on one host
 
 
-def _after(began: float, vague: float, latest: float, tolerance: float) -> bool:
+def began_after(began: float, vague: float, latest: float, tolerance: float) -> bool:
     """True when a symptom is known to have begun after ``latest`` (+ `STAMPED_SLACK`): its
     alerts say when it began (``began``), and those that do not (first at ``vague``, begun up to
     ``tolerance`` before) came later too."""

@@ -35,7 +35,14 @@ from stream_viz.rca.cooccurrence import cooccurrence
 from stream_viz.rca.episodes import Evidence
 from stream_viz.rca.hosts import lift_hosts
 from stream_viz.rca.settings import RcaSettings
-from stream_viz.rca.symptoms import NodeView, Symptoms, _after, collect_symptoms, gone_members, node_views
+from stream_viz.rca.symptoms import (
+    NodeView,
+    Symptoms,
+    began_after,
+    collect_symptoms,
+    gone_members,
+    node_views,
+)
 from stream_viz.rca.timelag import LagDistribution
 from stream_viz.records import Alert
 
@@ -159,11 +166,11 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
 
 def _before(ctx: Context, c: str, m: str) -> bool:
     """True when ``m``'s symptom is known to have begun before the candidate ``c``'s own did, by
-    their alerts' own word (`symptoms._after`: a stamp, a silence's last message): an effect
+    their alerts' own word (`symptoms.began_after`: a stamp, a silence's last message): an effect
     comes after its cause, however they were sampled together."""
     v, s = ctx.views.get(c), ctx.symptoms
     latest = min(s.began_by.get(m, np.inf), s.vague.get(m, np.inf))
-    return v is not None and _after(v.began, v.vague, latest, ctx.settings.tolerance)
+    return v is not None and began_after(v.began, v.vague, latest, ctx.settings.tolerance)
 
 
 def _cheap(ctx: Context, v: NodeView) -> float:
