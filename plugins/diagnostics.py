@@ -6,6 +6,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.detect.lifecycle import transitions
 from stream_viz.detect.startup import STARTUP_S, standing, starting
 from stream_viz.records import SEVERITY_RANK as RANK
 from stream_viz.records import Alert, Event
@@ -105,13 +106,8 @@ def _lifecycle(ctx: PluginContext) -> dict[str, float]:
     """Node → the time of its newest lifecycle transition (a message on its ``…/transition_event``
     topic), kept across samples."""
     newest: dict[str, float] = ctx.state.setdefault("transitions", {})
-    topics = ctx.structural(lambda: [m for m in ctx.members("topic") if m.endswith("/transition_event")],
-                            key="lifecycle")
-    for topic in topics:
-        age = ctx.value(topic, "age_s")
-        if age == age:
-            for node in ctx.publishers(topic):
-                newest[node] = max(ctx.t - age, newest.get(node, -INF))
+    for node, at in transitions(ctx):
+        newest[node] = max(at, newest.get(node, -INF))
     return newest
 
 

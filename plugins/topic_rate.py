@@ -19,6 +19,7 @@ from stream_viz.detect.baseline import (
     robust,
     streak,
 )
+from stream_viz.detect.lifecycle import transitions as lifecycle_transitions
 from stream_viz.detect.process import SETTINGS as PROCESS_SETTINGS
 from stream_viz.detect.rhythm import SAME_MESSAGE_S, Rhythm, follow, newest_message, quiet_limit, restarted
 from stream_viz.model.ids import name_of
@@ -627,15 +628,10 @@ def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
         if all(abs(x - at) > SAME_MESSAGE_S for x in times):  # the same message seen again
             times[:] = sorted([*times, at])[-TRANSITIONS_KEPT:]
 
-    lifecycle = ctx.structural(lambda: [m for m in ctx.members("topic") if m.endswith("/transition_event")],
-                               key="lifecycle")
     states = ctx.structural(lambda: [m for m in ctx.members("topic") if latched(ctx.attr(m, "qos"))],
                             key="states", token=ctx.graph.graph.get("qos_version"))
-    for topic in lifecycle:
-        age = ctx.value(topic, "age_s")
-        if age == age:
-            for node in ctx.publishers(topic):
-                note(node, ctx.t - age)
+    for node, at in lifecycle_transitions(ctx):
+        note(node, at)
     newest: dict[str, float] = ctx.state.setdefault("state_newest", {})
     for topic in states:
         age = ctx.value(topic, "age_s")
@@ -652,7 +648,7 @@ def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
     for e in ctx.events:
         if e.kind == "goal":
             note(e.member, e.t)
-        elif e.kind == "diag" and e.member.startswith("node:") and e.member == _publisher(e):
+        elif e.kind == "diag" and e.member.startswith("node:") and e.member == e.data.get("publisher"):
             mode = announced_mode(e)
             before = said.get((e.member, e.data.get("name")))
             said[(e.member, e.data.get("name"))] = mode
@@ -669,10 +665,6 @@ def announced_mode(e: Any) -> str | None:
         return None
     text = e.text.removeprefix(f"{name}:").strip().removeprefix("OK").strip()
     return _NUMBER.sub("#", text)
-
-
-def _publisher(e: Any) -> str | None:
-    return e.data.get("publisher")
 
 
 def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: float,
