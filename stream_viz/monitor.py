@@ -25,6 +25,7 @@ from stream_viz.detect.detector import Detector
 from stream_viz.detect.plugin_set import PluginSet
 from stream_viz.detect.store import AlertStore, default_db_path
 from stream_viz.detect.watchlist import Watchlist
+from stream_viz.errors import StoreError
 from stream_viz.model.history import History
 from stream_viz.model.shadow import Shadow
 from stream_viz.output import check_writable
@@ -82,7 +83,11 @@ class Monitor:
         self.db_path = Path(db) if db else default_db_path()
         self.store = AlertStore(self.db_path)
         self.started_at = time.time() if started_at is None else started_at
-        self.store.set_meta("started_at", self.started_at)
+        try:
+            self.store.begin_run(self.started_at)
+        except StoreError:
+            self.store.close()
+            raise
         timeout = {"timeout_s": plugin_timeout_s} if plugin_timeout_s else {}
         self.plugins = PluginSet.from_config(config, **timeout)
         self._say_problems(self.plugins.load_problems)

@@ -254,6 +254,24 @@ class AlertStore:
         self._last_structure = structure
         return True
 
+    def begin_run(self, started_at: float) -> None:
+        """Mark the file as holding the run started at ``started_at``.
+
+        Raises
+        ------
+        StoreError
+            The file already holds a run that kept alerts or a model: one database is one run, as
+            `analyze` and the report read every alert in it, so a second run would mix with it.
+        """
+        before = self.get_meta("started_at")
+        n = self._db.execute("SELECT count(*) FROM alerts").fetchone()[0]
+        kept = n or self._db.execute("SELECT count(*) FROM snapshots").fetchone()[0]
+        if before is not None and kept:  # a run killed before it kept anything may be taken over
+            when = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(float(before)))
+            raise StoreError(f"{self.path}: already holds a run (started {when}, {n} alerts); "
+                             "give --db a new file, one database holds one run")
+        self.set_meta("started_at", started_at)
+
     def set_meta(self, key: str, value: Any) -> None:
         """Set a free meta key to a JSON-able value."""
         if key in ("app", "migrations"):

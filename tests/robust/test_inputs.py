@@ -11,6 +11,8 @@ import subprocess
 
 import pytest
 
+from stream_viz.detect.store import AlertStore
+from stream_viz.records import Alert
 from stream_viz.testing import EXE, wait_for
 from tests.robust.common import ERROR_LOGGER, db_rows, error_lines, monitor_cmd, report, run
 
@@ -29,6 +31,9 @@ def _files(tmp):
     (tmp / "a_folder.rrd").mkdir()
     (tmp / "plain_file").write_text("x")
     (tmp / "zero.sqlite").write_bytes(b"")
+    with AlertStore(tmp / "used.sqlite") as st:  # a database that holds a run already
+        st.begin_run(1.0)
+        st.add([Alert("node:/cam", "rosout", 2.0, "error", "boom")])
 
 
 @pytest.mark.parametrize(
@@ -37,6 +42,7 @@ def _files(tmp):
         (["monitor", "--db", "{tmp}/corrupt.sqlite"], ["corrupt.sqlite"]),
         (["monitor", "--db", "{tmp}/random.sqlite"], ["random.sqlite"]),
         (["monitor", "--db", "{tmp}/foreign.sqlite"], ["foreign.sqlite", "another program"]),
+        (["monitor", "--db", "{tmp}/used.sqlite"], ["used.sqlite", "already holds a run"]),
         (["monitor", "--report", "{tmp}/no/such/dir/r.json"], ["no/such/dir"]),
         (["monitor", "--report", "{tmp}/plain_file/r.json"], ["plain_file"]),
         (["monitor", "--save", "{tmp}/a_folder.rrd"], ["a_folder.rrd"]),

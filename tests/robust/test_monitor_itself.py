@@ -51,13 +51,15 @@ def test_sigkill_loses_no_committed_alert_and_the_database_reopens(children, tmp
     after = _rosout_alerts(db)
     assert after[: len(committed)] == committed  # every row seen committed before the kill is there
     assert db_rows(db, "PRAGMA integrity_check") == [("ok",)]
-    # 3) analyze works on the killed run's file, and a new monitor run appends to it.
+    # 3) analyze works on the killed run's file; a new monitor run on it is refused, as it would
+    # mix its alerts with the killed run's, and leaves every row.
     out = run([EXE, "analyze", "--db", str(db), "--report", str(tmp_path / "off.json")], children.env)
     assert out.returncode == 0, out.stderr
     assert "node:/grumpy" in {a["member"] for a in report(tmp_path / "off.json")["alerts"]}
     out = run(monitor_cmd("--db", str(db), "--duration", "4"), children.env)
-    assert out.returncode == 0 and not error_lines(out.stderr), out.stderr
-    assert _rosout_alerts(db)[: len(after)] == after
+    lines = error_lines(out.stderr)
+    assert out.returncode != 0 and len(lines) == 1 and "a.sqlite: already holds a run" in lines[0], out.stderr
+    assert _rosout_alerts(db) == after
 
 
 def _free_port() -> int:

@@ -140,6 +140,21 @@ def test_a_monitor_tick_stores_what_changed(tmp_path):
         assert st.alerts() == [alert]
 
 
+def test_a_second_run_is_refused_and_the_first_kept(tmp_path):
+    path = tmp_path / "run.sqlite"
+    with AlertStore(path) as st:
+        st.begin_run(50.0)  # killed before it kept anything: taken over
+    with AlertStore(path) as st:
+        st.begin_run(100.0)
+        st.add([Alert("node:/cam", "rosout", 101.0, "error", "boom")])
+    refused = r"run\.sqlite: already holds a run .*1 alerts"
+    with AlertStore(path) as st, pytest.raises(StoreError, match=refused):
+        st.begin_run(200.0)
+    with AlertStore(path, readonly=True) as st:
+        assert st.get_meta("started_at") == 100.0
+        assert [a.message for a in st.alerts()] == ["boom"]
+
+
 def test_foreign_sqlite_file_is_refused(tmp_path):
     path = tmp_path / "foreign.sqlite"
     db = sqlite3.connect(path)
