@@ -122,7 +122,6 @@ class PidResolver:
     def __init__(self, domain_id: int, own_host: int | None = None) -> None:
         self.domain_id, self.own_host = domain_id, own_host
         self._cache: dict[str, PidInfo] = {}
-        self._self = psutil.Process().pid
         self._inner = InnerPids()
 
     def resolve(self, rosout_gids: dict[str, bytes]) -> dict[str, PidInfo]:
