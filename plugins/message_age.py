@@ -34,11 +34,11 @@ JUMP_SAID_S = 60.0  # a clock's jump back is said in the stale alerts this long 
 class MessageAge(Plugin):
     """Alerts on watched topics whose messages arrive with old or impossible header stamps.
 
-    * ``stale`` (warn): the age rises above the topic's own baseline by ``max(k·σ,
-      min_rise_ms, rise_ratio × baseline)`` for ``confirm`` samples with a new message and for
-      ``hold_s`` (the mean over the window, which one late message holds up), or sooner, for
-      ``fast_confirm`` such samples, when the youngest of the newest messages is as late
-      (`_all_late`); with ``max_age_ms`` > 0 also any age above it;
+    * ``stale`` (warn; error once the data are ``error_ms`` older than usual): the age rises
+      above the topic's own baseline by ``max(k·σ, min_rise_ms, rise_ratio × baseline)`` for
+      ``confirm`` samples with a new message and for ``hold_s`` (the mean over the window, which
+      one late message holds up), or sooner, for ``fast_confirm`` such samples, when the youngest
+      of the newest messages is as late (`_all_late`); with ``max_age_ms`` > 0 also any age above it;
     * ``clock_skew`` (warn): the age is below ``-skew_ms`` (the stamps are in our future: the
       publisher's clock runs ahead, another host's or a simulated one) or above ``implausible_s``
       (stamps not from this clock at all: simulated time, an unset or unsynchronised clock), for
@@ -80,6 +80,7 @@ class MessageAge(Plugin):
         "learn_s": 10.0,
         "loop_share": 0.3,
         "min_messages": 8,
+        "error_ms": 1000.0,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -150,7 +151,10 @@ class MessageAge(Plugin):
         back, when = ctx.state.get("jumped", {}).get(topic, (0.0, -math.inf))
         back = back if ctx.t - when <= JUMP_SAID_S else 0.0
         clock = f"; its stamps went back {back:.1f} s mid-stream (its clock jumped)" if back else ""
-        yield ctx.alert(topic, "warn", f"stale data: messages arrive {age:.0f} ms after their header "
+        # As old as a topic silent this long is useless to its consumers: an error, as silence is.
+        base = risen[1] if risen is not None else 0.0
+        level = "error" if s["error_ms"] > 0 and age - base >= s["error_ms"] else "warn"
+        yield ctx.alert(topic, level, f"stale data: messages arrive {age:.0f} ms after their header "
                         f"stamp{usual}{whose}{clock}", symptom="stale", value_ms=age,
                         baseline_ms=None if risen is None else risen[1],
                         **({"publishers": late} if late else {}), **({"stamps_back_s": back} if back else {}))

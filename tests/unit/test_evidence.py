@@ -646,6 +646,10 @@ def test_message_age_stale_against_its_own_baseline():
     assert [(a.t, a.member, a.severity) for a in alerts] == [(19.0, "topic:/img", "warn"),
                                                              (20.0, "topic:/img", "warn")]
     assert alerts[0].data["symptom"] == "stale" and alerts[0].data["baseline_ms"] == pytest.approx(2.5)
+    # A second older than usual is an error, as a topic silent that long is.
+    useless = [(a.t, a.severity) for a in drive_alerts("message_age", healthy + [_aged(1102.0, t)
+                                                                               for t in range(15, 21)])]
+    assert useless == [(19.0, "error"), (20.0, "error")]
     # a pipeline whose data is normally 1 s old: 1.4 s is within half its baseline
     slow = [_aged(1000.0 + (t % 3), t) for t in range(15)] + [_aged(1400.0, t) for t in range(15, 19)]
     assert drive("message_age", slow) == []
