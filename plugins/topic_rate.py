@@ -73,7 +73,10 @@ class TopicRate(Plugin):
       Nor when every publisher has an input that went quiet up to ``input_grace_s`` before the
       topic did: the quiet is the input's (`_inherited`), not learned either; nor while every
       publisher's process is busy beyond its own CPU baseline (`_busy`: its executor held by its
-      own work; the CPU is ``process_resources``' symptom).
+      own work; the CPU is ``process_resources``' symptom); nor while every publisher says OK of
+      itself on /diagnostics after the topic's next message was due, and nothing worse since its
+      last (`_vouched`: a driver reporting its device fine while its output stops means it;
+      ``self_reports`` false for drivers that report OK whatever happens).
       A silence again within ``flap_window_s`` of the last alert is the same episode
       (``episode_hold_s``), counted (``flaps``);
     * drop (warn): ``rate < drop_ratio × baseline`` and ``≥ drop_k`` σ below it for ``confirm``
@@ -124,6 +127,7 @@ class TopicRate(Plugin):
         "irregular_drop_s": 15.0,
         "sim_slow_ratio": 0.4,
         "sim_slow_s": 3.0,
+        "self_reports": True,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -146,6 +150,7 @@ class TopicRate(Plugin):
         if slowed is not None:
             yield slowed
         transitions = _transitions(ctx)
+        _self_reports(ctx)
         relearn = ctx.state.setdefault("relearn", {})  # topic -> learned anew from (a reconfiguration)
         followed = []  # every rhythm is followed before any is judged: a quiet is judged with its inputs'
         for topic in watched:
@@ -322,6 +327,8 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
         return None  # the topic's own rhythm: learned when it ends, judged again every sample
     if not r.departed and _on_request(ctx, topic, r):
         return None  # its quiet is its clients' (learned when it ends)
+    if not r.departed and s["self_reports"] and _vouched(ctx, topic, r, ref):
+        return None  # its publishers say they are fine with it quiet: their state, judged every sample
     if not r.departed:  # a new silence: count it for flapping
         r.departed = True
         flaps = ctx.state.setdefault("flaps", {}).setdefault(topic, [])
@@ -655,6 +662,35 @@ def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
             if mode is not None and before is not None and mode != before:
                 note(e.member, e.t)
     return last
+
+
+def _self_reports(ctx: PluginContext) -> None:
+    """Keep, per node, when it last said OK of itself on /diagnostics and when it last said worse
+    (its own statuses: published by the node they are mapped to, not an aggregator's copy)."""
+    said: dict[str, list[float]] = ctx.state.setdefault("self_reports", {})  # node -> [ok at, worse at]
+    for e in ctx.events:
+        if e.kind == "diag" and e.member.startswith("node:") and e.member == e.data.get("publisher"):
+            last = said.setdefault(e.member, [-math.inf, -math.inf])
+            k = 0 if e.data.get("level") == 0 else 1
+            last[k] = max(last[k], e.t)
+
+
+def _vouched(ctx: PluginContext, topic: str, r: Rhythm, ref_hz: float) -> bool:
+    """True when every publisher of ``topic`` said OK of itself after the topic's next message was
+    due, and nothing worse since its last message: a driver that keeps reporting its device fine
+    while its output stops means it (a USBL receiver with the vehicle on the surface), where a
+    driver's frequency check, a crash or a stalled executor says otherwise or stops its reports.
+    Not when a publisher's process lost a thread as the topic stopped (`_thread_ended`): a reader
+    thread that died beside a self-check that does not watch it."""
+    pubs = ctx.publishers(topic)
+    if not pubs or r.newest is None:
+        return False
+    period = max(1.0 / ref_hz if ref_hz > 0 else 0.0, max(r.gaps) if r.gaps else 0.0)
+    said = ctx.state.get("self_reports", {})
+    if not all(n in said and said[n][0] > r.newest + period and said[n][1] < r.newest for n in pubs):
+        return False
+    q = _this_quiet(ctx, topic, r)
+    return not any(_thread_ended(ctx, n, q, r) for n in pubs)
 
 
 def announced_mode(e: Any) -> str | None:

@@ -3,7 +3,8 @@ and 5), through the real monitor against real rclpy nodes in subprocesses.
 
 A camera says ``ERROR waiting for device`` in its first seconds (its bring-up), then captures
 only part of the time and says so in its own status (``OK capturing`` / ``OK idle``): its image
-topic stops for a new mode it announced. A lifecycle sonar deactivates itself now and then, its
+topic stops for a new mode it announced. A USBL receiver's fixes stop while the vehicle is on the
+surface, its own status OK all along. A lifecycle sonar deactivates itself now and then, its
 status updater stopping with it, and an aggregator republishes every status on
 /diagnostics_agg, STALE once not heard for 3 s. None of this raises an alert.
 """
@@ -72,6 +73,25 @@ print("ready", flush=True)
 rclpy.spin(n)
 """
 
+# A USBL receiver: fixes at 2 Hz while the vehicle is deep (14 s), none while it is on the surface
+# (10 s), and its own status OK each second throughout: its quiet is its state, said by no mode.
+USBL = HEAD + DIAG + """
+n = Node("usbl")
+pub = n.create_publisher(String, "/usbl_fix", 10)
+diag = n.create_publisher(DiagnosticArray, "/diagnostics", 10)
+t0, fixes = time.monotonic(), [0]
+def fix():
+    if (time.monotonic() - t0) % 24.0 < 14.0:
+        pub.publish(String(data="fix"))
+        fixes[0] += 1
+n.create_timer(0.5, fix)
+def report():
+    diag.publish(DiagnosticArray(status=[status("usbl: link", 0, f"{fixes[0]} fixes")]))
+n.create_timer(1.0, report)
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
 # An aggregator: every status it heard, under /robot/, each second; STALE once not heard for 3 s.
 AGGREGATOR = HEAD + DIAG + """
 n = Node("aggregator")
@@ -99,6 +119,7 @@ rclpy.spin(n)
 def test_what_nodes_say_of_their_modes_and_bring_up_raises_no_alert(children, tmp_path):
     children.python(CAMERA, name="camera")
     children.python(SONAR, name="sonar")
+    children.python(USBL, name="usbl")
     aggregator = children.python(AGGREGATOR, name="aggregator")
     mon = _monitor(children, tmp_path)
     sample, seen = mon.collector.sample, []
@@ -112,7 +133,9 @@ def test_what_nodes_say_of_their_modes_and_bring_up_raises_no_alert(children, tm
         assert any(e.member == "node:/sonar" and e.data["level"] == 3 for e in diags), "no STALE seen"
         log = (tmp_path / f"aggregator_{children.procs.index(aggregator)}.log").read_text()
         assert "stale sonar: head" in log
-        _no_alerts(mon, "a camera's bring-up and modes, a sonar deactivated")
+        _no_alerts(mon, "a camera's bring-up and modes, a sonar deactivated, a USBL on the surface")
+        # The USBL's OK, its own, was heard after its fixes stopped (from ~14 s).
+        assert _plugin(mon, "topic_rate").state["self_reports"]["node:/usbl"][0] > 20.0 + mon.started_at
         # The camera's idle was seen as its change of state; the sonar's STALE as its transition's.
         assert _plugin(mon, "topic_rate").state["transitions"].get("node:/camera"), "no mode change seen"
         assert "node:/sonar" in _plugin(mon, "diagnostics").state["transitions"]

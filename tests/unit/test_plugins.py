@@ -466,12 +466,35 @@ def test_topic_rate_a_mode_the_node_announces_in_its_own_status_explains_the_qui
             for t in HALF[:60]]
     assert drive("topic_rate", idle) == []
     # A reading that changes ("12.0 fps" -> "0.0 fps") is no new mode; nor is a status another
-    # node publishes about it (an aggregator's copy), nor one no longer OK: a silence each time.
-    for words, kw in ((lambda u: f"{4.0 if u < 20 else 0.0:.1f} fps", {}),
-                      (lambda u: "capturing" if u < 20 else "idle", {"by": "node:/agg"}),
+    # node publishes about it (an aggregator's copy), nor one no longer OK: a silence each time
+    # (the node's own OK statuses after the quiet began not taken at their word: `self_reports`).
+    fps = (lambda u: f"{4.0 if u < 20 else 0.0:.1f} fps", {})
+    for words, kw in (fps, (lambda u: "capturing" if u < 20 else "idle", {"by": "node:/agg"}),
                       (lambda u: "capturing" if u < 20 else "no frames", {"level": 2})):
         frames = [(t, model(**seen(msgs, t)), said(t, words, **kw)) for t in HALF[:60]]
-        assert drive("topic_rate", frames)[:1] == [(21.5, "topic:/img", "error")], kw
+        alerts = drive("topic_rate", frames, settings={"self_reports": False})
+        assert alerts[:1] == [(21.5, "topic:/img", "error")], kw
+        # Taken at their word, the node's own OK says its quiet is its state; the others do not.
+        assert (drive("topic_rate", frames) == []) == (kw == {}), kw
+
+
+def test_topic_rate_a_publisher_that_keeps_saying_ok_of_itself_vouches_for_its_quiet():
+    # /img's fixes every 4 s stop after 36 (the vehicle surfaced); its own status says OK each second.
+    msgs = [t for t in np.arange(0.0, 40.0, 4.0)]
+
+    def status(t, level=0, by="node:/camera", until=math.inf):
+        text = f"usbl_link: {'OK' if level == 0 else 'ERROR'}"
+        return [Event(t - 0.2, "diag", "node:/camera", "info", text,
+                      {"name": "usbl_link", "level": level, "publisher": by})] if t - 0.2 < until else []
+
+    def frames(**kw):
+        return [(t, model(**seen(msgs, t)), status(t, **kw)) for t in np.arange(1.0, 90.0, 1.0)]
+
+    assert drive("topic_rate", frames()) == []
+    # It stopped saying anything (a crash, a stalled executor) before its next fix was due (40),
+    # it says ERROR, or only an aggregator's copy says OK: a silence.
+    for kw in ({"until": 39.5}, {"level": 2}, {"by": "node:/agg"}):
+        assert [a[2] for a in drive("topic_rate", frames(**kw))][:1] == ["error"], kw
 
 
 def test_topic_rate_a_feeding_node_s_goal_ending_after_the_quiet_began_explains_nothing():
