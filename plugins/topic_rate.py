@@ -24,6 +24,7 @@ from stream_viz.detect.process import SETTINGS as PROCESS_SETTINGS
 from stream_viz.detect.rhythm import SAME_MESSAGE_S, Rhythm, follow, newest_message, quiet_limit, restarted
 from stream_viz.model.ids import name_of
 from stream_viz.model.qos import qos_policy
+from stream_viz.records import SEVERITY_RANK as RANK
 from stream_viz.records import Alert
 
 Baseline = tuple[float, float, int] | None
@@ -186,7 +187,9 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
     a cause, a topic whose recent rate departs from its baseline (below ``drop_ratio`` × it, or
     above it / ``drop_ratio``) in messages sent after it, promptly (within ``PROMPT_INTERVALS``
     of its new intervals, or ``transition_grace_s``), has its rhythm and rate baseline learned
-    anew from the cause: no drop, no silence against its old rate. A quiet whose last message
+    anew from the cause: no drop, no silence against its old rate; not when a publisher complained
+    as it changed (`_complained`: a flaky encoder dropping out, each time with a WARN, just as
+    its PLC bridge latched a new state). A quiet whose last message
     came within ``transition_grace_s`` of the cause is not judged (nor learned) until
     ``reconfigure_s`` after it: a slower rate shows its next message by then and is learned; a
     topic still quiet then (a hang that came with the change, a publisher switched off) is judged
@@ -233,7 +236,8 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
             limit = quiet_limit(r, _base_limit(s, _ref_hz(r, base)), s["gap_margin"])
             grace = s["transition_grace_s"]
             if quiet is not None and quiet >= limit and r.newest is not None \
-                    and abs(r.newest - at) <= grace and not (r.departed or r.explained):
+                    and abs(r.newest - at) <= grace and not (r.departed or r.explained) \
+                    and not _complained(ctx, topic, r):
                 if topic not in deferred and ctx.t < at + window:
                     deferred[topic], r.explained = (at + window, r.newest), True
                     moved |= causes.get(topic) != at
@@ -244,6 +248,8 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
             if base is None or relearn.get(topic, -math.inf) >= at or not now > 0 \
                     or not (r.newest or -math.inf) > at:  # a new rate shows in messages after the change
                 continue
+            if _complained(ctx, topic, r):
+                continue  # its publisher says something went wrong: no new normal
             began = ctx.state.get("_held", {}).get((topic, "drop"))
             if began is not None and began < at - grace:
                 continue  # a drop under way before the change is not the change's
@@ -385,7 +391,8 @@ def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[
     period = 1.0 / r.rate if r.rate > 0 else None
     if r.gaps:  # its next message may be due only after its longest healthy gap
         period = max(period or 0.0, max(r.gaps))
-    return _changed_state(ctx, ctx.publishers(topic), last, last, transitions, topic, period)
+    return _changed_state(ctx, ctx.publishers(topic), last, last, transitions, topic, period) \
+        and not _complained(ctx, topic, r)
 
 
 def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm],
@@ -665,14 +672,32 @@ def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
 
 
 def _self_reports(ctx: PluginContext) -> None:
-    """Keep, per node, when it last said OK of itself on /diagnostics and when it last said worse
-    (its own statuses: published by the node they are mapped to, not an aggregator's copy)."""
+    """Keep, per node, when it last said OK of itself on /diagnostics and when it last said worse:
+    a status of its own worse than OK (published by the node it is mapped to, not an aggregator's
+    copy), or a WARN or worse on /rosout."""
     said: dict[str, list[float]] = ctx.state.setdefault("self_reports", {})  # node -> [ok at, worse at]
     for e in ctx.events:
         if e.kind == "diag" and e.member.startswith("node:") and e.member == e.data.get("publisher"):
-            last = said.setdefault(e.member, [-math.inf, -math.inf])
             k = 0 if e.data.get("level") == 0 else 1
-            last[k] = max(last[k], e.t)
+        elif e.kind == "log" and RANK.get(e.level, -1) >= RANK["warn"]:
+            k = 1
+        else:
+            continue
+        last = said.setdefault(e.member, [-math.inf, -math.inf])
+        last[k] = max(last[k], e.t)
+
+
+def _complained(ctx: PluginContext, topic: str, r: Rhythm) -> bool:
+    """True when a publisher of ``topic`` said something was wrong as it went quiet: a WARN or
+    worse on /rosout, or a status of its own worse than OK, from ``transition_grace_s`` before
+    its last message on (`_self_reports`). A node that complains as its output stops did not
+    stop it for a change of state it made: the change does not excuse the quiet nor make its rate
+    a new normal (a PLC bridge latching a new state each cycle, its flaky encoder's dropouts each
+    with a WARN). Its complaint says nothing of a quiet it withholds while it works, though (an
+    acoustic modem's lost packet, a WARN each: a lossy input)."""
+    since = (r.newest if r.newest is not None else ctx.t) - ctx.settings["transition_grace_s"]
+    said = ctx.state.get("self_reports", {})
+    return any(said[n][1] >= since for n in ctx.publishers(topic) if n in said)
 
 
 def _vouched(ctx: PluginContext, topic: str, r: Rhythm, ref_hz: float) -> bool:

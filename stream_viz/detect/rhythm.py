@@ -12,7 +12,10 @@ from what the collector shows every sample (the receive time of the newest messa
   short) is seen in the collector's longest interval since the last sample (``gap_s``) and
   counts as if a sample had seen it;
 * a notable quiet that ends without having been a symptom, nor explained by a cause outside the
-  rhythm (``Rhythm.explained``: judged by ``topic_rate``), is a **healthy gap**, and is learned
+  rhythm (``Rhythm.explained``: judged by ``topic_rate``), is a **healthy gap**, and is learned,
+  unless the topic was settled and the quiet reached its silence limit between two samples (a
+  silence no sample saw: a sensor dropping out for 1.5 s, learned, would make its longer dropouts
+  its rhythm)
   (its length from the newest message before it to the newest after it: an upper bound, off by at
   most a sample period, so a repeat of the same gap never exceeds what was learned);
 * a topic is **settled** (its silence can be judged) once it has published without a notable
@@ -137,8 +140,9 @@ def follow(r: Rhythm, t: float, newest: float | None, rate: float, *, window_s: 
     r.count = count
     if newest is not None and (r.newest is None or newest > r.newest):
         if r.newest is None or count > before or newest > r.newest + SAME_MESSAGE_S:
-            r.peak = max(r.peak, gap)  # a quiet no sample saw
-            _message(r, newest, notable)
+            unseen = gap > r.peak  # the quiet's longest part no sample saw
+            r.peak = max(r.peak, gap)
+            _message(r, newest, notable, margin if unseen else None)
         else:  # the same message seen a little later (or one just after it): no quiet ended
             r.newest = newest
     if r.newest is None:
@@ -159,15 +163,21 @@ def restarted(r: Rhythm) -> None:
     r.departed = False
 
 
-def _message(r: Rhythm, newest: float, notable: float) -> None:
-    """A message newer than any seen: a notable quiet before it ends, and is learned if healthy."""
+def _message(r: Rhythm, newest: float, notable: float, margin: float | None = None) -> None:
+    """A message newer than any seen: a notable quiet before it ends, and is learned if healthy.
+    ``margin``: the quiet peaked between two samples; on a settled topic, one that reached its
+    limit then was a silence no sample saw, and is not learned (a flapping sensor's first dropout
+    would make the next ones its rhythm)."""
     if r.newest is None or r.explained:
         r.run_start = newest
     else:
-        if not r.departed:
+        # A continuous topic's limit is its base one: what its own hiccups added is no rhythm.
+        missed = margin is not None and r.settled \
+            and r.peak >= (quiet_limit(r, notable, margin) if r.gaps else notable)
+        if not r.departed and not missed:
             r.longest = max(r.longest, r.peak)
         if r.peak >= notable:
-            if not r.departed:
+            if not r.departed and not missed:
                 r.gaps = [*r.gaps, newest - r.newest][-GAP_MEMORY:]
                 start = r.newest if r.run_start is None else r.run_start
                 r.runs = [*r.runs, r.newest - start][-GAP_MEMORY:]

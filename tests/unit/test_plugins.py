@@ -849,6 +849,29 @@ def test_topic_rate_a_new_state_its_publisher_latched_is_a_new_normal_as_a_recon
     assert drive("topic_rate", frames([1.0]))[:1] == [(32.5, "topic:/img", "warn")]
 
 
+def test_topic_rate_a_publisher_that_complains_as_its_topic_stops_did_not_choose_the_quiet():
+    # /img 10 Hz, out from 29.9 to 32.5 (a cable dropping out) as /camera latches a new state at
+    # 30.1 (a PLC bridge's part present, every cycle): by itself the state explains the quiet.
+    # The same with /camera's WARN at 30.3 ("signal lost"): a silence at its base limit.
+    msgs = [i / 10 for i in range(300)] + [32.5 + i / 10 for i in range(200)]
+
+    def frames(said):
+        out = []
+        for t in HALF[:45]:
+            G, st = model(**seen(msgs, t)), seen([1.0, 30.1], t)
+            add_member(G, "topic:/mode", qos=[_qos("/camera", "pub", dur="transient_local")],
+                       theta=make_theta("topic", {"rate_hz": st["rate"], "publishers": 1,
+                                                  **({"age_s": st["age"]} if "age" in st else {})}))
+            add_flow_edge(G, "node:/camera", "topic:/mode", "pub")
+            out.append((t, G, said if t == 30.5 else []))
+        return out
+
+    assert [a for a in drive("topic_rate", frames([])) if a[2] == "error"] == []
+    lost = Event(30.3, "log", "node:/camera", "warn", "signal lost: no counts", {})
+    assert [a for a in drive("topic_rate", frames([lost])) if a[2] == "error"][:1] == [
+        (31.5, "topic:/img", "error")]
+
+
 def test_topic_rate_a_parameter_that_moved_no_rate_is_no_cause_when_it_changes_again():
     # 10 Hz, then 4 Hz from 30.0; /camera's exposure set at 30.2 (as at 30.2 it is the drop's cause:
     # a new normal, above). Set twice before, at 5.2 and 17.2, with the rate as it was, it is

@@ -120,3 +120,18 @@ def test_a_quiet_between_two_samples_is_learned_from_the_collectors_longest_gap(
     for t, newest, rate in samples:
         follow(r2, t, newest, rate, **KW, gap=0.3)  # short intervals: no quiet
     assert r2.gaps == []
+
+
+def test_a_settled_continuous_topic_s_dropout_between_two_samples_is_not_learned():
+    # 20 Hz for 20 s (settled, continuous), then a 1.6 s dropout that began and ended between two
+    # samples: a silence no sample saw, not its rhythm. Learned, its limit would double to 3.2 s
+    # and a 2.5 s dropout after it would pass.
+    samples = [(float(t), t - 0.05, 20.0) for t in range(21)]
+    r, _ = run(samples)
+    assert r.settled and r.gaps == []
+    follow(r, 21.0, 20.95, 20.0, **KW, gap=1.6)
+    assert r.gaps == [] and quiet_limit(r, 1.5, 2.0) == 1.5
+    # The same dropout before the topic settled is learned: its rhythm is still being found.
+    early, _ = run(samples[:5])
+    follow(early, 5.0, 4.95, 20.0, **KW, gap=1.6)
+    assert early.gaps == [1.0] and not early.settled  # newest to newest: 3.95 -> 4.95
