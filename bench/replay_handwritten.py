@@ -60,7 +60,8 @@ def main(argv: list[str] | None = None) -> int:
     for line in args.runs.read_text().splitlines():
         run = json.loads(line)
         newest[run.get("fault") or "healthy"] = run  # a run repeated in the folder: its last
-    code = code_version()["commit"][:7]
+    version = code_version()
+    code = version["commit"][:7] + ("+dirty" if version["dirty"] else "")  # uncommitted code says so
     rows = []
     for name, run in newest.items():
         samples = args.samples / f"{name}.jsonl.gz"
