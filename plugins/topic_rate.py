@@ -187,9 +187,10 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
     a cause, a topic whose recent rate departs from its baseline (below ``drop_ratio`` × it, or
     above it / ``drop_ratio``) in messages sent after it, promptly (within ``PROMPT_INTERVALS``
     of its new intervals, or ``transition_grace_s``), has its rhythm and rate baseline learned
-    anew from the cause: no drop, no silence against its old rate; not when a publisher complained
-    as it changed (`_complained`: a flaky encoder dropping out, each time with a WARN, just as
-    its PLC bridge latched a new state). A quiet whose last message
+    anew from the cause: no drop, no silence against its old rate; not while it is quiet for
+    ``STOPPING_PERIODS`` of its periods and a publisher complained (`_complained`: a flaky encoder
+    dropping out, each time with a WARN, just as its PLC bridge latched a new state; a sprayer
+    slowing its commands with a WARN of its low tank keeps a new steady rate). A quiet whose last message
     came within ``transition_grace_s`` of the cause is not judged (nor learned) until
     ``reconfigure_s`` after it: a slower rate shows its next message by then and is learned; a
     topic still quiet then (a hang that came with the change, a publisher switched off) is judged
@@ -248,8 +249,8 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
             if base is None or relearn.get(topic, -math.inf) >= at or not now > 0 \
                     or not (r.newest or -math.inf) > at:  # a new rate shows in messages after the change
                 continue
-            if _complained(ctx, topic, r):
-                continue  # its publisher says something went wrong: no new normal
+            if quiet is not None and quiet >= STOPPING_PERIODS / base[0] and _complained(ctx, topic, r):
+                continue  # quiet now, its publisher saying something went wrong: no new rate
             began = ctx.state.get("_held", {}).get((topic, "drop"))
             if began is not None and began < at - grace:
                 continue  # a drop under way before the change is not the change's

@@ -140,9 +140,9 @@ def follow(r: Rhythm, t: float, newest: float | None, rate: float, *, window_s: 
     r.count = count
     if newest is not None and (r.newest is None or newest > r.newest):
         if r.newest is None or count > before or newest > r.newest + SAME_MESSAGE_S:
-            unseen = gap > r.peak  # the quiet's longest part no sample saw
+            seen = r.peak  # the longest part of the quiet a sample saw (and topic_rate judged)
             r.peak = max(r.peak, gap)
-            _message(r, newest, notable, margin if unseen else None)
+            _message(r, newest, notable, margin, seen)
         else:  # the same message seen a little later (or one just after it): no quiet ended
             r.newest = newest
     if r.newest is None:
@@ -163,17 +163,18 @@ def restarted(r: Rhythm) -> None:
     r.departed = False
 
 
-def _message(r: Rhythm, newest: float, notable: float, margin: float | None = None) -> None:
+def _message(r: Rhythm, newest: float, notable: float, margin: float | None = None,
+             seen: float = 0.0) -> None:
     """A message newer than any seen: a notable quiet before it ends, and is learned if healthy.
-    ``margin``: the quiet peaked between two samples; on a settled topic, one that reached its
-    limit then was a silence no sample saw, and is not learned (a flapping sensor's first dropout
-    would make the next ones its rhythm)."""
+    On a settled topic, a quiet that reached its limit only between two samples (``seen``: the
+    longest a sample saw) was a silence no sample could judge, and is not learned (a flapping
+    sensor's first dropout would make the next ones its rhythm)."""
     if r.newest is None or r.explained:
         r.run_start = newest
     else:
         # A continuous topic's limit is its base one: what its own hiccups added is no rhythm.
-        missed = margin is not None and r.settled \
-            and r.peak >= (quiet_limit(r, notable, margin) if r.gaps else notable)
+        limit = (quiet_limit(r, notable, margin) if r.gaps else notable) if margin is not None else 0.0
+        missed = margin is not None and r.settled and seen < limit <= r.peak
         if not r.departed and not missed:
             r.longest = max(r.longest, r.peak)
         if r.peak >= notable:
