@@ -6,10 +6,14 @@ only part of the time and says so in its own status (``OK capturing`` / ``OK idl
 topic stops for a new mode it announced. A USBL receiver's fixes stop while the vehicle is on the
 surface, its own status OK all along. A lifecycle sonar deactivates itself now and then, its
 status updater stopping with it, and an aggregator republishes every status on
-/diagnostics_agg, STALE once not heard for 3 s. None of this raises an alert.
+/diagnostics_agg, STALE once not heard for 3 s. None of this raises an alert. A PLC bridge
+latches a new state each cycle; once its encoder drops out with a WARN each time, that is a
+silence, the bridge its cause.
 """
 
 from __future__ import annotations
+
+import time
 
 import pytest
 
@@ -141,3 +145,47 @@ def test_what_nodes_say_of_their_modes_and_bring_up_raises_no_alert(children, tm
         assert "node:/sonar" in _plugin(mon, "diagnostics").state["transitions"]
     finally:
         mon.close()
+
+
+# A PLC bridge: the belt encoder at 20 Hz, and parts present latched each 11 s (a new state each
+# cycle: 10 s or more after the last). Once the file argv[1] exists, the encoder drops out for 2 s
+# as each part arrives, with a WARN each time, as a chafed cable does.
+BRIDGE = HEAD + """
+n = Node("plc_bridge")
+enc = n.create_publisher(String, "/encoder", 10)
+parts = n.create_publisher(String, "/parts_present", LATCHED_QOS)
+t0, out_until, k = time.monotonic(), [0.0], [0]
+def tick():
+    if time.monotonic() >= out_until[0]:
+        enc.publish(String(data="counts"))
+def part():
+    k[0] += 1
+    parts.publish(String(data=str(k[0] % 2)))
+    if os.path.exists(sys.argv[1]):
+        out_until[0] = time.monotonic() + 2.0
+        n.get_logger().warn("Encoder signal lost: no counts from the belt encoder")
+n.create_timer(0.05, tick)
+n.create_timer(11.0, part)
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+
+def test_a_dropout_its_node_complains_of_is_no_change_of_state(children, tmp_path):
+    flaky = tmp_path / "flaky"
+    children.python(BRIDGE, str(flaky), name="bridge")
+    mon = _monitor(children, tmp_path)
+    try:
+        wait_for(lambda: (mon.step(), "node:/plc_bridge" in mon.seen)[1], timeout=20, period=1.0)
+        _observe(mon, 24.0)
+        _no_alerts(mon, "a PLC bridge latching a new state each cycle")
+        flaky.touch()
+        found = []
+        deadline = time.monotonic() + 26.0  # two parts arrive, each with a dropout
+        while not found and time.monotonic() < deadline:
+            _observe(mon, 1.0)
+            found = [a for a in mon.store.alerts() if a.member == "topic:/encoder"]
+        assert found, mon.store.alerts()
+    finally:
+        report = mon.close()
+    assert report["root_causes"][0]["member"] == "node:/plc_bridge", report["root_causes"][:3]
