@@ -249,7 +249,7 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
             if base is None or relearn.get(topic, -math.inf) >= at or not now > 0 \
                     or not (r.newest or -math.inf) > at:  # a new rate shows in messages after the change
                 continue
-            if quiet is not None and quiet >= STOPPING_PERIODS / base[0] and _complained(ctx, topic, r):
+            if quiet is not None and quiet * base[0] >= STOPPING_PERIODS and _complained(ctx, topic, r):
                 continue  # quiet now, its publisher saying something went wrong: no new rate
             began = ctx.state.get("_held", {}).get((topic, "drop"))
             if began is not None and began < at - grace:
