@@ -220,7 +220,7 @@ class Monitor:
 
         def write() -> None:
             report.update(build_report(self.seen, self.store.alerts(), self.engine.result().to_report(),
-                                       self.started_at, ended_at, self.injected))
+                                       self.started_at, ended_at, self.injected, self.store.problems()))
             if self.report_path:
                 write_report(self.report_path, report)
 

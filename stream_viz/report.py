@@ -26,6 +26,7 @@ def build_report(
     started_at: float,
     ended_at: float,
     injected: Mapping[str, Any] | None = None,
+    problems: Iterable[Mapping[str, Any]] = (),
 ) -> dict[str, Any]:
     """Return the report dict for the model ``G``, the alerts and the RCA's ``to_report()`` output.
 
@@ -42,6 +43,9 @@ def build_report(
         Unix seconds.
     injected : mapping, optional
         What the demo injected (``fault``, ``target``, ``t``).
+    problems : iterable of mapping, optional
+        The store's problems (`AlertStore.problems`); the plugins' go in the report, so a reader
+        knows when a plugin failed or was disabled and its symptoms could not be seen.
     """
     members = []
     for m, attrs in sorted(G.nodes(data=True)):
@@ -75,6 +79,8 @@ def build_report(
         "iterations": list(rca.get("iterations", [])),
         "root_causes": list(rca.get("root_causes", [])),
         "incidents": list(rca.get("incidents", [])),
+        "problems": [{"t": p["t"], "plugin": p["plugin"], "kind": p["kind"], "where": p["where"],
+                      "message": p["message"], "count": p["count"]} for p in problems if p["plugin"]],
     }
     if injected:
         report["injected"] = dict(injected)

@@ -104,6 +104,9 @@ def test_monitor_with_broken_plugins_exits_0_keeps_good_alerts_and_records_probl
     assert flood and all(c == 4800 for _, c in flood)
     stored = db_rows(db, "SELECT count(*) FROM alerts WHERE plugin = 'flood'")[0][0]
     assert 0 < stored <= 200 * len(flood)
+    # And the report lists them: a reader knows which plugins failed or were disabled.
+    reported = {(x["plugin"], x["kind"]) for x in r["problems"]}
+    assert {("broken_import", "import"), ("raiser", "disabled"), ("hang", "timeout")} <= reported, reported
     # The problems were said on the terminal too, by name.
     for name in ("broken_import", "raiser", "hang", "garbage", "flood"):
         assert f"plugin {name!r}" in log

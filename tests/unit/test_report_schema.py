@@ -74,6 +74,20 @@ def test_a_report_without_alerts_or_injection_is_valid(G):
     assert "injected" not in rep and rep["root_causes"] == [] and len(rep["iterations"]) == 1
 
 
+def test_a_report_lists_the_plugins_problems_not_unreadable_members(G):
+    problems = [{"t": 90.5, "plugin": "raiser", "kind": "disabled", "where": None,
+                 "message": "disabled after 3 failed calls in a row", "line": None, "count": 1},
+                {"t": 90.6, "plugin": "", "kind": "unreadable", "where": "process:7",
+                 "message": "access denied", "line": None, "count": 1}]
+    rep = build_report(G, [], analyze(G, [], RcaSettings(), None).to_report(), 90.0, 91.0, None, problems)
+    VALIDATOR.validate(json.loads(json.dumps(rep)))
+    assert rep["problems"] == [{"t": 90.5, "plugin": "raiser", "kind": "disabled", "where": None,
+                                "message": "disabled after 3 failed calls in a row", "count": 1}]
+    rep["problems"][0]["count"] = 0
+    with pytest.raises(jsonschema.ValidationError):
+        VALIDATOR.validate(rep)
+
+
 def _drop(key):
     return lambda r: r.pop(key)
 
