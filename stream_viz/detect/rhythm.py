@@ -163,8 +163,7 @@ def restarted(r: Rhythm) -> None:
     r.departed = False
 
 
-def _message(r: Rhythm, newest: float, notable: float, margin: float | None = None,
-             seen: float = 0.0) -> None:
+def _message(r: Rhythm, newest: float, notable: float, margin: float, seen: float) -> None:
     """A message newer than any seen: a notable quiet before it ends, and is learned if healthy.
     On a settled topic, a quiet that reached its limit only between two samples (``seen``: the
     longest a sample saw) was a silence no sample could judge, and is not learned (a flapping
@@ -173,8 +172,8 @@ def _message(r: Rhythm, newest: float, notable: float, margin: float | None = No
         r.run_start = newest
     else:
         # A continuous topic's limit is its base one: what its own hiccups added is no rhythm.
-        limit = (quiet_limit(r, notable, margin) if r.gaps else notable) if margin is not None else 0.0
-        missed = margin is not None and r.settled and seen < limit <= r.peak
+        limit = quiet_limit(r, notable, margin) if r.gaps else notable
+        missed = r.settled and seen < limit <= r.peak
         if not r.departed and not missed:
             r.longest = max(r.longest, r.peak)
         if r.peak >= notable:
