@@ -67,6 +67,7 @@ class Services(Plugin):
         "log_level": "warn",
         "startup_s": STARTUP_S,
         "missing_s": 60.0,
+        "discovery_s": 2.0,
         "server_gone": True,
         "goal_quiet_s": 3.0,
         "goal_margin": 3.0,
@@ -75,6 +76,9 @@ class Services(Plugin):
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         alerting = ctx.state.setdefault("alerting", set())
         had = ctx.state.setdefault("servers", {})
+        first = ctx.state.setdefault("first_served", {})
+        after_start = ctx.state.setdefault("checked", False)  # a service seen at the start came earlier
+        ctx.state["checked"] = True
         for service in _called(ctx):
             clients = ctx.clients(service)
             if service not in ctx.watch and not any(c in ctx.watch for c in clients):
@@ -84,6 +88,8 @@ class Services(Plugin):
             yield from _slow(ctx, service, servers, clients, alerting)
             yield from _stalled_goal(ctx, service, servers)
             if servers:
+                if after_start and service not in had:
+                    first[service] = ctx.t
                 had[service] = servers
             elif had.get(service) and clients and ctx.settings["server_gone"]:
                 gone = had[service]
@@ -141,10 +147,14 @@ class _Goals:
 def _coming_up(ctx: PluginContext, client: str, service: str, servers: list[str], had: bool,
                t: float) -> bool:
     """True when ``service``'s servers were coming up at ``t``: none yet and none ever (``had``)
-    in ``client``'s first ``missing_s``, or one whose process started ``startup_s`` before."""
+    in ``client``'s first ``missing_s``; its first server seen less than ``discovery_s`` before
+    ``t`` or after it; or one whose process started ``startup_s`` before."""
     s = ctx.settings
     if not servers:
         return not had and starting(ctx, client, t, s["missing_s"])
+    first = ctx.state.get("first_served", {}).get(service)
+    if first is not None and t < first + s["discovery_s"]:
+        return True
     return any(starting(ctx, n, t, s["startup_s"]) for n in servers)
 
 

@@ -609,6 +609,29 @@ def test_services_a_client_waiting_while_its_servers_come_up_is_their_bring_up()
     assert lost == [(36.0, "server_gone"), (36.0, "waiting")]
 
 
+def test_services_a_client_waiting_for_a_server_the_monitor_sees_appear_is_its_bring_up():
+    # Both processes started at 0 s; the planner's service came up only at 70 s (a slow
+    # bring-up): the client's lines until then, and in the 2 s after, waited for it.
+    def graph(servers=("/planner",)):
+        G = _service_model(servers)
+        for proc, node in (("process:1", "node:/bt"), ("process:2", "node:/planner")):
+            add_member(G, proc, create_time=0.0)
+            add_tree_edge(G, proc, node)
+        return G
+
+    def waits(t, frames):
+        line = Event(t, "log", "node:/bt", "warn", "waiting for service /plan",
+                     {"services": ["service:/plan"]})
+        return [(a.t, a.data["symptom"]) for a in drive_alerts("services", [*frames, (t, graph(), [line])])]
+
+    coming = [(65.0, graph(servers=()), []), (70.0, graph(), [])]
+    assert waits(70.0, coming[:1]) == []  # logged before the monitor saw the server
+    assert waits(71.5, coming) == []  # the client found it a moment after the monitor did
+    assert waits(73.0, coming) == [(73.0, "waiting")]  # up 3 s: it waits on it
+    # A server already up when the monitor started came up earlier: no excuse.
+    assert waits(71.0, [(70.0, graph(), [])]) == [(71.0, "waiting")]
+
+
 # --------------------------------------------------------------------------- message age
 
 
