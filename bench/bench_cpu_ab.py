@@ -1,4 +1,4 @@
-"""The monitor's CPU on the demo robot, this tree against an earlier commit, interleaved.
+"""The monitor's CPU on a demo robot (``--robot``), this tree against an earlier commit, interleaved.
 
 Each round runs `bench_monitor_cpu.py --no-stages` (phase 1: CPU per thread over ``--seconds``,
 own demo robot, own ROS_DOMAIN_ID) once with the code of ``--base`` (a git worktree of that
@@ -23,9 +23,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def run_once(code_root: Path, seconds: float, out: Path, fault: str | None) -> dict:
+def run_once(code_root: Path, seconds: float, out: Path, fault: str | None, robot: str) -> dict:
     env = dict(os.environ, PYTHONPATH=str(code_root))
-    subprocess.run([sys.executable, str(ROOT / "bench/bench_monitor_cpu.py"), "--no-stages",
+    subprocess.run([sys.executable, str(ROOT / "bench/bench_monitor_cpu.py"), "--no-stages", "--robot", robot,
                     "--seconds", str(seconds), "--json", str(out), *(["--fault", fault] if fault else [])],
                    env=env, cwd=code_root, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     return json.loads(out.read_text())
@@ -37,6 +37,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--seconds", type=float, default=40.0)
     ap.add_argument("--fault", metavar="KIND:NODE", help="a demo fault injected after the warm-up")
+    ap.add_argument("--robot", default="demo", help="the demo robot monitored (demo, amr)")
     args = ap.parse_args(argv)
     tmp = Path(tempfile.mkdtemp(prefix="bench_cpu_ab_"))
     base = tmp / "base"
@@ -49,14 +50,14 @@ def main(argv: list[str] | None = None) -> int:
     try:
         rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
                              text=True).stdout.strip()
-        print(f"monitor CPU on the demo, % of one core over {args.seconds:.0f} s, fault "
+        print(f"monitor CPU on the {args.robot} robot, % of one core over {args.seconds:.0f} s, fault "
               f"{args.fault or 'none'}: {args.base} vs this tree ({rev}{'+changes' if _dirty() else ''})")
         print(f"{'round':>5s} {'base':>7s} {'this':>7s} {'ratio':>6s}   {'base main/native':>17s} "
               f"{'this main/native':>17s}  load")
         ratios = []
         for i in range(args.rounds):
             order = [("base", base), ("this", ROOT)] if i % 2 == 0 else [("this", ROOT), ("base", base)]
-            got = {name: run_once(root, args.seconds, tmp / f"{name}_{i}.json", args.fault)
+            got = {name: run_once(root, args.seconds, tmp / f"{name}_{i}.json", args.fault, args.robot)
                    for name, root in order}
             pct = {k: v["total_pct"] for k, v in got.items()}
             split = {k: "{:.2f}/{:.2f}".format(*(100 * v["cpu_s"].get(g, 0.0) / v["wall_s"] for g in (

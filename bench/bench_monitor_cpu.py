@@ -1,6 +1,7 @@
-"""Where the monitor's CPU goes on the demo robot: per thread, then per pipeline stage.
+"""Where the monitor's CPU goes on a demo robot: per thread, then per pipeline stage.
 
-The real demo robot (12 rclpy nodes in 7 processes, its own ROS_DOMAIN_ID) and the real
+The real demo robot (12 rclpy nodes in 7 processes; ``--robot amr``: the AMR, 22 nodes in 13; its
+own ROS_DOMAIN_ID) and the real
 in-process `Monitor` (default config, 1 sample/s). Phase 1 measures CPU time per thread with no
 profiler (the monitor's main loop, the topic drain thread, the native rclpy / Fast DDS threads);
 phase 2 runs the same loop with each stage of the main loop timed by the main thread's CPU
@@ -141,16 +142,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fault", metavar="KIND:NODE", help="inject this demo fault right after the warm-up "
                     "(e.g. errlog:/controller): the cost while alerts flow and the RCA works")
     ap.add_argument("--json", type=Path, help="also write phase 1's figures here (bench_cpu_ab.py)")
+    ap.add_argument("--robot", default="demo", help="the demo robot to monitor (demo, amr)")
     args = ap.parse_args(argv)
 
     domain = own_domain()
     from stream_viz.config import load_config
     from stream_viz.demo.faults import FaultSpec
     from stream_viz.demo.robot import Robot
+    from stream_viz.demo.robots import robot_topology
     from stream_viz.monitor import Monitor
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_monitor_cpu_"))
-    robot = Robot(env=dict(os.environ), run_dir=tmp / "robot")
+    robot = Robot(env=dict(os.environ), topology=robot_topology(args.robot), run_dir=tmp / "robot")
     me = psutil.Process()
     robot.start()
     try:
@@ -174,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
                     name = "main loop (Monitor.step)"
                 groups[name] = groups.get(name, 0.0) + c - c0.get(tid, 0.0)
             total = sum(groups.values())
-            print(f"monitor on the demo robot: {wall:.0f} s, {n} samples, viewer off, .rrd "
+            print(f"monitor on the {args.robot} robot: {wall:.0f} s, {n} samples, viewer off, .rrd "
                   f"{'on' if args.save else 'off'}, fault {args.fault or 'none'}, "
                   f"load {os.getloadavg()[0]:.1f}, {os.cpu_count()} cores")
             print(f"{'thread':42s} {'CPU s':>7s} {'% core':>7s} {'share':>6s}")
