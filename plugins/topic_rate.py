@@ -78,6 +78,9 @@ class TopicRate(Plugin):
       itself on /diagnostics after the topic's next message was due, and nothing worse since its
       last (`_vouched`: a driver reporting its device fine while its output stops means it;
       ``self_reports`` false for drivers that report OK whatever happens).
+      A quiet a publisher complained of (`_complained`: a WARN or worse, a status of its own
+      worse than OK) is never learned as the topic's rhythm, however short (a sensor dropping out
+      for 1.2 s with a WARN, learned, would make its 2 s dropouts healthy).
       A silence again within ``flap_window_s`` of the last alert is the same episode
       (``episode_hold_s``), counted (``flaps``);
     * drop (warn): ``rate < drop_ratio × baseline`` and ``≥ drop_k`` σ below it for ``confirm``
@@ -139,6 +142,7 @@ class TopicRate(Plugin):
             if e.kind == "stamp_reset" and e.member in rhythms:
                 restarted(rhythms[e.member])
         watched = list(ctx.watched())
+        _self_reports(ctx)  # before any rhythm is followed: a quiet complained of is not learned
         # Every topic's rhythm is followed, so one the RCA starts watching later is judged at once.
         topics = ctx.structural(lambda: set(ctx.members("topic")), key="topics")
         for topic in topics.difference(watched):
@@ -151,7 +155,6 @@ class TopicRate(Plugin):
         if slowed is not None:
             yield slowed
         transitions = _transitions(ctx)
-        _self_reports(ctx)
         relearn = ctx.state.setdefault("relearn", {})  # topic -> learned anew from (a reconfiguration)
         followed = []  # every rhythm is followed before any is judged: a quiet is judged with its inputs'
         for topic in watched:
@@ -296,6 +299,8 @@ def _follow(ctx: PluginContext, r: Rhythm, topic: str, rate: float, base: Baseli
     """Account this sample in the topic's rhythm; return its quiet (s), None before any message."""
     s = ctx.settings
     limit = _base_limit(s, _ref_hz(r, base))
+    if r.newest is not None and not r.doubted and _complained(ctx, topic, r):
+        r.doubted = True  # a sensor's dropout, each with a WARN, is no rhythm of its topic
     newest = newest_message(ctx.t, rate, ctx.value(topic, "age_s"))
     gap = ctx.value(topic, "gap_s")
     return follow(r, ctx.t, newest, rate, window_s=s["rate_window_s"], notable=limit,

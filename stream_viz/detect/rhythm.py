@@ -12,7 +12,8 @@ from what the collector shows every sample (the receive time of the newest messa
   short) is seen in the collector's longest interval since the last sample (``gap_s``) and
   counts as if a sample had seen it;
 * a notable quiet that ends without having been a symptom, nor explained by a cause outside the
-  rhythm (``Rhythm.explained``: judged by ``topic_rate``), is a **healthy gap**, and is learned,
+  rhythm (``Rhythm.explained``: judged by ``topic_rate``), nor complained of by a publisher
+  (``Rhythm.doubted``), is a **healthy gap**, and is learned,
   unless the topic was settled and the quiet reached its silence limit between two samples (a
   silence no sample saw: a sensor dropping out for 1.5 s, learned, would make its longer dropouts
   its rhythm)
@@ -84,6 +85,10 @@ class Rhythm:
         The current quiet has a healthy cause outside the topic's rhythm (its publisher changed
         state, or its input stopped just before it): it is not a symptom, and not learned (its
         length is the cause's, not the topic's).
+    doubted : bool
+        A publisher complained during the current quiet (``topic_rate``: a WARN or worse, a
+        status of its own worse than OK): whatever it was, it is not learned (a sensor dropping
+        out with a WARN each time, learned, would make its longer dropouts its rhythm).
     """
 
     newest: float | None = None
@@ -98,6 +103,7 @@ class Rhythm:
     longest: float = 0.0
     departed: bool = False
     explained: bool = False
+    doubted: bool = False
 
 
 def newest_message(t: float, rate: float, age: float) -> float | None:
@@ -174,16 +180,17 @@ def _message(r: Rhythm, newest: float, notable: float, margin: float, seen: floa
         # A continuous topic's limit is its base one: what its own hiccups added is no rhythm.
         limit = quiet_limit(r, notable, margin) if r.gaps else notable
         missed = r.settled and seen < limit <= r.peak
-        if not r.departed and not missed:
+        learn = not (r.departed or missed or r.doubted)
+        if learn:
             r.longest = max(r.longest, r.peak)
         if r.peak >= notable:
-            if not r.departed and not missed:
+            if learn:
                 r.gaps = [*r.gaps, newest - r.newest][-GAP_MEMORY:]
                 start = r.newest if r.run_start is None else r.run_start
                 r.runs = [*r.runs, r.newest - start][-GAP_MEMORY:]
             r.run_start = newest
     r.newest = newest
-    r.peak, r.departed, r.explained = 0.0, False, False
+    r.peak, r.departed, r.explained, r.doubted = 0.0, False, False, False
 
 
 def _settles(r: Rhythm, settle_s: float, margin: float, min_gaps: int) -> bool:
