@@ -94,6 +94,9 @@ class TopicRate(Plugin):
       topic's own modes (`in_mode`): a lower rate it showed and left by itself before, its
       publishers the same processes (a downlink throttled while the link is poor), no deeper
       than half that and no longer than ``gap_margin`` × its longest — the first time, a drop;
+      nor when every publisher has an input that went quiet (by its base limit) up to
+      ``input_grace_s`` before the drop began (`_input_stopped`: a gait state slows as the
+      robot's velocity commands stop; the input's quiet is judged on the input);
     * below expectation (warn): ``rate < (1 - expected_tolerance) × expected_rate_hz`` from the
       config, for ``confirm`` samples;
     * a slowed simulation (warn, on ``/clock``): its pace (``sim_pace``, its real-time factor)
@@ -167,7 +170,7 @@ class TopicRate(Plugin):
         followed = _reconfigured(ctx, followed, rhythms)
         for topic, r, rate, base, quiet in followed:
             alert = (_silence(ctx, topic, r, quiet, base, transitions, rhythms)
-                     or _drop(ctx, topic, r, quiet, rate, base, transitions))
+                     or _drop(ctx, topic, r, quiet, rate, base, transitions, rhythms))
             expected = _below_expected(ctx, topic, rate)  # its streak counts every sample
             stopped = _publisher_stopped(ctx, topic, transitions)  # its run counts every sample
             alert = alert or expected or stopped  # one alert per topic and sample
@@ -735,10 +738,11 @@ def announced_mode(e: Any) -> str | None:
 
 
 def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: float,
-          base: Baseline, transitions: dict[str, list[float]]) -> Alert | None:
+          base: Baseline, transitions: dict[str, list[float]], rhythms: dict[str, Rhythm]) -> Alert | None:
     """The recent rate below ``drop_ratio`` × the baseline (and ``drop_k`` σ) for ``confirm``
     samples, on a continuous topic that is not quiet (a quiet is a silence or not: `_silence`),
-    nor stopping for a healthy cause (its recent rate falls as it stops: a goal ended)."""
+    nor stopping for a healthy cause (its recent rate falls as it stops: a goal ended), nor
+    following an input that went quiet as it fell (`_input_stopped`)."""
     s = ctx.settings
     if base is None or base[0] < s["min_baseline_hz"] or not r.settled or r.gaps:
         return None
@@ -771,6 +775,8 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
         modes[:] = learn_mode(modes, *run)
     if samples < s["confirm"] or lasted < r.longest:
         return None
+    if _input_stopped(ctx, topic, ctx.t - lasted, rhythms):
+        return None  # its rate follows what reaches it: a gait published slower as its commands stop
     if in_mode(modes, ratio, lasted, s["gap_margin"]):
         return None  # a lower rate it has shown and left by itself (a link throttled, a mode)
     steady = per_sim is not None and per_sim[1] <= STEADY_PER_SIM * per_sim[0]
@@ -780,6 +786,30 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     usual = expect if per_sim is not None else med
     return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {usual:.3g} Hz{sim}",
                      symptom="rate_drop", rate_hz=now_rate, baseline_hz=usual, sim_pace_ratio=pace)
+
+
+def _input_stopped(ctx: PluginContext, topic: str, since: float, rhythms: dict[str, Rhythm]) -> bool:
+    """True when every publisher of ``topic`` has an input whose last message came at most
+    ``input_grace_s`` before its drop began (``since``) and no later, and that is quiet by its own
+    base limit now: the publisher runs slower as what it follows stops (a legged robot's gait
+    state, 50 Hz walking and 10 Hz standing, slows as its velocity commands stop), as `_inherited`
+    makes a quiet the input's. The input's quiet is judged on the input."""
+    pubs = ctx.publishers(topic)
+    if not pubs:
+        return False
+    s = ctx.settings
+
+    def stopped(node: str) -> bool:
+        for name in ctx.subscribed_topics(node):
+            i = rhythms.get(name)
+            if name == topic or i is None or i.newest is None:
+                continue
+            if since - s["input_grace_s"] <= i.newest <= since \
+                    and ctx.t - i.newest >= _base_limit(s, _ref_hz(i, None)):
+                return True
+        return False
+
+    return all(stopped(p) for p in pubs)
 
 
 def _drop_run(ctx: PluginContext, topic: str, low: bool, ratio: float,

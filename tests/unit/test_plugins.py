@@ -1778,3 +1778,28 @@ def test_topic_rate_a_dropout_its_publisher_complained_of_is_not_learned_however
             50.5: [Event(50.1, "log", "node:/camera", "warn", "signal lost", {})]}
     assert drive("topic_rate", frames(lost))[:1] == [(51.5, "topic:/img", "error")]
 
+
+def test_topic_rate_a_rate_that_falls_as_its_publishers_input_stops_follows_the_input():
+    # /camera publishes /img at 10 Hz while /cmd (20 Hz, from /teleop) comes, 2 Hz after it
+    # stops at 29.6 (a gait state slowing as the robot stands): no drop. The same fall while
+    # /cmd goes on is a drop.
+    msgs = [i / 10 for i in range(300)] + [30 + i / 2 for i in range(60)]
+
+    def frames(cmd):
+        out = []
+        for t in HALF[:45]:
+            G, st = model(**seen(msgs, t)), seen(cmd, t)
+            add_member(G, "node:/teleop")
+            add_member(G, "topic:/cmd", theta=make_theta("topic", {
+                "rate_hz": st["rate"], "publishers": 1, "subscribers": 1,
+                **({"age_s": st["age"]} if "age" in st else {})}))
+            add_flow_edge(G, "node:/teleop", "topic:/cmd", "pub")
+            add_flow_edge(G, "topic:/cmd", "node:/camera", "sub")
+            out.append((t, G, []))
+        return out
+
+    stops = [i / 20 for i in range(593)]  # last at 29.6
+    assert [a for a in drive("topic_rate", frames(stops)) if a[1] == "topic:/img"] == []
+    goes_on = [i / 20 for i in range(900)]
+    assert [a for a in drive("topic_rate", frames(goes_on)) if a[1] == "topic:/img"][:1] == [
+        (32.5, "topic:/img", "warn")]
