@@ -36,11 +36,16 @@ class Services(Plugin):
       service's usual response time)`` (its baseline; before one is learnt, the longest it has
       taken; before any answer, ``first_wait_s``: some services take seconds); or (at the
       line's level) the client logged (≥ ``log_level``, WARN) a line naming the service or its
-      server, after the client's first ``startup_s`` (its bring-up, when it waits for servers
-      still coming up: the WARNs about a service not ready yet) and not while the servers come
-      up: none yet, and the service never had one, in the client's first ``missing_s``; or one
-      whose process started less than ``startup_s`` before (on a loaded computer a robot's
-      bring-up outlasts a client's first seconds);
+      server — a WARN only when it names it again within ``warn_repeat_s`` of an earlier one (a
+      behaviour tree announcing its recovery once is routine; a client that waits says so
+      again; 0: at once), an ERROR at once — after the client's first ``startup_s`` (its
+      bring-up, when it waits for servers still coming up: the WARNs about a service not ready
+      yet) and not while the servers come up: none yet, and the service never had one, in the
+      client's first ``missing_s``; or its first server, seen after the monitor's start,
+      appeared after the line or less than ``discovery_s`` before it (a client finds a new
+      server a moment after the monitor does); or one whose process started less than
+      ``startup_s`` before (on a loaded computer a robot's bring-up outlasts a client's first
+      seconds);
     * ``slow_response`` (warn): the service's mean response time rose above its own baseline by
       ``max(k·σ, min_rise_ms)`` for ``confirm`` samples;
     * ``server_gone`` (warn): the service had a server and has none while clients remain;
@@ -68,6 +73,7 @@ class Services(Plugin):
         "startup_s": STARTUP_S,
         "missing_s": 60.0,
         "discovery_s": 2.0,
+        "warn_repeat_s": 30.0,
         "server_gone": True,
         "goal_quiet_s": 3.0,
         "goal_margin": 3.0,
@@ -243,7 +249,12 @@ def _logged(ctx: PluginContext) -> Iterator[Alert]:
             if had is None or RANK.get(e.level, 0) > RANK.get(had[0].level, 0):
                 only = servers[0] if len(servers) == 1 else None
                 worst[(e.member, service)] = (e, hit[0] if hit else only)
+    warned = ctx.state.setdefault("warned", {})  # (client, service) -> its last WARN naming it
     for (client, service), (e, server) in worst.items():
+        if RANK.get(e.level, 0) < RANK["error"] and ctx.settings["warn_repeat_s"] > 0:
+            before, warned[(client, service)] = warned.get((client, service)), e.t
+            if before is None or e.t - before > ctx.settings["warn_repeat_s"]:
+                continue  # said once: a retry or a recovery announced, not yet a wait
         # As strong as the complaint: the server it names carries it (RCA `named`).
         level = e.level if e.level in RANK else "warn"
         yield ctx.alert(client, level, f"logged about {name_of(service)}: {e.text}",

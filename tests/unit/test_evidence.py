@@ -561,6 +561,9 @@ def test_services_server_gone_while_clients_remain():
     assert drive("services", [(1.0, _service_model(servers=()), [])]) == []  # never had one: late start
 
 
+ONCE = {"warn_repeat_s": 0.0}  # a WARN naming a service counts at once
+
+
 def test_services_client_log_naming_its_service_or_server():
     G = _service_model()
     logs = [Event(1.0, "log", "node:/bt", "warn", "service /plan not available",
@@ -573,8 +576,9 @@ def test_services_client_log_naming_its_service_or_server():
             for a in alerts] == [
         ("node:/bt", "error", "log", "node:/planner", "service:/plan",
          "logged about /plan: planner timed out")]
-    # a WARN counts, as a warning; one alert per client and service and sample, at its worst line
-    warned = drive_alerts("services", [(1.0, G, logs[:1])])
+    # a WARN counts, as a warning (once said again: below); one alert per client and service and
+    # sample, at its worst line
+    warned = drive_alerts("services", [(1.0, G, logs[:1])], settings=ONCE)
     assert [(a.member, a.severity, a.data["server"]) for a in warned] == [
         ("node:/bt", "warn", "node:/planner")]
     assert [(a.severity, a.data["server"]) for a in drive_alerts("services", [(1.0, G, logs)])] == [
@@ -582,6 +586,24 @@ def test_services_client_log_naming_its_service_or_server():
     # at an ERROR floor the WARN is not read
     strict = drive_alerts("services", [(1.0, G, logs[:1])], settings={"log_level": "error"})
     assert strict == []
+
+
+def test_services_a_warn_naming_a_service_counts_once_said_again():
+    # A behaviour tree announcing its recovery once (WARN naming /plan) is routine; the same
+    # WARN again within 30 s is a client that waits; an ERROR counts at once.
+    G = _service_model()
+
+    def line(t, level="warn"):
+        return Event(t, "log", "node:/bt", level, "running the recovery (plan)",
+                     {"services": ["service:/plan"]})
+
+    assert drive_alerts("services", [(10.0, G, [line(10.0)])]) == []
+    again = drive_alerts("services", [(10.0, G, [line(10.0)]), (25.0, G, [line(25.0)])])
+    assert [(a.t, a.severity) for a in again] == [(25.0, "warn")]
+    apart = drive_alerts("services", [(10.0, G, [line(10.0)]), (50.0, G, [line(50.0)])])
+    assert apart == []
+    assert [(a.t, a.severity) for a in drive_alerts("services", [(10.0, G, [line(10.0, "error")])])] == [
+        (10.0, "error")]
 
 
 def test_services_a_client_waiting_while_its_servers_come_up_is_their_bring_up():
@@ -597,7 +619,8 @@ def test_services_a_client_waiting_while_its_servers_come_up_is_their_bring_up()
     def waits(t, G, before=()):
         line = Event(t, "log", "node:/bt", "warn", "waiting for service /plan",
                      {"services": ["service:/plan"]})
-        return [(a.t, a.data["symptom"]) for a in drive_alerts("services", [*before, (t, G, [line])])]
+        return [(a.t, a.data["symptom"]) for a in drive_alerts("services", [*before, (t, G, [line])],
+                                                                 settings=ONCE)]
 
     assert waits(25.0, graph()) == []
     assert waits(35.0, graph()) == [(35.0, "waiting")]  # the planner up 15 s: it waits on it
@@ -622,7 +645,8 @@ def test_services_a_client_waiting_for_a_server_the_monitor_sees_appear_is_its_b
     def waits(t, frames):
         line = Event(t, "log", "node:/bt", "warn", "waiting for service /plan",
                      {"services": ["service:/plan"]})
-        return [(a.t, a.data["symptom"]) for a in drive_alerts("services", [*frames, (t, graph(), [line])])]
+        return [(a.t, a.data["symptom"]) for a in drive_alerts("services", [*frames, (t, graph(), [line])],
+                                                                 settings=ONCE)]
 
     coming = [(65.0, graph(servers=()), []), (70.0, graph(), [])]
     assert waits(70.0, coming[:1]) == []  # logged before the monitor saw the server
