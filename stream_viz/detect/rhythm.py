@@ -35,7 +35,7 @@ from what the collector shows every sample (the receive time of the newest messa
 
 A quiet that ends as the topic's stream restarts its time (its stamps went back: a recording
 played in loops, paused between them) was the loop's end: `restarted` marks it healthy even if it
-alerted, so it is learned and the next pauses are within the rhythm.
+alerted or its publisher complained, so it is learned and the next pauses are within the rhythm.
 
 Pure: `Rhythm` is plain data, changed only by `follow` and `restarted`.
 """
@@ -165,8 +165,9 @@ def follow(r: Rhythm, t: float, newest: float | None, rate: float, *, window_s: 
 
 def restarted(r: Rhythm) -> None:
     """The topic's stream restarted its time (a ``stamp_reset``): the quiet that ends now was its
-    loop's end, a healthy gap to learn though it was a symptom."""
-    r.departed = False
+    loop's end, a healthy gap to learn though it was a symptom or its publisher complained (a
+    log player warning of its loop)."""
+    r.departed = r.doubted = False
 
 
 def _message(r: Rhythm, newest: float, notable: float, margin: float, seen: float) -> None:

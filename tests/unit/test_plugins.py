@@ -363,6 +363,11 @@ def test_topic_rate_a_loops_pause_ended_by_its_stamps_going_back_is_learned():
     looped = [(t, G, reset(t)) for t, G, _ in frames]
     alerts = drive("topic_rate", looped)
     assert alerts and max(t for t, _, _ in alerts) < 30.5  # its first pause only: a departure
+    # the same when the player warns of each loop as it pauses: the stamps say it was a loop
+    said = [(t, G, reset(t) + ([Event(t - 1.5, "log", "node:/camera", "warn", "end of bag: looping", {})]
+                               if t + 1.0 in restarts else [])) for t, G, _ in frames]
+    alerts = drive("topic_rate", said)
+    assert alerts and max(t for t, _, _ in alerts) < 30.5
     # without the stamps going back, every pause of the continuous topic is a silence
     assert max(t for t, _, _ in drive("topic_rate", frames)) > 90.0
 
