@@ -141,13 +141,14 @@ class TopicRate(Plugin):
         alerting = ctx.state.setdefault("alerting", set())
         ctx.state["interval"] = ctx.since_last_call()  # what this sample's process metrics cover
         rhythms: dict[str, Rhythm] = ctx.state.setdefault("rhythms", {})
-        restarts = ctx.state["restarts"] = set()  # its loop's end, whatever was said: `_follow`
-        for e in ctx.events:
+        _self_reports(ctx)
+        for topic, r in rhythms.items():  # before any is followed: a quiet complained of is not learned
+            if r.newest is not None and not r.doubted and _complained(ctx, topic, r):
+                r.doubted = True  # a sensor's dropout, each with a WARN, is no rhythm of its topic
+        for e in ctx.events:  # after: a loop's end is learned, whatever its player said
             if e.kind == "stamp_reset" and e.member in rhythms:
                 restarted(rhythms[e.member])
-                restarts.add(e.member)
         watched = list(ctx.watched())
-        _self_reports(ctx)  # before any rhythm is followed: a quiet complained of is not learned
         # Every topic's rhythm is followed, so one the RCA starts watching later is judged at once.
         topics = ctx.structural(lambda: set(ctx.members("topic")), key="topics")
         for topic in topics.difference(watched):
@@ -304,9 +305,6 @@ def _follow(ctx: PluginContext, r: Rhythm, topic: str, rate: float, base: Baseli
     """Account this sample in the topic's rhythm; return its quiet (s), None before any message."""
     s = ctx.settings
     limit = _base_limit(s, _ref_hz(r, base))
-    if r.newest is not None and not r.doubted and topic not in ctx.state["restarts"] \
-            and _complained(ctx, topic, r):
-        r.doubted = True  # a sensor's dropout, each with a WARN, is no rhythm of its topic
     newest = newest_message(ctx.t, rate, ctx.value(topic, "age_s"))
     gap = ctx.value(topic, "gap_s")
     return follow(r, ctx.t, newest, rate, window_s=s["rate_window_s"], notable=limit,
