@@ -475,7 +475,9 @@ def _upstream(
     all does not end the search: a fault crosses a node that raised nothing (its output merely
     went on late), so the walk goes on upstream through silent members, up to
     ``max_trajectory`` hops, each silent node passed weakening what is found behind it by
-    `SILENT_DECAY`. A cause whose symptom is known to have begun after ``n``'s (`began_after`: a log
+    `SILENT_DECAY`; so does the walk from what ``n``'s silent siblings read (`_sibling_inputs`:
+    composed nodes share data in memory). A symptom charged to ``n`` never excuses it. A cause
+    whose symptom is known to have begun after ``n``'s (`began_after`: a log
     line stamped after the next message of ``n``'s silent output was due) does not count.
     ``sources``: the members that can excuse at all (symptoms, candidates, evidence); the walk
     ends once it has passed every one of them. ``fellows``: nodes that stalled with ``n`` in one
@@ -494,8 +496,11 @@ def _upstream(
     mine = set(outputs(G, n))
     left = None if sources is None else sources - mine - {n}
     worst = 0.0
-    seen = {n, *mine}  # its own outputs, reached round a feedback loop, are no cause of it
-    frontier: list[tuple[str, float]] = [(p, 1.0) for p in causes_in(G, n, parents) if p not in mine]
+    # Its own outputs, reached round a feedback loop, are no cause of it; nor is a symptom charged
+    # to it (a client's complaint naming it is its evidence, however the walk comes round to it).
+    seen = {n, *mine, *v.own}
+    frontier: list[tuple[str, float]] = [(p, 1.0) for p in causes_in(G, n, parents) if p not in seen]
+    frontier += _sibling_inputs(G, n, home, seen, views, parents)
     for _ in range(settings.max_trajectory):
         if left is not None and not left:
             break
@@ -519,6 +524,28 @@ def _upstream(
             break
         frontier = nxt
     return _clip(worst)
+
+
+def _sibling_inputs(
+    G: nx.MultiDiGraph, n: str, home: str | None, seen: Collection[str], views: Mapping[str, NodeView],
+    parents: dict[str, list[str]],
+) -> list[tuple[str, float]]:
+    """The inputs of ``n``'s silent siblings (nodes of its process ``home`` with no symptom of
+    their own), as a walk's frontier one silent node away (weight `SILENT_DECAY`).
+
+    Composed nodes share data in memory: nav2's controller reads the costmap its sibling node
+    keeps, MoveIt's move_group its private node's state. What that sibling subscribes to is, in
+    effect, ``n``'s input though no edge of the graph says so. A sibling with symptoms of its own
+    is left out: they may be ``n``'s effects, and `siblings.judge` weighs them.
+    """
+    if home is None:
+        return []
+    out: list[tuple[str, float]] = []
+    for q in nodes_of_process(G, home):
+        if q == n or q in seen or (q in views and views[q].own):
+            continue
+        out += [(c, SILENT_DECAY) for c in causes_in(G, q, parents) if c not in seen]
+    return out
 
 
 def _among(G: nx.MultiDiGraph, p: str, fellows: Collection[str],

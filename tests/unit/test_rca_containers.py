@@ -225,3 +225,60 @@ def test_a_pipeline_in_one_container_whose_executor_stopped_ties_its_filters():
     assert set(order[:3]) == {crop, ground, voxel}
     for n in (crop, ground, voxel):
         assert by[n].evidence["indistinguishable_from"] == sorted({crop, ground, voxel} - {n})
+
+
+DRIVER, POINTS, COSTMAP, CONTROL, CMD = (
+    "node:/lidar_driver", "topic:/points", "node:/local_costmap", "node:/controller", "topic:/cmd")
+
+
+def costmap_graph(same_process: bool):
+    """driver (process 1) → /points → costmap; controller → /cmd. The controller reads the
+    costmap in memory when both are in process 5 (nav2's controller server and its costmap)."""
+    g = new_graph()
+    for m in (DRIVER, POINTS, COSTMAP, CONTROL, CMD, "process:1", "process:5", "process:6"):
+        add_member(g, m)
+    add_flow_edge(g, DRIVER, POINTS, "pub")
+    add_flow_edge(g, POINTS, COSTMAP, "sub")
+    add_flow_edge(g, CONTROL, CMD, "pub")
+    add_tree_edge(g, "process:1", DRIVER)
+    add_tree_edge(g, "process:5", CONTROL)
+    add_tree_edge(g, "process:5" if same_process else "process:6", COSTMAP)
+    return g
+
+
+def test_a_node_is_excused_by_what_its_silent_sibling_reads():
+    # The lidar's clouds go stale; the controller logs that its costmap is old. The costmap node
+    # raised nothing: what it reads is the controller's input, through memory. Before: the
+    # controller ranked first (the quadruped's stale lidar).
+    from stream_viz.rca.symptoms import SILENT_DECAY
+
+    alerts = [*(al(POINTS, "message_age", t) for t in (10, 15, 20)),
+              *(al(CONTROL, "rosout", t, symptom="log") for t in (12, 17, 22))]
+    by, order = rank(costmap_graph(same_process=True), alerts)
+    assert order[0] == DRIVER
+    assert by[CONTROL].evidence["upstream"] == pytest.approx(S.severity["error"] * SILENT_DECAY)
+    # In its own process the costmap is no input of the controller's: nothing excuses it.
+    by, order = rank(costmap_graph(same_process=False), alerts)
+    assert order[0] == CONTROL and by[CONTROL].evidence["upstream"] == 0.0
+
+
+PLANNER, BT, MANAGER = "node:/planner", "node:/bt_navigator", "node:/lifecycle_manager"
+
+
+def test_a_complaint_charged_to_a_server_never_excuses_it_round_its_siblings():
+    # One container: bt_navigator calls the planner; the lifecycle manager calls bt_navigator
+    # (send edges: client → server). The slow planner's only symptom is bt_navigator's complaint
+    # naming it; walking its silent sibling, the manager, leads back to bt_navigator, whose
+    # complaint is the planner's own evidence, not its cause.
+    g = new_graph()
+    for m in ("process:5", PLANNER, BT, MANAGER):
+        add_member(g, m)
+    for m in (PLANNER, BT, MANAGER):
+        add_tree_edge(g, "process:5", m)
+    add_flow_edge(g, BT, PLANNER, "send")
+    add_flow_edge(g, MANAGER, BT, "send")
+    alerts = [a for t in (10, 17, 24) for a in (
+        al(BT, "rosout", t, symptom="log"), al(BT, "services", t, server=PLANNER.removeprefix("node:")))]
+    by, order = rank(g, alerts)
+    assert order[0] == PLANNER
+    assert BT in by[PLANNER].evidence["symptoms"]
