@@ -60,7 +60,9 @@ class TopicRate(Plugin):
     * silence (error): quiet (no message, from the age of the newest one, ``age_s``; without one,
       a zero rate means none for the collector's ``rate_window_s``, 3 s) for longer than
       ``max(silence_periods / rate, silence_min_s)`` (the rate while publishing, not counting a
-      bursty topic's quiets: `stream_viz.detect.rhythm`), or ``gap_margin`` × the longest healthy gap
+      bursty topic's quiets: `stream_viz.detect.rhythm`; ``complained_min_s`` for the floor when a
+      publisher complained as it went quiet, `_complained`: its word confirms what the floor
+      guards against, the monitor's own sampling), or ``gap_margin`` × the longest healthy gap
       or quiet the topic has shown, or, for a topic whose arrivals are irregular, the longest
       quiet random arrivals at its rate show in ``irregular_horizon_s`` (`_by_chance`). Judged
       only once the topic's rhythm is settled: it published for ``warmup_s`` without such a
@@ -117,6 +119,7 @@ class TopicRate(Plugin):
         "confirm": 2,
         "silence_periods": 3.0,
         "silence_min_s": 1.5,
+        "complained_min_s": 0.5,
         "expected_tolerance": 0.3,
         "rate_window_s": 3.0,
         "gap_margin": 2.0,
@@ -321,7 +324,11 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
         return None
     pace = _pace(ctx, topic)  # on simulated time a quiet lasts 1/pace as long on our clock
     judged = quiet * pace if 0 < pace < 1 else quiet
-    limit = quiet_limit(r, _base_limit(s, ref), s["gap_margin"])
+    # A quiet its publisher complained of (a driver's "no data-ready interrupt") is a silence
+    # from ``complained_min_s``: the floor guards against our own sampling, which it confirms.
+    complained = r.doubted and ref > 0
+    floor = max(s["silence_periods"] / ref, s["complained_min_s"]) if complained else _base_limit(s, ref)
+    limit = quiet_limit(r, floor, s["gap_margin"])
     if judged >= limit:  # its arrivals may be irregular: then longer quiets come by chance
         limit = max(limit, _by_chance(ctx, topic, ref))
     stalled = False
@@ -356,6 +363,8 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     stalled = stalled or _stalled(ctx, topic, r, rhythms)
     if stalled:
         again += "; its executor stopped while its input arrives"
+    if complained and quiet < _base_limit(s, ref):
+        again += "; its publisher complained as it went quiet"
     if ended := _this_quiet(ctx, topic, r).get("ended"):
         again += f"; {ended} lost a thread as it stopped"
     # When it began: after its last message, by the next one due (the RCA orders causes by it).

@@ -472,13 +472,14 @@ def test_topic_rate_a_mode_the_node_announces_in_its_own_status_explains_the_qui
     assert drive("topic_rate", idle) == []
     # A reading that changes ("12.0 fps" -> "0.0 fps") is no new mode; nor is a status another
     # node publishes about it (an aggregator's copy), nor one no longer OK: a silence each time
-    # (the node's own OK statuses after the quiet began not taken at their word: `self_reports`).
+    # (the node's own OK statuses after the quiet began not taken at their word: `self_reports`),
+    # from 1.5 s, or 0.5 s once the node's own status is no longer OK (it complained).
     fps = (lambda u: f"{4.0 if u < 20 else 0.0:.1f} fps", {})
     for words, kw in (fps, (lambda u: "capturing" if u < 20 else "idle", {"by": "node:/agg"}),
                       (lambda u: "capturing" if u < 20 else "no frames", {"level": 2})):
         frames = [(t, model(**seen(msgs, t)), said(t, words, **kw)) for t in HALF[:60]]
         alerts = drive("topic_rate", frames, settings={"self_reports": False})
-        assert alerts[:1] == [(21.5, "topic:/img", "error")], kw
+        assert alerts[:1] == [(20.5 if kw.get("level") else 21.5, "topic:/img", "error")], kw
         # Taken at their word, the node's own OK says its quiet is its state; the others do not.
         assert (drive("topic_rate", frames) == []) == (kw == {}), kw
 
@@ -857,7 +858,8 @@ def test_topic_rate_a_new_state_its_publisher_latched_is_a_new_normal_as_a_recon
 def test_topic_rate_a_publisher_that_complains_as_its_topic_stops_did_not_choose_the_quiet():
     # /img 10 Hz, out from 29.9 to 32.5 (a cable dropping out) as /camera latches a new state at
     # 30.1 (a PLC bridge's part present, every cycle): by itself the state explains the quiet.
-    # The same with /camera's WARN at 30.3 ("signal lost"): a silence at its base limit.
+    # The same with /camera's WARN at 30.3 ("signal lost"): a silence, from 0.5 s
+    # (`complained_min_s`: the publisher's word confirms the quiet).
     msgs = [i / 10 for i in range(300)] + [32.5 + i / 10 for i in range(200)]
 
     def frames(said):
@@ -874,7 +876,7 @@ def test_topic_rate_a_publisher_that_complains_as_its_topic_stops_did_not_choose
     assert [a for a in drive("topic_rate", frames([])) if a[2] == "error"] == []
     lost = Event(30.3, "log", "node:/camera", "warn", "signal lost: no counts", {})
     assert [a for a in drive("topic_rate", frames([lost])) if a[2] == "error"][:1] == [
-        (31.5, "topic:/img", "error")]
+        (30.5, "topic:/img", "error")]
 
 
 def test_topic_rate_a_parameter_that_moved_no_rate_is_no_cause_when_it_changes_again():
@@ -1781,7 +1783,30 @@ def test_topic_rate_a_dropout_its_publisher_complained_of_is_not_learned_however
     assert drive("topic_rate", frames({})) == []
     lost = {29.5: [Event(29.4, "log", "node:/camera", "warn", "signal lost", {})],
             50.5: [Event(50.1, "log", "node:/camera", "warn", "signal lost", {})]}
-    assert drive("topic_rate", frames(lost))[:1] == [(51.5, "topic:/img", "error")]
+    # With the complained-of floor as high as the base one (below, the first dropout alerts).
+    floor = {"complained_min_s": 1.5}
+    assert drive("topic_rate", frames(lost), settings=floor)[:1] == [(51.5, "topic:/img", "error")]
+
+
+def test_topic_rate_a_quiet_its_publisher_complained_of_is_a_silence_from_half_a_second():
+    # /img 10 Hz, out from 29.2 to 30.6: 1.3 s quiet at 30.5, under the 1.5 s floor. With
+    # /camera's WARN as it went out (an IMU's "no data-ready interrupt"), a silence there: its
+    # subscriber's ERROR 0.5 s in must not be the first symptom. Without the WARN, nothing.
+    msgs = [i / 10 for i in range(293)] + [30.6 + i / 10 for i in range(294)]
+
+    def frames(said):
+        return [(t, model(**seen(msgs, t)), said.get(t, [])) for t in HALF[:50]]
+
+    assert drive("topic_rate", frames({})) == []
+    lost = {29.5: [Event(29.4, "log", "node:/camera", "warn", "no data-ready interrupt", {})]}
+    alerts = drive("topic_rate", frames(lost), full=True)
+    assert [(a.t, a.member, a.severity) for a in alerts] == [(30.5, "topic:/img", "error")]
+    assert alerts[0].message.endswith("its publisher complained as it went quiet")
+    assert alerts[0].data["since"] == pytest.approx(29.2)
+    # A quiet under half a second is not, complaint or not (29.2 to 29.6: 0.3 s at 29.5).
+    short = [i / 10 for i in range(293)] + [29.6 + i / 10 for i in range(304)]
+    quick = [(t, model(**seen(short, t)), lost.get(t, [])) for t in HALF[:50]]
+    assert drive("topic_rate", quick) == []
 
 
 def test_topic_rate_a_rate_that_falls_as_its_publishers_input_stops_follows_the_input():
