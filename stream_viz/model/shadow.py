@@ -8,6 +8,7 @@ from stream_viz.model.diff import GraphDiff
 from stream_viz.model.graph import new_graph
 from stream_viz.model.history import History
 from stream_viz.model.seen import drop_gone, missing_among, missing_edges, remember
+from stream_viz.model.traffic import TRAFFIC, note_traffic
 
 
 class Shadow:
@@ -20,12 +21,17 @@ class Shadow:
         Samples of θ kept per member.
     forget_gone_s : float
         Seconds a vanished member stays (<= 0: the whole run).
+    rate_window_s : float
+        The collector's rate window: a topic's rate above 0 says it carried over that window
+        (`stream_viz.model.traffic`, in the seen graph's ``graph["traffic"]``).
     """
 
-    def __init__(self, history: int = 600, forget_gone_s: float = 600.0) -> None:
+    def __init__(self, history: int = 600, forget_gone_s: float = 600.0, rate_window_s: float = 3.0) -> None:
         self.seen: nx.MultiDiGraph = new_graph()
         self.history = History(maxlen=history)
         self.forget_gone_s = forget_gone_s
+        self.rate_window_s = rate_window_s
+        self.traffic: dict[str, list[tuple[float, float]]] = {}  # topic -> spans it carried in
         self._live: nx.MultiDiGraph | None = None  # the previous live model
         # The edges of the seen graph that are gone: with the sample's diff, the only ones the
         # live model can lack, so no sample searches every edge (after a crash: every sample).
@@ -54,6 +60,10 @@ class Shadow:
         gone = drop_gone(self.seen, t, self.forget_gone_s)
         if gone:
             self.history.forget(set(self.seen))
+            for m in gone:
+                self.traffic.pop(m, None)
+        note_traffic(self.traffic, G, t, self.rate_window_s)
+        self.seen.graph[TRAFFIC] = self.traffic
         self._gone_edges = {(u, v, k) for u, v, k, _ in missing if not gone or self.seen.has_edge(u, v, k)}
         if diff is None or diff or gone:  # an empty diff: the same live structure, the same gone
             self.structure += 1

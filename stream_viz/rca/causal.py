@@ -88,7 +88,7 @@ def outputs(G: nx.MultiDiGraph, n: str) -> list[str]:
 
 def trace(
     G: nx.MultiDiGraph, c: str, symptomatic: Container[str], max_len: int,
-    children: dict[str, list[str]] | None = None,
+    children: dict[str, list[str]] | None = None, closed: Container[str] = (),
 ) -> tuple[dict[str, float], dict[str, str]]:
     """Dijkstra from ``c`` along causal edges (downstream), up to ``max_len`` members per path.
 
@@ -96,7 +96,9 @@ def trace(
     symptoms is preferred. Returns ``(cost, back)``: cost per reached member, and ``back[x]`` the
     member before ``x`` on its path from ``c`` — following ``back`` from a symptom leads
     upstream, to ``c``: that is the fault trajectory. ``children``: `effects_in`'s memo, shared
-    by the traces of one ranking.
+    by the traces of one ranking. ``closed``: topics that carried nothing at the time; the trace
+    enters one only from ``c`` (its own output: its subscribers see it gone) and goes no further
+    than the nodes behind it.
     """
     children = {} if children is None else children
     cost: dict[str, float] = {c: 0.0}
@@ -105,9 +107,11 @@ def trace(
     heap = [(0.0, c)]
     while heap:
         d, m = heapq.heappop(heap)
-        if d > cost[m] or hops[m] >= max_len:
-            continue
+        if d > cost[m] or hops[m] >= max_len or (m != c and back.get(m) in closed):
+            continue  # a node reached through a closed topic (its own input) goes no further
         for x in effects_in(G, m, children):
+            if x in closed and m != c:
+                continue
             nd = d + (1.0 if x in symptomatic else SILENT_COST)
             if nd < cost.get(x, float("inf")):
                 cost[x], hops[x], back[x] = nd, hops[m] + 1, m

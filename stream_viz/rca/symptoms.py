@@ -17,6 +17,7 @@ import networkx as nx
 import numpy as np
 
 from stream_viz.model.queries import called_servers, nodes_of_process, process_of_node
+from stream_viz.model.traffic import idle
 from stream_viz.rca import siblings
 from stream_viz.rca.causal import causes_in, is_node, outputs, publishers
 from stream_viz.rca.charge import NAME_KEYS, charged_nodes, names_in, pointed_nodes, publisher_shares
@@ -476,9 +477,12 @@ def _upstream(
     went on late), so the walk goes on upstream through silent members, up to
     ``max_trajectory`` hops, each silent node passed weakening what is found behind it by
     `SILENT_DECAY`; so does the walk from what ``n``'s silent siblings read (`_sibling_inputs`:
-    composed nodes share data in memory). A symptom charged to ``n`` never excuses it. A cause
-    whose symptom is known to have begun after ``n``'s (`began_after`: a log
-    line stamped after the next message of ``n``'s silent output was due) does not count.
+    composed nodes share data in memory). A symptom charged to ``n`` never excuses it, and a topic
+    without a symptom of its own that carried no message in that time (`traffic.idle`: a teleop
+    topic nobody publishes on) passes nothing but, as ``n``'s own input, its publishers'
+    departure. A cause whose symptom is known to have begun after
+    ``n``'s (`began_after`: a log line stamped after the next message of ``n``'s silent output was
+    due) does not count.
     ``sources``: the members that can excuse at all (symptoms, candidates, evidence); the walk
     ends once it has passed every one of them. ``fellows``: nodes that stalled with ``n`` in one
     executor (`siblings.stalls`) — neither they nor the topics only they publish excuse it. A
@@ -500,6 +504,7 @@ def _upstream(
     # to it (a client's complaint naming it is its evidence, however the walk comes round to it).
     seen = {n, *mine, *v.own}
     frontier: list[tuple[str, float]] = [(p, 1.0) for p in causes_in(G, n, parents) if p not in seen]
+    inputs = {p for p, _ in frontier}
     frontier += _sibling_inputs(G, n, home, seen, views, parents)
     for _ in range(settings.max_trajectory):
         if left is not None and not left:
@@ -511,12 +516,17 @@ def _upstream(
             seen.add(p)
             if fellows and _among(G, p, fellows, parents):
                 continue
+            # A topic that carried no message then passes no fault: n's own input still shows
+            # its publishers' departure (a subscriber warned its publisher died), no further.
+            shut = p not in s.anomaly and not is_node(G, p) and idle(G, p, lo, hi)
+            if shut and p not in inputs:
+                continue
             if left is not None:
                 left.discard(p)
             when = (lo, hi, latest, settings.tolerance)
             found = _excuse(G, p, n, s, views, ev_passive, when, home, parents)
             worst = max(worst, w * found)
-            if found > 0 or w * SILENT_DECAY <= worst:
+            if shut or found > 0 or w * SILENT_DECAY <= worst:
                 continue  # an alerting member ends its path: the earlier ones are its own causes
             decay = w * SILENT_DECAY if is_node(G, p) else w
             nxt += [(q, decay) for q in causes_in(G, p, parents) if q not in seen]

@@ -23,13 +23,14 @@ explains no other symptom).
 from __future__ import annotations
 
 import itertools
-from collections.abc import Collection, Iterable, Mapping
+from collections.abc import Collection, Container, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import networkx as nx
 import numpy as np
 
+from stream_viz.model.traffic import TRAFFIC, idle
 from stream_viz.rca.causal import path_back, trace
 from stream_viz.rca.cooccurrence import cooccurrence
 from stream_viz.rca.episodes import Evidence
@@ -125,9 +126,9 @@ def _series(ctx: Context, m: str) -> np.ndarray:
 def trajectory_of(ctx: Context, c: str) -> Trajectory:
     """Trace ``c``'s fault trajectory and score its dependencies (module docstring, stage 2)."""
     s, settings = ctx.symptoms, ctx.settings
-    cost, back = trace(ctx.G, c, s.times, settings.max_trajectory, ctx._children)
-    # A symptom that began before the candidate's own (beyond the tolerance) is not its effect.
     onset = ctx.views[c].onset if c in ctx.views else np.inf
+    cost, back = trace(ctx.G, c, s.times, settings.max_trajectory, ctx._children, _closed(ctx, onset))
+    # A symptom that began before the candidate's own (beyond the tolerance) is not its effect.
     since = onset - settings.tolerance if np.isfinite(onset) else -np.inf  # metric evidence only: no time
     explained = [m for m in cost if m in s.times and s.onset[m] >= since and not _before(ctx, c, m)]
     coverage = len(explained) / len(s.times) if s.times else 0.0
@@ -162,6 +163,28 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
         float(np.mean(lag)) if lag else None,
         coverage,
     )
+
+
+@dataclass
+class _Closed:
+    """The topics without a symptom that carried no message while a candidate's symptoms began
+    (``lo``–``hi``, as its walk upstream judges them: `symptoms._upstream`): nothing it did went
+    along them. Asked member by member (`causal.trace`'s ``closed``), not built for every topic."""
+
+    ctx: Context
+    lo: float
+    hi: float
+
+    def __contains__(self, m: object) -> bool:
+        ctx = self.ctx
+        return isinstance(m, str) and m not in ctx.symptoms.times and idle(ctx.G, m, self.lo, self.hi)
+
+
+def _closed(ctx: Context, onset: float) -> Container[str]:
+    """`_Closed` for a candidate whose symptoms began at ``onset``; nothing for one without a time."""
+    if not np.isfinite(onset) or TRAFFIC not in ctx.G.graph:
+        return ()
+    return _Closed(ctx, onset - ctx.settings.episode_gap, onset + ctx.settings.tolerance)
 
 
 def _before(ctx: Context, c: str, m: str) -> bool:
