@@ -299,9 +299,11 @@ def _ref_hz(r: Rhythm, base: Baseline) -> float:
     return r.rate if r.rate > 0 else base[0] if base and base[0] > 0 else 0.0
 
 
-def _base_limit(s: dict[str, Any], ref_hz: float) -> float:
-    """The shortest quiet that can be a silence: ``max(silence_periods / rate, silence_min_s)``."""
-    return max(s["silence_periods"] / ref_hz, s["silence_min_s"]) if ref_hz > 0 else s["silence_min_s"]
+def _base_limit(s: dict[str, Any], ref_hz: float, complained: bool = False) -> float:
+    """The shortest quiet that can be a silence: ``max(silence_periods / rate, silence_min_s)``
+    (``complained_min_s`` for the floor when a publisher ``complained`` as it went quiet)."""
+    floor = s["complained_min_s"] if complained else s["silence_min_s"]
+    return max(s["silence_periods"] / ref_hz, floor) if ref_hz > 0 else s["silence_min_s"]
 
 
 def _follow(ctx: PluginContext, r: Rhythm, topic: str, rate: float, base: Baseline) -> float | None:
@@ -326,9 +328,8 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     judged = quiet * pace if 0 < pace < 1 else quiet
     # A quiet its publisher complained of (a driver's "no data-ready interrupt") is a silence
     # from ``complained_min_s``: the floor guards against our own sampling, which it confirms.
-    complained = r.doubted and ref > 0
-    floor = max(s["silence_periods"] / ref, s["complained_min_s"]) if complained else _base_limit(s, ref)
-    limit = quiet_limit(r, floor, s["gap_margin"])
+    complained = r.doubted
+    limit = quiet_limit(r, _base_limit(s, ref, complained), s["gap_margin"])
     if judged >= limit:  # its arrivals may be irregular: then longer quiets come by chance
         limit = max(limit, _by_chance(ctx, topic, ref))
     stalled = False
