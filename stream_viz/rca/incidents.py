@@ -3,12 +3,14 @@
 A robot's alert history mixes faults: an old one that has ended, a warning that recurs somewhere
 else, the fault of now. Ranked together, a loud old symptom can take the first place of the
 fault a user is looking at. So symptom episodes (`stream_viz.rca.episodes`) are grouped first:
-two episodes belong to one incident when their members are at most ``incident_hops`` hops apart
-(data flow in either direction, service calls, a node and its process, an alert and the node it
-names, a service and its servers and clients, a host with a symptom and its nodes) and the
-episodes are at most ``episode_gap`` apart in time (single linkage: a chain of such pairs is one
-incident). Each incident is ranked on its own alerts; the diagnosis is the ranking of the
-*current* incident.
+two episodes belong to one incident when one fault could explain both (single linkage: a chain
+of such pairs is one incident). In the graph, their members are joined by a path of at most
+``incident_hops`` hops with no collider (`ball`, `relation`): one is upstream of the other, or
+both are downstream of a member between them; two publishers of ``/diagnostics`` are not. In
+time, the episodes are at most ``episode_gap`` apart, in an order one fault can give
+(`_linked`). Metric evidence joins the incident of the alert closest to it and links no two.
+Each incident is ranked on its own alerts; the diagnosis is the ranking of the *current*
+incident.
 
 The current incident is one with a candidate at all (not, say, the metric evidence of a process
 that hosts no node); among those an ongoing one (its last episode ended less than
@@ -85,21 +87,40 @@ class Incident:
                 "root_causes": [rc.to_report() for rc in self.root_causes]}
 
 
-def neighbours(G: nx.MultiDiGraph, m: str) -> set[str]:
-    """Members one hop from ``m``: data flow and service calls in either direction, a node's
-    process and a process's nodes (not a process's parent: a launcher would join everything)."""
+def steps(G: nx.MultiDiGraph, m: str) -> tuple[set[str], set[str]]:
+    """Members one hop from ``m`` as ``(up, down)``: up where a fault comes from (a topic's
+    publishers, a node's inputs, the servers it calls), down where it goes; what acts both ways is
+    in both (a node's process and a process's nodes; not a process's parent: a launcher would join
+    everything)."""
     if m not in G:
-        return set()
-    out = {x for x, keys in G._succ[m].items() if FLOW in keys}
-    out |= {x for x, keys in G._pred[m].items() if FLOW in keys}
+        return set(), set()
+    up: set[str] = set()
+    down: set[str] = set()
+    # A service call (client → server in the flow) acts against it: the client waits on the server.
+    for x, keys in G._succ[m].items():
+        if FLOW in keys:
+            (up if keys[FLOW].get("kind") == "send" else down).add(x)
+    for x, keys in G._pred[m].items():
+        if FLOW in keys:
+            (down if keys[FLOW].get("kind") == "send" else up).add(x)
     kind = G.nodes[m].get("kind")
+    both: set[str] = set()
     if kind == "node":
         p = process_of_node(G, m)
         if p is not None:
-            out.add(p)
+            both.add(p)
     elif kind == "process":
-        out.update(nodes_of_process(G, m))
-    return out
+        both.update(nodes_of_process(G, m))
+    return up | both, down | both
+
+
+def neighbours(G: nx.MultiDiGraph, m: str) -> set[str]:
+    """Members one hop from ``m`` in either direction (`steps`)."""
+    up, down = steps(G, m)
+    return up | down
+
+
+SELF, UP, DOWN, MIXED = "self", "up", "down", "mixed"  # how a walk reached a member (`ball`)
 
 
 def ball(
@@ -107,40 +128,71 @@ def ball(
     m: str,
     radius: int,
     links: Mapping[str, set[str]] | None = None,
-    cache: dict[str, set[str]] | None = None,
-    rim: bool = False,
-) -> set[Any]:
-    """Return the members at most ``radius`` hops from ``m`` (`neighbours`, plus ``links``: extra
-    one-hop pairs such as an alert and the node it names), ``m`` included.
+    cache: dict[str, tuple[set[str], set[str]]] | None = None,
+) -> dict[str, dict[str, int]]:
+    """Return what ``m`` reaches in at most ``radius`` hops without a collider: member → {how →
+    fewest hops}.
 
-    With ``rim``, also the edges leaving the outermost of them, as sorted ``(u, v)`` pairs: two
-    members are at most ``2 radius + 1`` hops apart exactly when their balls with rims share a
-    member or an edge (its midpoint). ``cache`` (member → its one-hop members) is filled and
-    reused across calls on the same graph.
+    A walk goes up (against the data flow: ``x`` is then upstream of ``m``), then down (along
+    it), never down then up: two publishers of one topic meet at it head to head, and a fault of
+    one does not reach the other that way. How: `SELF` (``m``), `UP` (up only), `DOWN` (down
+    only: ``x`` is downstream of ``m``) or `MIXED` (up, then down: ``x`` and ``m`` share an
+    upstream member). Steps are `steps` plus ``links``, extra pairs that act both ways (an alert
+    and the node it names). ``cache`` (member → its steps) is filled and reused across calls on
+    the same graph.
     """
     links = links or {}
     cache = {} if cache is None else cache
 
-    def step(x: str) -> set[str]:
+    def step(x: str) -> tuple[set[str], set[str]]:
         if x not in cache:
-            cache[x] = neighbours(G, x) | links.get(x, set())
+            up, down = steps(G, x)
+            extra = links.get(x, set())
+            cache[x] = (up | extra, down | extra)
         return cache[x]
 
-    seen: set[Any] = {m}
-    frontier = {m}
-    for _ in range(radius):
-        nxt = set()
-        for x in frontier:
-            nxt |= step(x) - seen
-        seen |= nxt
+    seen: dict[str, dict[str, int]] = {m: {SELF: 0}}
+    frontier = [(m, SELF)]
+    for d in range(1, radius + 1):
+        nxt = []
+        for x, how in frontier:
+            up_x, down_x = step(x)
+            moves = [(y, {SELF: DOWN, UP: MIXED}.get(how, how)) for y in down_x]
+            if how in (SELF, UP):
+                moves += [(y, UP) for y in up_x]
+            for y, h in moves:
+                hows = seen.setdefault(y, {})
+                if h not in hows:
+                    hows[h] = d
+                    nxt.append((y, h))
         frontier = nxt
-    if rim:
-        seen |= {(x, y) if x < y else (y, x) for x in frontier for y in step(x)}
     return seen
 
 
-def _close(a: Episode, b: Episode, gap: float) -> bool:
-    return a[0] <= b[1] + gap and b[0] <= a[1] + gap
+def relation(a: str, b: str) -> set[str]:
+    """How two members whose walks met (each walk's how, `ball`) relate: ``{"ab"}`` (the first is
+    upstream of the second), ``{"ba"}``, ``{"fork"}`` (both downstream of a member between them),
+    or empty (head to head: neither reaches the other)."""
+    if a == SELF:
+        return {"ab"} if b == UP else {"ba"} if b == DOWN else {"fork"} if b == MIXED else set()
+    if b == SELF:
+        return {"ba"} if a == UP else {"ab"} if a == DOWN else {"fork"} if a == MIXED else set()
+    if UP in (a, b):
+        other = b if a == UP else a
+        return {"fork"} if other in (UP, MIXED) else {"ba"} if a == UP else {"ab"}
+    return set()
+
+
+_HOWS = (SELF, UP, DOWN, MIXED)
+_RELATION = {(a, b): frozenset(relation(a, b)) for a in _HOWS for b in _HOWS}
+
+
+def _linked(r: set[str], sa: float, sb: float, lead: float) -> bool:
+    """Whether symptoms of two members so related (`relation`), beginning at ``sa`` and ``sb``,
+    can be one fault's: a cause comes first (its detection may lag by ``lead``), and two
+    effects of a cause that shows nothing begin together."""
+    return (("ab" in r and sb >= sa - lead) or ("ba" in r and sa >= sb - lead)
+            or ("fork" in r and abs(sa - sb) <= lead))
 
 
 def find_incidents(
@@ -151,6 +203,7 @@ def find_incidents(
     now: float,
     links: Mapping[str, set[str]] | None = None,
     alerted: Mapping[str, list[Episode]] | None = None,
+    lead: float | None = None,
 ) -> list[Incident]:
     """Group symptom episodes into incidents (module docstring), oldest first, ids from 1.
 
@@ -172,7 +225,11 @@ def find_incidents(
     alerted : mapping, optional
         The episodes that are alerts' (of ``episodes``): a group with none of them is no
         incident (metric evidence is a hint where something alerted, not a symptom of its own).
+    lead : float, optional
+        Longest a symptom may begin before that of a member only upstream of it, and be linked
+        to it (the upstream one's detection lagged); ``gap`` when not given.
     """
+    lead = gap if lead is None else lead
     items = [(m, ep) for m in sorted(episodes) for ep in episodes[m]]
     index: dict[str, list[int]] = {}
     for i, (m, _) in enumerate(items):
@@ -185,27 +242,46 @@ def find_incidents(
             i = parent[i]
         return i
 
-    # Two members are at most `hops` apart exactly when their balls of half that radius meet; the
-    # episodes of the members whose balls hold one point are linked where close in time (a sweep
-    # by start: single linkage of intervals).
-    radius, odd = divmod(hops, 2)
-    cache: dict[str, set[str]] = {}
-    at: dict[Any, list[int]] = {}
+    # Two members are joined within `hops` exactly when walks from both (`ball`) of at most
+    # half that length meet at one point, one of them there going up only; their episodes are
+    # linked where close in time and in an order one fault can give (`_linked`; single linkage).
+    radius = (hops + 1) // 2
+    cache: dict[str, tuple[set[str], set[str]]] = {}
+    at: dict[str, list[tuple[str, dict[str, int]]]] = {}
     for m in index:
-        for x in ball(G, m, radius, links, cache, rim=bool(odd)):
-            at.setdefault(x, []).extend(index[m])
-    for xs in at.values():
-        if len(xs) < 2:
-            continue
-        xs.sort(key=lambda i: items[i][1][0])
-        run, run_end = xs[0], items[xs[0]][1][1]
-        for i in xs[1:]:
-            start, end = items[i][1]
-            if start <= run_end + gap:
-                parent[root(i)] = root(run)
-                run_end = max(run_end, end)
-            else:
-                run, run_end = i, end
+        for x, hows in ball(G, m, radius, links, cache).items():
+            at.setdefault(x, []).append((m, hows))
+    rel: dict[tuple[str, str], set[str]] = {}
+    for there in at.values():  # members in sorted order (`index`'s)
+        for k, (a, ha) in enumerate(there):
+            for b, hb in there[k + 1:]:
+                found = [_RELATION[wa, wb] for wa, da in ha.items() for wb, db in hb.items()
+                         if da + db <= hops]
+                if found:
+                    rel.setdefault((a, b), set()).update(*found)
+    pairs = [(i, j) for (a, b), r in rel.items() for i in index[a] for j in index[b]
+             if items[i][1][0] <= items[j][1][1] + gap and items[j][1][0] <= items[i][1][1] + gap
+             and _linked(r, items[i][1][0], items[j][1][0], lead)]
+    for idx in index.values():  # a member's own episodes close in time
+        idx = sorted(idx, key=lambda i: items[i][1][0])
+        for k, i in enumerate(idx[1:], 1):
+            if items[i][1][0] <= max(items[j][1][1] for j in idx[:k]) + gap:
+                pairs.append((idx[k - 1], i))
+    said = [alerted is None or ep in alerted.get(m, ()) for m, ep in items]
+    for i, j in pairs:
+        if said[i] and said[j]:
+            parent[root(i)] = root(j)
+    # Metric evidence joins the group of the alert closest to it in time, and bridges no two:
+    # a process's CPU burst between two unrelated faults is a hint for either, not a link.
+    near: dict[int, tuple[float, int]] = {}
+    for i, j in pairs:
+        for e, a in ((i, j), (j, i)):
+            if not said[e] and said[a]:
+                d = abs(items[e][1][0] - items[a][1][0])
+                if e not in near or d < near[e][0]:
+                    near[e] = (d, a)
+    for e, (_, a) in near.items():
+        parent[root(e)] = root(a)
     groups: dict[int, list[int]] = {}
     for i in range(len(items)):
         groups.setdefault(root(i), []).append(i)
@@ -303,7 +379,7 @@ def diagnose(
     if not s.count:  # evidence alone, with nothing alerted, names no cause
         return Diagnosis([], [], None)
     incidents = find_incidents(G, episodes, settings.incident_hops, settings.episode_gap, now, links,
-                               s.episodes)
+                               s.episodes, settings.incident_lead)
     if not incidents:
         ctx = make_context(G, alerts, settings, keep, evidence, first, gone)
         return Diagnosis(ranker(ctx), [], ctx.symptoms.first)

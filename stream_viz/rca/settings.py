@@ -70,6 +70,9 @@ class RcaSettings:
     incident_hops : int
         Symptoms at most this many hops apart in the graph (data flow in either direction,
         service calls, a node and its process) and close in time form one incident.
+    incident_lead : float
+        Longest a symptom may begin before that of a member only upstream of it and still be in
+        its incident (the upstream one's detection lagged; a cause comes first).
     """
 
     policy: str = setting("both", choices=POLICIES)
@@ -90,6 +93,7 @@ class RcaSettings:
     replay: bool = True
     episode_gap: float = setting(15.0, gt=0)
     incident_hops: int = setting(4, ge=1)
+    incident_lead: float = setting(10.0, ge=0)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str) -> RcaSettings:

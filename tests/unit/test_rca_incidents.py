@@ -9,7 +9,17 @@ import pytest
 
 from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.rca import RcaEngine, RcaSettings, analyze
-from stream_viz.rca.incidents import ball, current, find_incidents, neighbours
+from stream_viz.rca.incidents import (
+    DOWN,
+    MIXED,
+    SELF,
+    UP,
+    ball,
+    current,
+    find_incidents,
+    neighbours,
+    relation,
+)
 from stream_viz.records import Alert
 
 SENSOR, PERC, PLAN, CTRL = "node:/sensor", "node:/perception", "node:/planner", "node:/controller"
@@ -40,12 +50,51 @@ def test_neighbours_and_hops(G):
     assert neighbours(G, PERC) == {SCAN, OBJ, PROC}
     assert neighbours(G, PROC) == {PERC}
     assert neighbours(G, "node:/unknown") == set()
-    assert ball(G, SCAN, 1) == {SCAN, SENSOR, PERC}
-    assert ball(G, SCAN, 2) == {SCAN, SENSOR, PERC, OBJ, PROC}
-    assert ball(G, SCAN, 1, rim=True) == {SCAN, SENSOR, PERC, (SENSOR, SCAN), (PERC, SCAN), (PERC, OBJ),
-                                          (PERC, PROC)}
-    assert ball(G, BATTERY, 1, links={BATTERY: {SENSOR}}) == {BATTERY, BATT, SENSOR}
+    # how each member was reached: up only, down only, up then down (never down then up)
+    assert ball(G, SCAN, 1) == {SCAN: {SELF: 0}, SENSOR: {UP: 1}, PERC: {DOWN: 1}}
+    assert ball(G, SCAN, 2) == {SCAN: {SELF: 0, MIXED: 2}, SENSOR: {UP: 1}, PERC: {DOWN: 1}, OBJ: {DOWN: 2},
+                                PROC: {DOWN: 2}}
+    assert ball(G, PERC, 1) == {PERC: {SELF: 0}, SCAN: {UP: 1}, PROC: {UP: 1, DOWN: 1}, OBJ: {DOWN: 1}}
+    assert ball(G, OBJ, 2) == {OBJ: {SELF: 0, MIXED: 2}, PERC: {UP: 1}, PLAN: {DOWN: 1}, SCAN: {UP: 2},
+                               PROC: {UP: 2, MIXED: 2}, CMD: {DOWN: 2}}
+    assert ball(G, BATTERY, 1, links={BATTERY: {SENSOR}}) == {BATTERY: {SELF: 0}, BATT: {UP: 1},
+                                                             SENSOR: {UP: 1, DOWN: 1}}
 
+
+def test_relation_of_two_walks_that_met():
+    assert relation(SELF, UP) == {"ab"} and relation(UP, SELF) == {"ba"}  # the first is upstream
+    assert relation(SELF, DOWN) == {"ba"} and relation(DOWN, UP) == {"ab"} and relation(UP, DOWN) == {"ba"}
+    assert relation(UP, UP) == relation(UP, MIXED) == relation(SELF, MIXED) == {"fork"}  # a common cause
+    assert relation(DOWN, DOWN) == relation(DOWN, MIXED) == relation(MIXED, MIXED) == set()  # head to head
+
+
+DIAG, AGG, OTHER = "topic:/diagnostics", "node:/aggregator", "node:/other"
+
+
+def test_publishers_of_one_topic_meet_head_to_head(G):
+    """The sensor and the battery both publish /diagnostics: a fault of one does not reach the
+    other through it, so their symptoms at the same time are two incidents; a symptom of the
+    aggregator that reads it joins both (each is upstream of it); two readers of /scan share a
+    cause and are one."""
+    for m in (DIAG, AGG, OTHER):
+        add_member(G, m)
+    for a, b, kind in ((SENSOR, DIAG, "pub"), (BATT, DIAG, "pub"), (DIAG, AGG, "sub"), (SCAN, OTHER, "sub")):
+        add_flow_edge(G, a, b, kind)
+    for hops in (2, 3, 4, 5, 6):
+        got = find_incidents(G, {SENSOR: [(0.0, 1.0)], BATT: [(0.0, 1.0)]}, hops, 15.0, 1.0)
+        assert [i.members for i in got] == [[BATT], [SENSOR]], hops
+        both = {SENSOR: [(0.0, 1.0)], BATT: [(0.0, 1.0)]}
+        got = find_incidents(G, {**both, AGG: [(10.0, 11.0)]}, hops, 15.0, 11.0)
+        assert [i.members for i in got] == [[AGG, BATT, SENSOR]], hops
+        # the aggregator's symptom too far off in time joins neither
+        got = find_incidents(G, {**both, AGG: [(40.0, 41.0)]}, hops, 15.0, 41.0)
+        assert len(got) == 3, hops
+        got = find_incidents(G, {PERC: [(0.0, 1.0)], OTHER: [(0.0, 1.0)]}, hops, 15.0, 1.0)
+        assert [i.members for i in got] == [[OTHER, PERC]], hops
+    # down the chain is no collider: the sensor reaches /objects in three hops
+    assert len(find_incidents(G, {SENSOR: [(0.0, 1.0)], OBJ: [(0.0, 1.0)]}, 3, 15.0, 1.0)) == 1
+    # the battery and the planner are six hops apart, through the sensor head to head at /diagnostics
+    assert len(find_incidents(G, {BATT: [(0.0, 1.0)], PLAN: [(0.0, 1.0)]}, 6, 15.0, 1.0)) == 2
 
 PAIRS = {(SCAN, OBJ): 2, (OBJ, CMD): 2, (SENSOR, OBJ): 3, (SCAN, CMD): 4, (SENSOR, CMD): 5}
 
@@ -194,3 +243,36 @@ def test_a_flapping_fault_is_one_incident_and_ranks_its_root_first(G):
     r = analyze(G, flapping(period=40.0), RcaSettings(), None)
     assert len(r.incidents) == 6 and [i.recurring for i in r.incidents] == [False] + [True] * 5
     assert r.incidents[-1].current and r.root_causes[0].member == SENSOR
+
+
+def test_a_symptom_downstream_does_not_begin_long_before_its_cause(G):
+    """The planner (downstream of /scan) alerts from 0 s to 22 s: /scan's symptom from 20 s on
+    did not cause it (it began more than the episode gap later), so they are two incidents; from
+    10 s on it may have (its detection lagged). A later symptom downstream joins an earlier one
+    upstream. Two readers of /scan (a common cause) join whichever began first."""
+    def members(eps):
+        return [i.members for i in find_incidents(G, eps, 4, 15.0, 32.0)]
+
+    assert members({PLAN: [(0.0, 22.0)], SCAN: [(20.0, 32.0)]}) == [[PLAN], [SCAN]]
+    assert members({PLAN: [(0.0, 22.0)], SCAN: [(10.0, 32.0)]}) == [[PLAN, SCAN]]
+    assert members({SCAN: [(0.0, 22.0)], PLAN: [(20.0, 32.0)]}) == [[PLAN, SCAN]]
+    add_member(G, OTHER)
+    add_flow_edge(G, SCAN, OTHER, "sub")
+    assert members({OTHER: [(0.0, 22.0)], PERC: [(20.0, 32.0)]}) == [[OTHER], [PERC]]
+    assert members({PERC: [(0.0, 22.0)], OTHER: [(5.0, 32.0)]}) == [[OTHER, PERC]]
+    assert members({OTHER: [(0.0, 22.0)], PERC: [(20.0, 32.0)], SCAN: [(0.0, 32.0)]}) == [[OTHER, PERC, SCAN]]
+
+
+def test_metric_evidence_joins_the_nearest_alert_and_bridges_no_two(G):
+    """Perception's process (42) also hosts a node that alerts 0-5 s; the sensor upstream alerts
+    from 18 s (too late to explain it). The process's CPU evidence at 7 s could go with either:
+    it joins the nearer, and does not make the two one incident."""
+    add_member(G, OTHER)
+    add_tree_edge(G, PROC, OTHER)
+    eps = {OTHER: [(0.0, 5.0)], SENSOR: [(18.0, 25.0)], PROC: [(7.0, 8.0)]}
+    alerted = {OTHER: eps[OTHER], SENSOR: eps[SENSOR]}
+    got = find_incidents(G, eps, 4, 15.0, 25.0, alerted=alerted)
+    assert [i.members for i in got] == [[OTHER, PROC], [SENSOR]]
+    # as an alert (a plugin confirmed it), it is a symptom and links both
+    got = find_incidents(G, eps, 4, 15.0, 25.0, alerted={**alerted, PROC: eps[PROC]})
+    assert [i.members for i in got] == [[OTHER, SENSOR, PROC]]
