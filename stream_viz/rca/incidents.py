@@ -35,6 +35,8 @@ import networkx as nx
 
 from stream_viz.model.graph import FLOW
 from stream_viz.model.queries import clients, nodes_of_process, process_of_node, servers
+from stream_viz.model.traffic import idle
+from stream_viz.rca.causal import publishers
 from stream_viz.rca.charge import pointed_nodes
 from stream_viz.rca.episodes import INF, Episode, Evidence, as_evidence
 from stream_viz.rca.settings import RcaSettings
@@ -129,6 +131,7 @@ def ball(
     radius: int,
     links: Mapping[str, set[str]] | None = None,
     cache: dict[str, tuple[set[str], set[str]]] | None = None,
+    shut: Callable[[str, bool], bool] | None = None,
 ) -> dict[str, dict[str, int]]:
     """Return what ``m`` reaches in at most ``radius`` hops without a collider: member → {how →
     fewest hops}.
@@ -139,7 +142,8 @@ def ball(
     only: ``x`` is downstream of ``m``) or `MIXED` (up, then down: ``x`` and ``m`` share an
     upstream member). Steps are `steps` plus ``links``, extra pairs that act both ways (an alert
     and the node it names). ``cache`` (member → its steps) is filled and reused across calls on
-    the same graph.
+    the same graph. A member ``shut(member, going up)`` says true of is not entered there (a
+    topic that carried no message at the time passes no fault, `stream_viz.model.traffic`).
     """
     links = links or {}
     cache = {} if cache is None else cache
@@ -161,6 +165,8 @@ def ball(
             if how in (SELF, UP):
                 moves += [(y, UP) for y in up_x]
             for y, h in moves:
+                if shut is not None and shut(y, h == UP):
+                    continue
                 hows = seen.setdefault(y, {})
                 if h not in hows:
                     hows[h] = d
@@ -204,6 +210,8 @@ def find_incidents(
     links: Mapping[str, set[str]] | None = None,
     alerted: Mapping[str, list[Episode]] | None = None,
     lead: float | None = None,
+    blamed: Iterable[tuple[str, float, str]] = (),
+    tolerance: float = 2.0,
 ) -> list[Incident]:
     """Group symptom episodes into incidents (module docstring), oldest first, ids from 1.
 
@@ -228,6 +236,14 @@ def find_incidents(
     lead : float, optional
         Longest a symptom may begin before that of a member only upstream of it, and be linked
         to it (the upstream one's detection lagged); ``gap`` when not given.
+    blamed : iterable, optional
+        ``(member, alert time, member it blames)``: that alert's episode is linked to the blamed
+        member's episodes close in time that began before it (or within ``lead`` after), as if
+        upstream of it, whatever the graph holds (a subscriber warning that its input lost the
+        publisher that left).
+    tolerance : float, optional
+        Seconds within which two times count as one (a topic carrying just after a symptom
+        began still carried to it).
     """
     lead = gap if lead is None else lead
     items = [(m, ep) for m in sorted(episodes) for ep in episodes[m]]
@@ -248,8 +264,17 @@ def find_incidents(
     radius = (hops + 1) // 2
     cache: dict[str, tuple[set[str], set[str]]] = {}
     at: dict[str, list[tuple[str, dict[str, int]]]] = {}
-    for m in index:
-        for x, hows in ball(G, m, radius, links, cache).items():
+    for m, idx in index.items():
+        # Its causes carried to it before its symptom began; it carried to its effects while
+        # its symptom lasted.
+        lo = min(items[i][1][0] for i in idx) - gap
+        began = max(items[i][1][0] for i in idx) + tolerance
+        hi = max(min(items[i][1][1], now) for i in idx)
+
+        def shut(x: str, up: bool, lo: float = lo, began: float = began, hi: float = hi) -> bool:
+            return x not in episodes and idle(G, x, lo, began if up else hi)
+
+        for x, hows in ball(G, m, radius, links, cache, shut).items():
             at.setdefault(x, []).append((m, hows))
     rel: dict[tuple[str, str], set[str]] = {}
     for there in at.values():  # members in sorted order (`index`'s)
@@ -267,6 +292,11 @@ def find_incidents(
         for k, i in enumerate(idx[1:], 1):
             if items[i][1][0] <= max(items[j][1][1] for j in idx[:k]) + gap:
                 pairs.append((idx[k - 1], i))
+    for m, t, n in blamed:
+        mine = [i for i in index.get(m, ()) if items[i][1][0] <= t <= items[i][1][1]]
+        pairs += [(i, j) for i in mine for j in index.get(n, ())
+                  if items[j][1][0] <= items[i][1][1] + gap and items[i][1][0] <= items[j][1][1] + gap
+                  and _linked({"ab"}, items[j][1][0], items[i][1][0], lead)]
     said = [alerted is None or ep in alerted.get(m, ()) for m, ep in items]
     for i, j in pairs:
         if said[i] and said[j]:
@@ -378,8 +408,13 @@ def diagnose(
         links.setdefault(n, set()).add(m)
     if not s.count:  # evidence alone, with nothing alerted, names no cause
         return Diagnosis([], [], None)
+    # A subscriber's warning that its input lost its publishers, and the publishers: an idle input
+    # passes no fault (`ball`), but its publishers' departure it does show.
+    orphaned = [(a.member, a.t, p) for a in alerts if (keep is None or a.member in keep) and a.data
+                and a.data.get("symptom") == "no_publisher" and a.data.get("topic") in G
+                for p in publishers(G, a.data["topic"])]
     incidents = find_incidents(G, episodes, settings.incident_hops, settings.episode_gap, now, links,
-                               s.episodes, settings.incident_lead)
+                               s.episodes, settings.incident_lead, orphaned, settings.tolerance)
     if not incidents:
         ctx = make_context(G, alerts, settings, keep, evidence, first, gone)
         return Diagnosis(ranker(ctx), [], ctx.symptoms.first)

@@ -276,3 +276,40 @@ def test_metric_evidence_joins_the_nearest_alert_and_bridges_no_two(G):
     # as an alert (a plugin confirmed it), it is a symptom and links both
     got = find_incidents(G, eps, 4, 15.0, 25.0, alerted={**alerted, PROC: eps[PROC]})
     assert [i.members for i in got] == [[OTHER, SENSOR, PROC]]
+
+
+def test_a_topic_that_carried_nothing_then_joins_nothing(G):
+    """/scan carried no message (a teleop topic whose joystick is never held): the sensor's exit
+    and the perception's symptom 5 s later are two incidents; when it carried up to the
+    perception's symptom, one. Carrying again only after the perception's symptom began (a new
+    session) does not make it the cause's path; a warning of the perception that its input lost
+    the sensor links them whatever the topic carried."""
+    from stream_viz.model.traffic import TRAFFIC
+
+    eps = {SENSOR: [(0.0, 10.0)], PERC: [(5.0, 12.0)]}
+
+    def members(spans, blamed=()):
+        G.graph[TRAFFIC] = {SCAN: spans}
+        return [i.members for i in find_incidents(G, eps, 4, 15.0, 12.0, blamed=blamed, lead=10.0)]
+
+    assert members([]) == [[SENSOR], [PERC]]
+    assert members([(-20.0, 6.0)]) == [[PERC, SENSOR]]
+    assert members([(11.0, 20.0)]) == [[SENSOR], [PERC]]
+    assert members([], blamed=[(PERC, 6.0, SENSOR)]) == [[PERC, SENSOR]]
+    # blamed, but the one it blames began 11 s after it (more than the lead): not its cause
+    eps[SENSOR] = [(16.0, 20.0)]
+    assert members([], blamed=[(PERC, 6.0, SENSOR)]) == [[PERC], [SENSOR]]
+    del G.graph[TRAFFIC]
+
+
+def test_a_warning_that_an_input_lost_its_publisher_joins_the_publisher(G):
+    from stream_viz.model.traffic import TRAFFIC
+
+    G.graph[TRAFFIC] = {SCAN: []}  # measured, never carried
+    exit_ = [al(SENSOR, "member_gone", t) for t in (0, 5, 10)]
+    warn = [al(PERC, "graph_anomalies", t, "warn", symptom="no_publisher", topic=SCAN) for t in (6, 12)]
+    r = analyze(G, exit_ + warn, RcaSettings(), None)
+    assert [i.members for i in r.incidents] == [[PERC, SENSOR]]
+    plain = [al(PERC, "graph_anomalies", t, "warn") for t in (6, 12)]
+    r = analyze(G, exit_ + plain, RcaSettings(), None)
+    assert [i.members for i in r.incidents] == [[SENSOR], [PERC]]
