@@ -94,8 +94,9 @@ def test_a_node_gone_while_its_topic_carried_nothing_explains_no_fault_beyond_it
     # The operator's UI leaves uncleanly at 10 (its teleop topic never carried a message); the mux
     # warns its input lost its publisher; at 20 the lidar's rate falls, and the pose's with it:
     # one incident (the UI shows the pose).
+    lost = {"symptom": "no_publisher", "topic": TELEOP}  # as graph_anomalies says it
     alerts = [al(UI, "member_gone", 10, symptom="exit"),
-              *(al(MUX, "graph_anomalies", t, "warn") for t in (16, 22)),
+              *(al(MUX, "graph_anomalies", t, "warn", **lost) for t in (16, 22)),
               *(al(m, "topic_rate", t, "warn") for t in (20, 25, 30) for m in (SCAN, POSE))]
     unknown = {rc.member: rc for rc in analyze(robot(traffic=False), alerts, RcaSettings()).root_causes}
     # Unknown traffic: the UI's trajectory reaches the pose through the mux, the base, the odometry.
