@@ -264,10 +264,12 @@ def find_incidents(
     radius = (hops + 1) // 2
     cache: dict[str, tuple[set[str], set[str]]] = {}
     at: dict[str, list[tuple[str, dict[str, int]]]] = {}
+    hull = {m: (min(items[i][1][0] for i in idx), max(items[i][1][1] for i in idx))
+            for m, idx in index.items()}
     for m, idx in index.items():
         # Its causes carried to it before its symptom began; it carried to its effects while
         # its symptom lasted.
-        lo = min(items[i][1][0] for i in idx) - gap
+        lo = hull[m][0] - gap
         began = max(items[i][1][0] for i in idx) + tolerance
         hi = max(min(items[i][1][1], now) for i in idx)
 
@@ -279,7 +281,10 @@ def find_incidents(
     rel: dict[tuple[str, str], set[str]] = {}
     for there in at.values():  # members in sorted order (`index`'s)
         for k, (a, ha) in enumerate(there):
+            lo, hi = hull[a][0] - gap, hull[a][1] + gap
             for b, hb in there[k + 1:]:
+                if hull[b][0] > hi or hull[b][1] < lo:
+                    continue  # no two of their episodes close in time
                 found = [_RELATION[wa, wb] for wa, da in ha.items() for wb, db in hb.items()
                          if da + db <= hops]
                 if found:
