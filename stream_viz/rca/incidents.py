@@ -27,7 +27,7 @@ then the newest.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Container, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -212,6 +212,7 @@ def find_incidents(
     lead: float | None = None,
     blamed: Iterable[tuple[str, float, str]] = (),
     tolerance: float = 2.0,
+    blamed_only: Container[str] = (),
 ) -> list[Incident]:
     """Group symptom episodes into incidents (module docstring), oldest first, ids from 1.
 
@@ -244,6 +245,9 @@ def find_incidents(
     tolerance : float, optional
         Seconds within which two times count as one (a topic carrying just after a symptom
         began still carried to it).
+    blamed_only : container, optional
+        Members related by their ``blamed`` pairs alone, not through the graph: all their alerts
+        say what they are about.
     """
     lead = gap if lead is None else lead
     items = [(m, ep) for m in sorted(episodes) for ep in episodes[m]]
@@ -267,6 +271,8 @@ def find_incidents(
     hull = {m: (min(items[i][1][0] for i in idx), max(items[i][1][1] for i in idx))
             for m, idx in index.items()}
     for m, idx in index.items():
+        if m in blamed_only:
+            continue
         # Its causes carried to it before its symptom began; it carried to its effects while
         # its symptom lasted.
         lo = hull[m][0] - gap
@@ -415,11 +421,20 @@ def diagnose(
         return Diagnosis([], [], None)
     # A subscriber's warning that its input lost its publishers, and the publishers: an idle input
     # passes no fault (`ball`), but its publishers' departure it does show.
-    orphaned = [(a.member, a.t, p) for a in alerts if (keep is None or a.member in keep) and a.data
-                and a.data.get("symptom") == "no_publisher" and a.data.get("topic") in G
-                for p in publishers(G, a.data["topic"])]
+    # A member whose every alert is such a warning is related by them alone: the warning says
+    # what it is about.
+    lost: list[Alert] = []
+    said: set[str] = set()
+    for a in alerts:
+        if keep is None or a.member in keep:
+            if a.data and a.data.get("symptom") == "no_publisher" and a.data.get("topic") in G:
+                lost.append(a)
+            else:
+                said.add(a.member)
+    orphaned = [(a.member, a.t, p) for a in lost for p in publishers(G, a.data["topic"])]
+    only = {a.member for a in lost} - said
     incidents = find_incidents(G, episodes, settings.incident_hops, settings.episode_gap, now, links,
-                               s.episodes, settings.incident_lead, orphaned, settings.tolerance)
+                               s.episodes, settings.incident_lead, orphaned, settings.tolerance, only)
     if not incidents:
         ctx = make_context(G, alerts, settings, keep, evidence, first, gone)
         return Diagnosis(ranker(ctx), [], ctx.symptoms.first)

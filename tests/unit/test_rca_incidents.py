@@ -313,3 +313,24 @@ def test_a_warning_that_an_input_lost_its_publisher_joins_the_publisher(G):
     plain = [al(PERC, "graph_anomalies", t, "warn") for t in (6, 12)]
     r = analyze(G, exit_ + plain, RcaSettings(), None)
     assert [i.members for i in r.incidents] == [[SENSOR], [PERC]]
+
+
+def test_a_member_whose_alerts_all_blame_a_publisher_is_related_by_them_alone(G):
+    """Perception only warns that /scan lost the sensor (5-17 s); another node of its process
+    logs errors from 27 s. The warnings say what they are about: the sensor's exit, not the
+    other node's fault (the process would join them in any order)."""
+    from stream_viz.model.traffic import TRAFFIC
+
+    add_member(G, OTHER)
+    add_tree_edge(G, PROC, OTHER)
+    G.graph[TRAFFIC] = {SCAN: []}
+    exit_ = [al(SENSOR, "member_gone", t) for t in (0, 5, 10)]
+    other = [al(OTHER, "rosout", t) for t in (27, 33, 44)]
+    warn = [al(PERC, "graph_anomalies", t, "warn", symptom="no_publisher", topic=SCAN) for t in (5, 11, 17)]
+    r = analyze(G, exit_ + warn + other, RcaSettings(), None)
+    assert [i.members for i in r.incidents] == [[PERC, SENSOR], [OTHER]]
+    assert r.root_causes[0].member == OTHER
+    # a warning that says nothing of what it is about: the process joins them
+    plain = [al(PERC, "graph_anomalies", t, "warn") for t in (5, 11, 17)]
+    r = analyze(G, exit_ + plain + other, RcaSettings(), None)
+    assert [i.members for i in r.incidents] == [[SENSOR], [OTHER, PERC]]
