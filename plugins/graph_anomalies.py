@@ -78,15 +78,20 @@ def _publishers_seen(ctx: PluginContext) -> tuple[dict[str, list[str]], set[str]
     """Return topic → its publishers when it last had any, and the nodes seen to die uncleanly.
 
     A node died uncleanly when an ``exit`` event says its process ended while DDS still listed it,
-    or it is marked ``alive=False``; it is forgiven when it appears again.
+    or it is marked ``alive=False``, unless its process exited with code 0 (``exit_code``); it is
+    forgiven when it appears again.
     """
     had = ctx.state.setdefault("had_publishers", {})
     died = ctx.state.setdefault("died", set())
+    clean = ctx.state.setdefault("clean", set())  # exited with code 0, still listed for a while
     died.difference_update(ctx.diff.added_members)
+    clean.difference_update(ctx.diff.added_members)
     for e in ctx.events:
-        if e.kind == "exit":
+        if e.kind == "exit" and e.data.get("exit_code") == 0:
+            clean.update(e.data.get("still_listed", ()))
+        elif e.kind == "exit":
             died.update(e.data.get("still_listed", ()))
-    died.update(m for m in ctx.members("node") if ctx.attr(m, "alive") is False)
+    died.update(m for m in ctx.members("node") if ctx.attr(m, "alive") is False and m not in clean)
     if ctx.diff or "had_publishers_at" not in ctx.state:  # publishers change only with the graph
         ctx.state["had_publishers_at"] = ctx.t
         for topic in ctx.members("topic"):

@@ -15,7 +15,8 @@ class MemberGone(Plugin):
     * exit (error): the node's process ended while DDS still listed the node (the collector's
       ``still_listed``: a crash or a kill; a node that deregisters and then its process ends,
       exit code 0 or not, left cleanly and raises nothing); a process without nodes raises
-      nothing;
+      nothing; so does a process that exited with code 0 (``exit_code`` in the event, where the
+      collector reads exit codes), its nodes listed or not;
     * restart: the node runs in a new process. One restart is news only as a respawn (the node
       changed process between two samples, or its last process crashed): warn. A node that keeps
       reappearing is one symptom, ``restarted N times in M s`` over ``loop_window_s``: warn from
@@ -26,7 +27,8 @@ class MemberGone(Plugin):
     * not alive (error, every sample while it lasts): DDS lists the node, its process is gone —
       at once after an unclean exit seen, else once it lasted ``not_alive_s``: a process that
       ended before it was ever read may have ended cleanly (a one-shot job), and on a loaded
-      computer its node's deregistration reaches the graph a sample or two later;
+      computer its node's deregistration reaches the graph a sample or two later; never after
+      an exit with code 0 (its nodes stay listed until their lease ends: no goodbye was sent);
     * left (``left_severity``): the node left the graph and its process cannot be seen (no
       pid): clean or not cannot be told. A node of a known process that leaves deregistered
       (destroyed on purpose, or its process is ending cleanly) and raises nothing; so does one
@@ -55,13 +57,17 @@ class MemberGone(Plugin):
         def ok(m: str) -> bool:
             return not s["watched_only"] or m in ctx.watch
 
+        clean = ctx.state.setdefault("clean", set())  # nodes whose process exited with code 0
         said: set[str] = set()
         for e in ctx.events:
             if e.kind != "exit":
                 continue
-            unclean = set(e.data.get("still_listed", ()))
+            # Code 0 (when the collector can read codes): it ended on purpose, without the goodbye.
+            unclean = set(e.data.get("still_listed", ())) if e.data.get("exit_code") != 0 else set()
             for m in _exited_members(ctx, e):
                 exited.add(m)
+                if e.data.get("exit_code") == 0:
+                    clean.add(m)
                 if m not in unclean or m in said:
                     continue  # deregistered before its process ended: a clean exit
                 crashed[m] = ctx.t
@@ -82,11 +88,14 @@ class MemberGone(Plugin):
                 yield ctx.alert(m, s["left_severity"], "left the graph; its process is not visible here",
                                 symptom="left")
         exited.difference_update(ctx.diff.added_members)  # back again: a later departure is news
+        clean.intersection_update(ctx.members("node"))
         dead = ctx.state.get("dead_since", {})
         ctx.state["dead_since"] = dead = {m: dead.get(m, ctx.t) for m in ctx.members("node")
                                           if ctx.attr(m, "alive") is False}
         for m, since in dead.items():
-            if m in said or not ok(m) or (m not in crashed and ctx.t - since < s["not_alive_s"]):
+            if m in said or m in clean or not ok(m):
+                continue
+            if m not in crashed and ctx.t - since < s["not_alive_s"]:
                 continue
             yield ctx.alert(m, "error", "not alive", symptom="not_alive", **hold)
 

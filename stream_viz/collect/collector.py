@@ -22,6 +22,7 @@ from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 from stream_viz.collect.build import build_model
 from stream_viz.collect.cgroups import read_mounts
 from stream_viz.collect.diagnostics import DiagnosticsReader
+from stream_viz.collect.exitcodes import ExitCodes, describe_exit
 from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.goals import STATUS_SUFFIX, GoalTracker
 from stream_viz.collect.graphsignal import GraphSignal
@@ -144,6 +145,7 @@ class Collector:
         self.topics: TopicMonitor | None = None
         self.resolver: PidResolver | None = None
         self.hosts: HostReports | None = None
+        self.exits: ExitCodes | None = None
         self.sampler = ProcessSampler()
         self.ooms = OomWatch(read_mounts())
         self.qos = QosCache()
@@ -174,6 +176,7 @@ class Collector:
         self.topics.start()
         self.resolver = PidResolver(self.domain_id, self._own_host())
         self.hosts = HostReports(self.node, (self.resolver.own_host, socket.gethostname()))
+        self.exits = ExitCodes()
 
     def _own_host(self) -> int | None:
         # Our own /rosout subscription carries our participant's prefix, hence this host's id.
@@ -261,7 +264,13 @@ class Collector:
             nodes = [make_id("node", n) for n in had]
             data = {"pid": pid, "process": make_id("process", pid), "nodes": nodes, "name": r.name,
                     "still_listed": [make_id("node", n) for n in listed]}
-            text = f"process {pid} ({r.name}) exited" + (f" with nodes {', '.join(had)}" if had else "")
+            code = self.exits.take(pid) if self.exits is not None else None
+            if code is not None:
+                data["exit_code"] = code
+                if code == 0:  # exit(0) without ROS's goodbye: its nodes linger, nothing crashed
+                    level = "info" if listed else level
+            text = (f"process {pid} ({r.name}) {describe_exit(code)}"
+                    + (f" with nodes {', '.join(had)}" if had else ""))
             if (oom := ooms.get(pid)) is not None:
                 level, text, data = oom.said(text, data)
             for m in [*nodes, make_id("process", pid)]:
@@ -399,6 +408,8 @@ class Collector:
             self.topics.close()
         if self.structure.signal is not None:
             self.structure.signal.close()
+        if self.exits is not None:
+            self.exits.close()
         node, ctx, self.node, self._ctx = self.node, self._ctx, None, None
         end_node(node, ctx)
 

@@ -63,6 +63,8 @@ def tick():
             threading.Thread(target=burn, daemon=True).start()
     if mode == 'silence' and sick:
         return
+    if mode == 'exit0' and sick:
+        os._exit(0)  # ends on purpose, as a GUI's quit does: code 0, no goodbye to DDS
     if mode == 'burst' and sick:
         if int(time.monotonic() * 20) % 5:
             return
@@ -351,7 +353,31 @@ def test_member_gone_on_sigkill(children, tmp_path, run_of):
     found = run.until(lambda a: a.member == "node:/talker", 15.0)
     assert found and found[0].severity == "error" and found[0].data["symptom"] == "exit"
     assert found[0].t - t_kill < 5.0  # from the OS at once, not after the 20 s DDS lease
+    if run.collector.exits.reason is None:  # the kernel's process events are readable here
+        assert "was killed by SIGKILL" in found[0].message
     assert not any(a.member == "node:/listener" for a in run.alerts)
+
+
+def test_a_process_that_exits_0_without_its_goodbye_is_no_crash(children, tmp_path, run_of):
+    flag, _, _ = _start(children, tmp_path, "exit0")
+    run = run_of(["member_gone", "graph_anomalies"])
+    if run.collector.exits.reason is not None:
+        pytest.skip(run.collector.exits.reason)
+    _ready(run, "node:/talker", "node:/listener")
+    run.observe(3.0)
+    assert run.alerts == []
+    flag.touch()
+    events = []
+    end = time.monotonic() + 30.0
+    while time.monotonic() < end and (not events or "node:/talker" in run.G):
+        events += [e for e in run.step().events if e.kind == "exit" and e.member == "node:/talker"]
+        time.sleep(PERIOD)
+    # DDS kept listing it after its process ended (no goodbye), and the kernel said code 0
+    assert [(e.data["exit_code"], e.data["still_listed"], e.level) for e in events] == [
+        (0, ["node:/talker"], "info")]
+    assert "exited with code 0" in events[0].text
+    assert "node:/talker" not in run.G  # its lease ended while we watched: no alert all along
+    assert run.alerts == [] and run.problems == []
 
 
 def test_rosout_errors(children, tmp_path, run_of):
