@@ -83,14 +83,17 @@ def _publishers_seen(ctx: PluginContext) -> tuple[dict[str, list[str]], set[str]
     """
     had = ctx.state.setdefault("had_publishers", {})
     died = ctx.state.setdefault("died", set())
-    clean = ctx.state.setdefault("clean", set())  # exited with code 0, still listed for a while
+    clean = ctx.state.setdefault("clean", {})  # node -> pid that exited with code 0, still listed
     died.difference_update(ctx.diff.added_members)
-    clean.difference_update(ctx.diff.added_members)
     for e in ctx.events:
-        if e.kind == "exit" and e.data.get("exit_code") == 0:
-            clean.update(e.data.get("still_listed", ()))
-        elif e.kind == "exit":
-            died.update(e.data.get("still_listed", ()))
+        for m in e.data.get("still_listed", ()) if e.kind == "exit" else ():
+            if e.data.get("exit_code") == 0:
+                clean[m] = e.data.get("pid")
+            else:
+                died.add(m)
+                clean.pop(m, None)
+    for m in [m for m, pid in clean.items() if m not in ctx.graph or ctx.attr(m, "pid") != pid]:
+        del clean[m]  # gone, or in a new process
     died.update(m for m in ctx.members("node") if ctx.attr(m, "alive") is False and m not in clean)
     if ctx.diff or "had_publishers_at" not in ctx.state:  # publishers change only with the graph
         ctx.state["had_publishers_at"] = ctx.t

@@ -57,17 +57,20 @@ class MemberGone(Plugin):
         def ok(m: str) -> bool:
             return not s["watched_only"] or m in ctx.watch
 
-        clean = ctx.state.setdefault("clean", set())  # nodes whose process exited with code 0
+        clean = ctx.state.setdefault("clean", {})  # node -> (pid, when) its process exited with code 0
         said: set[str] = set()
         for e in ctx.events:
             if e.kind != "exit":
                 continue
             # Code 0 (when the collector can read codes): it ended on purpose, without the goodbye.
-            unclean = set(e.data.get("still_listed", ())) if e.data.get("exit_code") != 0 else set()
+            code0 = e.data.get("exit_code") == 0
+            unclean = set() if code0 else set(e.data.get("still_listed", ()))
             for m in _exited_members(ctx, e):
                 exited.add(m)
-                if e.data.get("exit_code") == 0:
-                    clean.add(m)
+                if code0:
+                    clean[m] = (e.data.get("pid"), ctx.t)
+                else:
+                    clean.pop(m, None)
                 if m not in unclean or m in said:
                     continue  # deregistered before its process ended: a clean exit
                 crashed[m] = ctx.t
@@ -75,7 +78,7 @@ class MemberGone(Plugin):
                     said.add(m)
                     yield ctx.alert(m, "error", f"process died: {e.text or 'exited'}", symptom="exit",
                                     process=e.data.get("process", e.member), clean=False, **hold)
-        for m, restarts, respawn in _restarts(ctx, crashed):
+        for m, restarts, respawn in _restarts(ctx, crashed, clean):
             sev = _restart_severity(s, len(restarts), respawn)
             if sev is not None and ok(m):
                 yield ctx.alert(m, sev, _restart_text(ctx, m, restarts), symptom="restart",
@@ -88,12 +91,13 @@ class MemberGone(Plugin):
                 yield ctx.alert(m, s["left_severity"], "left the graph; its process is not visible here",
                                 symptom="left")
         exited.difference_update(ctx.diff.added_members)  # back again: a later departure is news
-        clean.intersection_update(ctx.members("node"))
+        for m in [m for m, (pid, _) in clean.items() if m not in ctx.graph or ctx.attr(m, "pid") != pid]:
+            del clean[m]  # gone, or in a new process: its clean exit is over
         dead = ctx.state.get("dead_since", {})
         ctx.state["dead_since"] = dead = {m: dead.get(m, ctx.t) for m in ctx.members("node")
                                           if ctx.attr(m, "alive") is False}
         for m, since in dead.items():
-            if m in said or m in clean or not ok(m):
+            if m in said or m in clean or not ok(m):  # clean: its exited process, still listed
                 continue
             if m not in crashed and ctx.t - since < s["not_alive_s"]:
                 continue
@@ -122,7 +126,8 @@ def _exited_members(ctx: PluginContext, e: Event) -> list[str]:
     return sorted(set(ctx.nodes_of(e.member, by_pid=True)) | set(e.data.get("nodes", ())))
 
 
-def _restarts(ctx: PluginContext, crashed: dict[str, float]) -> list[tuple[str, list[float], bool]]:
+def _restarts(ctx: PluginContext, crashed: dict[str, float],
+              clean: dict[str, tuple[Any, float]]) -> list[tuple[str, list[float], bool]]:
     """Return ``(node, its restart times within loop_window_s, respawn?)`` per node that started
     again in a new process since the last sample.
 
@@ -149,7 +154,7 @@ def _restarts(ctx: PluginContext, crashed: dict[str, float]) -> list[tuple[str, 
             continue
         waiting = [x for x in pending.get(m, ()) if ctx.t - x <= window]
         new_pid = m in moved or (pid is not None and old[0] is not None and pid != old[0])
-        if new_pid and _ran_its_course(ctx, old, crashed.get(m)):
+        if new_pid and _ran_its_course(ctx, old, crashed.get(m), clean.get(m)):
             continue
         rises = 0 if m in ctx.diff.added_members else max(0, inst - old[1])
         if rises:
@@ -172,12 +177,17 @@ def _restarts(ctx: PluginContext, crashed: dict[str, float]) -> list[tuple[str, 
     return out
 
 
-def _ran_its_course(ctx: PluginContext, old: tuple, crashed_at: float | None) -> bool:
+def _ran_its_course(ctx: PluginContext, old: tuple, crashed_at: float | None,
+                    clean_exit: tuple[Any, float] | None = None) -> bool:
     """True when a node's last process held it for ``cycle_life_s`` until it left cleanly (no
     crash seen since) and the node was away for ``cycle_away_s`` before this new process: a
-    clean end, not a loop (a crash loop's lives are short or end uncleanly)."""
+    clean end, not a loop (a crash loop's lives are short or end uncleanly). A process that
+    exited with code 0 (``clean_exit``: its pid, when) ended its node then, though DDS listed
+    the node until its lease ended."""
     s = ctx.settings
-    _, _, last, since = old
+    pid, _, last, since = old
+    if clean_exit is not None and clean_exit[0] == pid:
+        last = min(last, clean_exit[1])
     clean = crashed_at is None or crashed_at < since
     return clean and last - since >= s["cycle_life_s"] and ctx.t - last >= s["cycle_away_s"]
 

@@ -1358,6 +1358,46 @@ def test_member_gone_a_node_that_comes_back_cleanly_now_and_then_is_healthy():
     assert drive("member_gone", frames) == [(20.0, "node:/camera", "warn"), (30.0, "node:/camera", "error")]
 
 
+def test_member_gone_a_process_that_exits_0_without_its_goodbye_is_no_crash():
+    # An operator UI: each session lives 46 s, then its process calls exit(0) without shutting ROS
+    # down, so DDS lists its node 20 s more (alive=False), until the next session starts.
+    def sessions(code):
+        frames = []
+        for k in range(3):
+            t0, pid = 66.0 * k, 100 + k
+            data = {"pid": pid, "process": f"process:{pid}", "nodes": ["node:/camera"],
+                    "still_listed": ["node:/camera"], **({} if code is None else {"exit_code": code})}
+            ended = [Event(t0 + 46.0, "exit", m, "error", f"process {pid} exited", data)
+                     for m in ("node:/camera", f"process:{pid}")]
+            # the collector sees the name in a new process from one sample to the next
+            moved = [Event(t0, "restart", "node:/camera", "warn", f"now in process {pid}",
+                           {"old_pid": pid - 1, "pid": pid})] if k else []
+            frames += [(t0, camera_in(pid), moved)]
+            frames += [(t0 + dt, camera_in(pid), []) for dt in range(5, 46, 5)]
+            frames += [(t0 + 46.0, camera_in(pid, alive=False), ended)]
+            frames += [(t0 + dt, camera_in(pid, alive=False), []) for dt in range(47, 66)]
+        return frames
+
+    assert drive("member_gone", sessions(0)) == []
+    # The kernel said nothing (no exit code readable): each end looks like a crash.
+    got = drive("member_gone", sessions(None))
+    assert [a for a in got if a[0] == 46.0] == [(46.0, "node:/camera", "error")] and len(got) > 3
+    # Killed: a crash, with or without the code.
+    assert (46.0, "node:/camera", "error") in drive("member_gone", sessions(-9))
+
+
+def test_graph_anomalies_a_publisher_that_exited_0_without_its_goodbye_did_not_die():
+    # /camera's process exits 0 at t=2 without the goodbye: DDS lists it (alive=False) until its
+    # lease ends at t=6; then /img has no publisher, as after a clean departure: no fault.
+    data = {"pid": 100, "process": "process:100", "nodes": ["node:/camera"],
+            "still_listed": ["node:/camera"], "exit_code": 0}
+    ended = [Event(2.0, "exit", "node:/camera", "info", "process 100 exited with code 0", data)]
+    frames = [(0.0, model(), []), (1.0, model(), []), (2.0, model(alive=False), ended)]
+    frames += [(float(t), model(alive=False), []) for t in range(3, 6)]
+    frames += [(float(t), without_camera(), []) for t in range(6, 13)]
+    assert drive("graph_anomalies", frames) == []
+
+
 # --------------------------------------------------------------------------- diagnostics, rosout
 
 def test_diagnostics_levels():
