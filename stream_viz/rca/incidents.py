@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Container, Iterable, Mapping
 from dataclasses import dataclass, field
+from itertools import pairwise
 from typing import Any
 
 import networkx as nx
@@ -300,9 +301,11 @@ def find_incidents(
              and _linked(r, items[i][1][0], items[j][1][0], lead)]
     for idx in index.values():  # a member's own episodes close in time
         idx = sorted(idx, key=lambda i: items[i][1][0])
-        for k, i in enumerate(idx[1:], 1):
-            if items[i][1][0] <= max(items[j][1][1] for j in idx[:k]) + gap:
-                pairs.append((idx[k - 1], i))
+        reach = items[idx[0]][1][1]  # the latest end so far
+        for prev, i in pairwise(idx):
+            if items[i][1][0] <= reach + gap:
+                pairs.append((prev, i))
+            reach = max(reach, items[i][1][1])
     for m, t, n in blamed:
         mine = [i for i in index.get(m, ()) if items[i][1][0] <= t <= items[i][1][1]]
         pairs += [(i, j) for i in mine for j in index.get(n, ())
