@@ -10,6 +10,7 @@ from typing import Any, ClassVar
 import networkx as nx
 
 from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.detect.exits import exited_0, forget_clean_exits, note_clean_exits
 from stream_viz.records import Alert
 
 
@@ -83,17 +84,13 @@ def _publishers_seen(ctx: PluginContext) -> tuple[dict[str, list[str]], set[str]
     """
     had = ctx.state.setdefault("had_publishers", {})
     died = ctx.state.setdefault("died", set())
-    clean = ctx.state.setdefault("clean", {})  # node -> pid that exited with code 0, still listed
+    clean = ctx.state.setdefault("clean", {})  # exited with code 0, still listed
     died.difference_update(ctx.diff.added_members)
     for e in ctx.events:
-        for m in e.data.get("still_listed", ()) if e.kind == "exit" else ():
-            if e.data.get("exit_code") == 0:
-                clean[m] = e.data.get("pid")
-            else:
-                died.add(m)
-                clean.pop(m, None)
-    for m in [m for m, pid in clean.items() if m not in ctx.graph or ctx.attr(m, "pid") != pid]:
-        del clean[m]  # gone, or in a new process
+        if e.kind == "exit" and not exited_0(e):
+            died.update(e.data.get("still_listed", ()))
+    note_clean_exits(ctx, clean)
+    forget_clean_exits(ctx, clean)
     died.update(m for m in ctx.members("node") if ctx.attr(m, "alive") is False and m not in clean)
     if ctx.diff or "had_publishers_at" not in ctx.state:  # publishers change only with the graph
         ctx.state["had_publishers_at"] = ctx.t

@@ -6,6 +6,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.detect.exits import CleanExits, exited_0, forget_clean_exits, note_clean_exits
 from stream_viz.records import Alert, Event
 
 
@@ -57,20 +58,16 @@ class MemberGone(Plugin):
         def ok(m: str) -> bool:
             return not s["watched_only"] or m in ctx.watch
 
-        clean = ctx.state.setdefault("clean", {})  # node -> (pid, when) its process exited with code 0
+        clean = ctx.state.setdefault("clean", {})  # exited with code 0, still listed
+        note_clean_exits(ctx, clean)
         said: set[str] = set()
         for e in ctx.events:
             if e.kind != "exit":
                 continue
             # Code 0 (when the collector can read codes): it ended on purpose, without the goodbye.
-            code0 = e.data.get("exit_code") == 0
-            unclean = set() if code0 else set(e.data.get("still_listed", ()))
+            unclean = set() if exited_0(e) else set(e.data.get("still_listed", ()))
             for m in _exited_members(ctx, e):
                 exited.add(m)
-                if code0:
-                    clean[m] = (e.data.get("pid"), ctx.t)
-                else:
-                    clean.pop(m, None)
                 if m not in unclean or m in said:
                     continue  # deregistered before its process ended: a clean exit
                 crashed[m] = ctx.t
@@ -91,8 +88,7 @@ class MemberGone(Plugin):
                 yield ctx.alert(m, s["left_severity"], "left the graph; its process is not visible here",
                                 symptom="left")
         exited.difference_update(ctx.diff.added_members)  # back again: a later departure is news
-        for m in [m for m, (pid, _) in clean.items() if m not in ctx.graph or ctx.attr(m, "pid") != pid]:
-            del clean[m]  # gone, or in a new process: its clean exit is over
+        forget_clean_exits(ctx, clean)  # after the restarts: a new process ends its clean exit
         dead = ctx.state.get("dead_since", {})
         ctx.state["dead_since"] = dead = {m: dead.get(m, ctx.t) for m in ctx.members("node")
                                           if ctx.attr(m, "alive") is False}
@@ -127,7 +123,7 @@ def _exited_members(ctx: PluginContext, e: Event) -> list[str]:
 
 
 def _restarts(ctx: PluginContext, crashed: dict[str, float],
-              clean: dict[str, tuple[Any, float]]) -> list[tuple[str, list[float], bool]]:
+              clean: CleanExits) -> list[tuple[str, list[float], bool]]:
     """Return ``(node, its restart times within loop_window_s, respawn?)`` per node that started
     again in a new process since the last sample.
 
@@ -178,7 +174,7 @@ def _restarts(ctx: PluginContext, crashed: dict[str, float],
 
 
 def _ran_its_course(ctx: PluginContext, old: tuple, crashed_at: float | None,
-                    clean_exit: tuple[Any, float] | None = None) -> bool:
+                    clean_exit: tuple[int | None, float] | None = None) -> bool:
     """True when a node's last process held it for ``cycle_life_s`` until it left cleanly (no
     crash seen since) and the node was away for ``cycle_away_s`` before this new process: a
     clean end, not a loop (a crash loop's lives are short or end uncleanly). A process that

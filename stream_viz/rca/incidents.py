@@ -117,12 +117,6 @@ def steps(G: nx.MultiDiGraph, m: str) -> tuple[set[str], set[str]]:
     return up | both, down | both
 
 
-def neighbours(G: nx.MultiDiGraph, m: str) -> set[str]:
-    """Members one hop from ``m`` in either direction (`steps`)."""
-    up, down = steps(G, m)
-    return up | down
-
-
 SELF, UP, DOWN, MIXED = "self", "up", "down", "mixed"  # how a walk reached a member (`ball`)
 
 
@@ -192,6 +186,10 @@ def relation(a: str, b: str) -> set[str]:
 
 _HOWS = (SELF, UP, DOWN, MIXED)
 _RELATION = {(a, b): frozenset(relation(a, b)) for a in _HOWS for b in _HOWS}
+
+
+def _close(a: Episode, b: Episode, gap: float) -> bool:
+    return a[0] <= b[1] + gap and b[0] <= a[1] + gap
 
 
 def _linked(r: set[str], sa: float, sb: float, lead: float) -> bool:
@@ -297,8 +295,7 @@ def find_incidents(
                 if found:
                     rel.setdefault((a, b), set()).update(*found)
     pairs = [(i, j) for (a, b), r in rel.items() for i in index[a] for j in index[b]
-             if items[i][1][0] <= items[j][1][1] + gap and items[j][1][0] <= items[i][1][1] + gap
-             and _linked(r, items[i][1][0], items[j][1][0], lead)]
+             if _close(items[i][1], items[j][1], gap) and _linked(r, items[i][1][0], items[j][1][0], lead)]
     for idx in index.values():  # a member's own episodes close in time
         idx = sorted(idx, key=lambda i: items[i][1][0])
         reach = items[idx[0]][1][1]  # the latest end so far
@@ -308,8 +305,7 @@ def find_incidents(
             reach = max(reach, items[i][1][1])
     for m, t, n in blamed:
         mine = [i for i in index.get(m, ()) if items[i][1][0] <= t <= items[i][1][1]]
-        pairs += [(i, j) for i in mine for j in index.get(n, ())
-                  if items[j][1][0] <= items[i][1][1] + gap and items[i][1][0] <= items[j][1][1] + gap
+        pairs += [(i, j) for i in mine for j in index.get(n, ()) if _close(items[i][1], items[j][1], gap)
                   and _linked({"ab"}, items[j][1][0], items[i][1][0], lead)]
     said = [alerted is None or ep in alerted.get(m, ()) for m, ep in items]
     for i, j in pairs:

@@ -17,8 +17,8 @@ from stream_viz.rca.incidents import (
     ball,
     current,
     find_incidents,
-    neighbours,
     relation,
+    steps,
 )
 from stream_viz.records import Alert
 
@@ -47,9 +47,9 @@ def al(member, plugin, t, severity="error", **data):
 
 
 def test_neighbours_and_hops(G):
-    assert neighbours(G, PERC) == {SCAN, OBJ, PROC}
-    assert neighbours(G, PROC) == {PERC}
-    assert neighbours(G, "node:/unknown") == set()
+    assert steps(G, PERC) == ({SCAN, PROC}, {OBJ, PROC})
+    assert steps(G, PROC) == ({PERC}, {PERC})
+    assert steps(G, "node:/unknown") == (set(), set())
     # how each member was reached: up only, down only, up then down (never down then up)
     assert ball(G, SCAN, 1) == {SCAN: {SELF: 0}, SENSOR: {UP: 1}, PERC: {DOWN: 1}}
     assert ball(G, SCAN, 2) == {SCAN: {SELF: 0, MIXED: 2}, SENSOR: {UP: 1}, PERC: {DOWN: 1}, OBJ: {DOWN: 2},
