@@ -431,6 +431,9 @@ def test_threads_that_ran_are_above_a_core_share_and_a_share_of_the_busiest():
     # Two executor threads sharing the work both ran; a thread new since `before` counts from 0.
     assert threads_that_ran(before, {1: 1_300_000_000, 2: 255_000_000, 4: 30_000_000}, 1.0) == [
         1, 2, 4]
+    # An rclpy multi-threaded executor at a light load, over 30 s: its main thread dispatches (5 % of
+    # a core on a loaded machine), its two workers run the callbacks (0.2 % each): all three ran.
+    assert threads_that_ran({}, {1: 1_500_000_000, 5: 60_000_000, 6: 60_000_000}, 30.0) == [1, 5, 6]
     # Nothing over 0.1 % of a core over 2 s: none ran.
     assert threads_that_ran(before, {1: 1_001_500_000, 2: 5_100_000}, 2.0) == []
     assert threads_that_ran({}, {}, 1.0) == []
