@@ -3,7 +3,9 @@
 It maps the nodes whose participant's GUID prefix carries this host's id to their processes
 (`PidResolver`, as the monitor does locally; the /rosout endpoints read only when their number
 changes), samples those processes and their ancestors
-(`ProcessSampler`) and publishes the report on `AGENT_TOPIC` (best effort, depth 1). Its node has
+(`ProcessSampler`) and publishes the report on `AGENT_TOPIC` (best effort, depth 1). Where it
+may listen to the kernel's process events (`ExitCodes`), the exit codes of the processes that
+ended ride in its next `EXITS_KEPT` reports: one lost report does not lose them. Its node has
 no /rosout publisher, no parameter or type-description services and is hidden (``_`` name); it
 publishes nothing else and calls nothing.
 """
@@ -21,6 +23,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from stream_viz.collect.cgroups import read_mounts
 from stream_viz.collect.collector import ObserverNode, end_node, new_node
 from stream_viz.collect.diagcdr import diagnostic_array
+from stream_viz.collect.exitcodes import ExitCodes
 from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.hostreport import AGENT_TOPIC, HostReport, encode
 from stream_viz.collect.oomkills import OomKill, OomWatch
@@ -35,6 +38,7 @@ QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
 GIDS_EVERY_S = 30.0  # the /rosout endpoints read again at least this often
 UNSURE = ("unknown", "ambiguous", "unverified")  # pid statuses resolved again each sample
 IDENTITY_EVERY = 10  # a process's command line, user and start time: when new and every 10th report
+EXITS_KEPT = 3  # reports an exit code rides in (and samples its kernel event is waited for)
 
 
 class AgentNode(ObserverNode):
@@ -79,6 +83,8 @@ class Agent:
         self._killed: dict[int, OomKill] = {}  # of the ended processes kept in the reports
         self.last_size = 0  # bytes of the last report published
         self._sent: set[int] = set()  # processes of the last report (their identity was sent)
+        self.exits: ExitCodes | None = None
+        self._ended: dict[int, tuple[int, int | None]] = {}  # pid → (report it ended in, exit code)
 
     def start(self) -> None:
         """Create our own Context, node and the one publisher."""
@@ -92,6 +98,7 @@ class Agent:
             raise CollectError(f"cannot start the agent on domain {self.domain_id}: {e}") from e
         self.host_id = self._own_host()
         self.resolver = PidResolver(self.domain_id, self.host_id)
+        self.exits = ExitCodes()
 
     def _own_host(self) -> int:
         # Our own publisher's gid carries our participant's prefix, hence this host's id.
@@ -122,7 +129,18 @@ class Agent:
             processes[pid] = r
         self.seq += 1
         return HostReport(self.host, self.host_id, self.seq, self.period_s, mine, processes,
-                          self.machine.sample(mine.values()), dict(self._killed))
+                          self.machine.sample(mine.values()), dict(self._killed),
+                          self._exit_codes(ps.exited))
+
+    def _exit_codes(self, exited: dict[int, ProcessReading]) -> dict[int, int]:
+        """The exit codes known of the processes that ended in the last `EXITS_KEPT` reports (the
+        kernel's event may come a moment after the process is seen gone)."""
+        self._ended.update({pid: (self.seq, None) for pid in exited})
+        self._ended = {p: e for p, e in self._ended.items() if e[0] > self.seq - EXITS_KEPT}
+        for pid, (seq, code) in self._ended.items():
+            if code is None and self.exits is not None:
+                self._ended[pid] = (seq, self.exits.take(pid))
+        return {pid: code for pid, (_, code) in self._ended.items() if code is not None}
 
     def _participants(self) -> dict[str, int]:
         """GUID prefix → pid of this host's participants. The /rosout endpoints are read again
@@ -157,6 +175,8 @@ class Agent:
         """Destroy the node and shut our Context. Idempotent."""
         node, ctx, self.node, self._ctx = self.node, self._ctx, None, None
         end_node(node, ctx)
+        if self.exits is not None:
+            self.exits.close()
 
     def __enter__(self) -> Agent:
         self.start()

@@ -3,7 +3,9 @@
 One report per sample: a ``diagnostic_msgs/DiagnosticArray`` whose first status describes the
 host (``name`` = `HOST_STATUS`, ``hardware_id`` = the host name, key-values ``schema``,
 ``host_id``, ``seq``, ``period_s``, ``machine``: the whole computer's CPU and memory in use as
-``machine_cpu_percent=97 machine_mem_percent=41``) and whose other statuses are one per process
+``machine_cpu_percent=97 machine_mem_percent=41``, and ``exits``: the exit codes of processes
+that ended in its last few reports, where the agent reads them, as ``4242=0 4250=-9``) and whose
+other statuses are one per process
 (``name`` =
 ``process <pid>``, level OK when alive, ERROR once it ended, ``message`` = the process name,
 key-values ``ppid``, ``participants`` (its GUID prefixes), ``metrics`` (its θ as
@@ -60,6 +62,7 @@ class HostReport:
     processes: dict[int, ProcessReading] = field(default_factory=dict)
     machine: dict[str, float] = field(default_factory=dict)  # the host's own θ (`MachineSampler`)
     ooms: dict[int, OomKill] = field(default_factory=dict)
+    exits: dict[int, int] = field(default_factory=dict)  # pid → exit code (`exitcodes.exit_code`)
 
 
 def encode(report: HostReport, known: set[int] | frozenset[int] = frozenset()) -> list[StatusRow]:
@@ -69,6 +72,8 @@ def encode(report: HostReport, known: set[int] | frozenset[int] = frozenset()) -
             ("period_s", f"{report.period_s:g}")]
     if report.machine:
         head.append(("machine", _metrics_text(report.machine)))
+    if report.exits:
+        head.append(("exits", " ".join(f"{pid}={code}" for pid, code in sorted(report.exits.items()))))
     rows = [StatusRow(OK, HOST_STATUS, f"{len(report.processes)} processes", report.host, head)]
     by_pid: dict[int, list[str]] = {}
     for prefix, pid in sorted(report.participants.items()):
@@ -106,6 +111,7 @@ def decode(rows: list[StatusRow], before: HostReport | None = None) -> HostRepor
     report = HostReport(rows[0].hardware_id, int(head["host_id"]), int(head.get("seq", 0)),
                         float(head.get("period_s", 1.0)))
     report.machine = _metrics(head.get("machine", ""), {*SCHEMAS["host"], "cpus", "mem_limit_mb"})
+    report.exits = _exits(head.get("exits", ""))
     names = set(SCHEMAS["process"])
     for row in rows[1:]:
         kv = dict(row.values)
@@ -132,6 +138,16 @@ def decode(rows: list[StatusRow], before: HostReport | None = None) -> HostRepor
 def _oom_kill(text: str) -> OomKill | None:
     limit, _, group = text.partition(" ")
     return OomKill(group, int(limit) or None) if limit.isdigit() and group else None
+
+
+def _exits(text: str) -> dict[int, int]:
+    """``4242=0 4250=-9`` → {4242: 0, 4250: -9} (a malformed item left out)."""
+    out = {}
+    for item in text.split():
+        pid, _, code = item.partition("=")
+        if pid.isdigit() and code.lstrip("-").isdigit():
+            out[int(pid)] = int(code)
+    return out
 
 
 def _metrics_text(values: dict[str, float]) -> str:

@@ -35,6 +35,8 @@ def run(args: argparse.Namespace) -> int:
     with Agent(domain, args.period, args.host) as agent:
         print(f"agent on host {agent.host} (Fast DDS host id {agent.host_id:04x}), domain {domain}",
               flush=True)
+        if agent.exits is not None and agent.exits.reason:  # a clean exit(0) then looks like a crash
+            print(f"exit codes not read: {agent.exits.reason}", flush=True)
         due = time.monotonic()
         while not stop.is_set() and (end is None or time.monotonic() < end):
             agent.step()

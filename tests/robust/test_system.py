@@ -303,6 +303,61 @@ def test_an_agent_says_a_process_of_its_host_the_oom_killer_ended(children, ros_
     _said_oom({e.member: e for e in exits})
 
 
+# A node that, once the file argv[1] exists, ends with os._exit(argv[3]): no ROS goodbye, so DDS
+# lists it until its lease ends, whatever the code.
+QUITTER = """
+import os, sys, rclpy
+rclpy.init()
+n = rclpy.create_node(sys.argv[2])
+print("ready", flush=True)
+while not os.path.exists(sys.argv[1]):
+    rclpy.spin_once(n, timeout_sec=0.1)
+os._exit(int(sys.argv[3]))
+"""
+
+
+def test_an_agent_says_how_a_process_of_its_host_ended(children, ros_domain, tmp_path):
+    """On a computer of its own, a node whose process exits 0 without ROS's goodbye is no crash and
+    one that exits 1 is: the agent reads the exit codes from the kernel and its report (encoded and
+    decoded as on the wire) carries them to the monitor's exit events."""
+    from stream_viz.collect.agent import Agent
+    from stream_viz.collect.fastdds import decode_gid
+    from stream_viz.collect.hostreport import decode, encode
+    from stream_viz.collect.hosts import remote_exits
+    from stream_viz.model.ids import node_fqn
+
+    go = tmp_path / "go"
+    ends = {name: children.python(QUITTER, str(go), name, code, name=name)
+            for name, code in (("clean", "0"), ("failing", "1"))}
+    exits = []
+    with Agent(ros_domain, 0.5, "b") as agent:
+        if agent.exits.reason is not None:
+            pytest.skip(agent.exits.reason)
+
+        def mapped():
+            r = decode(encode(agent.sample()))
+            return r if {p.pid for p in ends.values()} <= set(r.participants.values()) else None
+        before = wait_for(mapped, timeout=20, period=0.3)
+        infos = agent.node.get_publishers_info_by_topic("/rosout")
+        node_prefix = {node_fqn(i.node_namespace, i.node_name): decode_gid(bytes(i.endpoint_gid)).prefix
+                       for i in infos if i.node_name in ends}
+
+        def both_ended():
+            nonlocal before
+            now = decode(encode(agent.sample(), set(before.processes)), before)
+            exits.extend(e for e in remote_exits(time.time(), "b", before, now, node_prefix)
+                         if e.member.startswith("node:"))
+            before = now
+            return len(exits) == 2
+        go.touch()
+        wait_for(both_ended, timeout=10, period=0.3)
+    by = {e.member: e for e in exits}
+    clean, failing = by["node:/clean"], by["node:/failing"]
+    assert (clean.level, clean.data["exit_code"]) == ("info", 0), clean
+    assert clean.text.endswith("on host b exited with code 0 with nodes /clean"), clean.text
+    assert (failing.level, failing.data["exit_code"]) == ("error", 1), failing
+
+
 def test_ancestors_of_the_nodes_processes_are_read_every_fifth_sample(children):
     """The launch tree above the nodes (here: this test process) is read every 5th sample and
     stays in the tree without metrics in between; the given processes are read every time."""

@@ -181,6 +181,32 @@ def test_an_agent_s_oom_kill_travels_in_its_report_and_makes_the_exit_an_oom_kil
     assert [e.level for e in remote_exits(5.0, "b", _report(), gone, {})] == ["warn"]
 
 
+def test_an_agent_s_exit_codes_travel_in_its_report_and_say_how_the_process_ended():
+    dead = _report(alive=False, seq=2)
+    dead.exits = {10: 0, 77: -9}
+    assert ("exits", "10=0 77=-9") in encode(dead)[0].values
+    back = decode(encode(dead))
+    assert back.exits == {10: 0, 77: -9}
+    # exit(0) with its node still listed (no goodbye sent): no crash, an info
+    ev = remote_exits(5.0, "b", _report(), back, {"/cam": PRE_B})
+    assert [(e.member, e.level) for e in ev] == [("node:/cam", "info"), ("process:b/10", "info")]
+    assert ev[0].text == "process 10 (python) on host b exited with code 0 with nodes /cam"
+    assert ev[0].data["exit_code"] == 0
+    back.exits = {10: -9}  # killed: the crash it looked like
+    ev = remote_exits(5.0, "b", _report(), back, {"/cam": PRE_B})
+    assert [e.level for e in ev] == ["error", "error"] and "was killed by SIGKILL" in ev[0].text
+    assert ev[0].data["exit_code"] == -9
+    # ended cleanly (DDS no longer lists /cam, the agent left it out): the code still says so
+    gone = _report(seq=2)
+    del gone.processes[10]
+    gone.exits = {10: 3}
+    ev = remote_exits(5.0, "b", _report(), gone, {})
+    assert [(e.level, e.data["exit_code"]) for e in ev] == [("warn", 3)]
+    assert "exited with code 3" in ev[0].text
+    head = encode(_report())[0]
+    assert "exits" not in dict(head.values) and decode([head]).exits == {}  # none known: none said
+
+
 def test_tree_of_merge_is_a_tree():
     G, pids = _local_graph()
     merge_hosts(G, pids, (OWN, "a"), {REMOTE: Received(50.0, _report())}, now=50.5)
