@@ -63,3 +63,9 @@ def idle(G: nx.MultiDiGraph, topic: str, lo: float, hi: float) -> bool:
     if spans is None:
         return False
     return not any(a <= hi and b >= lo for a, b in spans)
+
+
+def measured(G: nx.MultiDiGraph, topic: str) -> bool:
+    """True when the traffic of ``topic`` is measured (its rate read): a change of what it carries
+    would show on it."""
+    return topic in G.graph.get(TRAFFIC, {})

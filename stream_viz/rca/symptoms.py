@@ -17,7 +17,7 @@ import networkx as nx
 import numpy as np
 
 from stream_viz.model.queries import called_servers, nodes_of_process, process_of_node
-from stream_viz.model.traffic import idle
+from stream_viz.model.traffic import idle, measured
 from stream_viz.rca import siblings
 from stream_viz.rca.causal import causes_in, is_node, outputs, publishers
 from stream_viz.rca.charge import NAME_KEYS, charged_nodes, names_in, pointed_nodes, publisher_shares
@@ -202,6 +202,7 @@ class NodeView:
     own_onset: float = INF
     own_kinds: set[str] = field(default_factory=set)
     spans: list[Episode] = field(default_factory=list)
+    metric_spans: list[Episode] = field(default_factory=list)  # those of ``spans`` from evidence
     untimed: float = 0.0
     implied: bool = False
     sibling: float = 0.0
@@ -222,6 +223,13 @@ class NodeView:
         if overlaps(self.spans, t0, t1):
             return x
         return 0.0 if self.spans else min(self.untimed, x) if own else self.untimed
+
+    def alerted(self, t0: float, t1: float, own: bool = False) -> float:
+        """As `active`, from its alerts alone (its own, its process's, those charged to it): no
+        metric evidence."""
+        x = max(self.own_direct if own else self.direct, self.charged)
+        evidence = set(self.metric_spans)
+        return x if overlaps([sp for sp in self.spans if sp not in evidence], t0, t1) else 0.0
 
 
 def _clip(x: float) -> float:
@@ -248,6 +256,7 @@ def _metric(v: NodeView, e: Evidence, own: bool) -> None:
     else:
         v.onset = min(v.onset, ep[0])
         v.spans.append(ep)
+        v.metric_spans.append(ep)
         _start(v, (INF, INF, ep[0]))
     if own:
         v.own_evidence = max(v.own_evidence, e.strength)
@@ -503,14 +512,15 @@ def _upstream(
     # Its own outputs, reached round a feedback loop, are no cause of it; nor is a symptom charged
     # to it (a client's complaint naming it is its evidence, however the walk comes round to it).
     seen = {n, *mine, *v.own}
-    frontier: list[tuple[str, float]] = [(p, 1.0) for p in causes_in(G, n, parents) if p not in seen]
-    inputs = {p for p, _ in frontier}
-    frontier += _sibling_inputs(G, n, home, seen, views, parents)
+    # Each step: (member, weight, bare): bare once the walk crossed a measured topic (`_excuse`).
+    frontier = [(p, 1.0, False) for p in causes_in(G, n, parents) if p not in seen]
+    inputs = {p for p, _, _ in frontier}
+    frontier += [(p, w, False) for p, w in _sibling_inputs(G, n, home, seen, views, parents)]
     for _ in range(settings.max_trajectory):
         if left is not None and not left:
             break
-        nxt: list[tuple[str, float]] = []
-        for p, w in frontier:
+        nxt: list[tuple[str, float, bool]] = []
+        for p, w, bare in frontier:
             if p in seen:
                 continue
             seen.add(p)
@@ -524,12 +534,13 @@ def _upstream(
             if left is not None:
                 left.discard(p)
             when = (lo, hi, latest, settings.tolerance)
-            found = _excuse(G, p, n, s, views, ev_passive, when, home, parents)
+            bare = bare or (not is_node(G, p) and measured(G, p))
+            found = _excuse(G, p, n, s, views, ev_passive, when, home, parents, bare)
             worst = max(worst, w * found)
             if shut or found > 0 or w * SILENT_DECAY <= worst:
                 continue  # an alerting member ends its path: the earlier ones are its own causes
             decay = w * SILENT_DECAY if is_node(G, p) else w
-            nxt += [(q, decay) for q in causes_in(G, p, parents) if q not in seen]
+            nxt += [(q, decay, bare) for q in causes_in(G, p, parents) if q not in seen]
         if not nxt:
             break
         frontier = nxt
@@ -577,18 +588,21 @@ def _excuse(
     when: tuple[float, float, float, float],
     home: str | None = None,
     parents: dict[str, list[str]] | None = None,
+    bare: bool = False,
 ) -> float:
     """How much the cause ``p`` of ``n`` was anomalous at some time in ``[lo, hi]``, not known to
     have begun after ``latest`` (``when``: lo, hi, latest, tolerance; `began_after`); a node of
-    ``n``'s process ``home`` counts with its own changes only. ``parents``: `causal.causes_in`'s
-    memo."""
+    ``n``'s process ``home`` counts with its own changes only. A node behind a measured topic
+    (``bare``, `traffic.measured`) counts with its alerts only: its metric evidence (a CPU burst no
+    plugin confirmed) changed nothing it sends that the topic would not show. ``parents``:
+    `causal.causes_in`'s memo."""
     lo, hi, latest, tolerance = when
     if is_node(G, p):  # a server it calls, or a node further upstream
         pv = views.get(p)
         fellow = home is not None and process_of_node(G, p) == home
         if pv is None or pv.implied or began_after(pv.began, pv.vague, latest, tolerance):
             return 0.0
-        return pv.active(lo, hi, own=fellow)
+        return pv.alerted(lo, hi, own=fellow) if bare else pv.active(lo, hi, own=fellow)
     worst = 0.0
     if p in s.anomaly and overlaps(s.episodes[p], lo, hi) \
             and not began_after(s.began.get(p, INF), s.vague.get(p, INF), latest, tolerance):
@@ -600,10 +614,11 @@ def _excuse(
         qv = views.get(q)
         if q == n or qv is None or qv.implied or began_after(qv.began, qv.vague, latest, tolerance):
             continue
-        if home is not None and process_of_node(G, q) == home:
-            own = max(qv.own_direct, qv.own_evidence)
-        else:
-            own = max(qv.direct, qv.evidence)
+        fellow = home is not None and process_of_node(G, q) == home
+        if bare:
+            worst = max(worst, qv.alerted(lo, hi, own=fellow))
+            continue
+        own = max(qv.own_direct, qv.own_evidence) if fellow else max(qv.direct, qv.evidence)
         worst = max(worst, own if overlaps(qv.spans, lo, hi) else (0.0 if qv.spans else qv.untimed))
     return worst
 

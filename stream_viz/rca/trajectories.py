@@ -30,8 +30,8 @@ from typing import Any
 import networkx as nx
 import numpy as np
 
-from stream_viz.model.traffic import TRAFFIC, idle
-from stream_viz.rca.causal import path_back, trace
+from stream_viz.model.traffic import TRAFFIC, idle, measured
+from stream_viz.rca.causal import is_node, path_back, trace
 from stream_viz.rca.cooccurrence import cooccurrence
 from stream_viz.rca.episodes import Evidence
 from stream_viz.rca.hosts import lift_hosts
@@ -128,6 +128,9 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
     s, settings = ctx.symptoms, ctx.settings
     onset = ctx.views[c].onset if c in ctx.views else np.inf
     cost, back = trace(ctx.G, c, s.times, settings.max_trajectory, ctx._children, _closed(ctx, onset))
+    v = ctx.views.get(c)
+    if v is not None and not (v.direct or v.charged):
+        cost = _unblocked(ctx, c, cost, back)
     # A symptom that began before the candidate's own (beyond the tolerance) is not its effect.
     since = onset - settings.tolerance if np.isfinite(onset) else -np.inf  # metric evidence only: no time
     explained = [m for m in cost if m in s.times and s.onset[m] >= since and not _before(ctx, c, m)]
@@ -163,6 +166,26 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
         float(np.mean(lag)) if lag else None,
         coverage,
     )
+
+
+def _unblocked(ctx: Context, c: str, cost: dict[str, float], back: dict[str, str]) -> dict[str, float]:
+    """The members of ``cost`` that ``c``'s trace reached crossing no measured topic without a
+    symptom: all that metric evidence alone (no alert of ``c``) can explain, as the walk upstream
+    judges it (`symptoms._excuse`)."""
+    s, G = ctx.symptoms, ctx.G
+    blocked: dict[str, bool] = {c: False}
+
+    def crossed(m: str) -> bool:
+        path = []
+        while m not in blocked:
+            path.append(m)
+            m = back[m]
+        b = blocked[m]
+        for x in reversed(path):  # from the member after the known one to the asked one
+            p = back[x]
+            b = blocked[x] = b or (p != c and p not in s.times and not is_node(G, p) and measured(G, p))
+        return b
+    return {m: d for m, d in cost.items() if not crossed(m)}
 
 
 @dataclass

@@ -108,3 +108,42 @@ def test_a_node_gone_while_its_topic_carried_nothing_explains_no_fault_beyond_it
     assert ranked[MUX].evidence["upstream"] == pytest.approx(RcaSettings().severity["error"])
     # What it does not settle: the UI's exit (an error) still outranks the lidar's drop (a warn).
     assert ranked[LIDAR].score == pytest.approx(unknown[LIDAR].score)
+
+
+def _recorder(measured: bool):
+    """planner (process 7) → /plan → recorder (process 8, leaking); the recorder also calls the
+    planner's service (a client waits on its server)."""
+    g = new_graph()
+    for m in ("node:/planner", "topic:/plan", "node:/recorder", "process:7", "process:8"):
+        add_member(g, m)
+    add_flow_edge(g, "node:/planner", "topic:/plan", "pub")
+    add_flow_edge(g, "topic:/plan", "node:/recorder", "sub")
+    add_tree_edge(g, "process:7", "node:/planner")
+    add_tree_edge(g, "process:8", "node:/recorder")
+    if measured:
+        g.graph[TRAFFIC] = {"topic:/plan": [(0.0, 100.0)]}
+    return g
+
+
+def test_metric_evidence_behind_a_measured_topic_does_not_excuse_its_subscriber():
+    from stream_viz.rca.episodes import Evidence
+
+    leak = [Alert("node:/recorder", "process_resources", float(t), "warn", "memory growing", {})
+            for t in (50, 55, 60)]
+    burst = {"process:7": Evidence(1.0, 40.0, None)}  # the planner's CPU, no plugin confirming it
+    # /plan measured and without a symptom: the planning burst changed nothing it sent.
+    res = analyze(_recorder(measured=True), leak, RcaSettings(), evidence=burst)
+    first = res.root_causes[0]
+    assert first.member == "node:/recorder" and first.evidence["upstream"] == 0.0
+    # Not measured, nothing says what it carried: the burst may have reached the recorder.
+    res = analyze(_recorder(measured=False), leak, RcaSettings(), evidence=burst)
+    assert res.root_causes[0].member == "node:/planner"
+    # An alert of the planner (its own log) still excuses through the measured topic ...
+    logged = [Alert("node:/planner", "rosout", 45.0, "error", "planning failed", {})]
+    ranked = {rc.member: rc for rc in analyze(_recorder(measured=True), logged + leak, RcaSettings(),
+                                              evidence=burst).root_causes}
+    assert ranked["node:/recorder"].evidence["upstream"] > 0.0
+    # ... and a server the recorder calls excuses it with its evidence (a slow reply shows on no topic).
+    g = _recorder(measured=True)
+    add_flow_edge(g, "node:/recorder", "node:/planner", "send")
+    assert analyze(g, leak, RcaSettings(), evidence=burst).root_causes[0].member == "node:/planner"
