@@ -199,7 +199,9 @@ def test_memory_in_use_is_the_container_s_share_of_its_limit(children, tmp_path,
         assert got["mem_limit_mb"] == 200.0 and got["machine_mem_percent"] >= 90.0, got
 
 
-# A node that, once the file argv[1] exists, takes 10 MiB more every 20 ms until it is stopped.
+# A node named argv[2] that, once the file argv[1] exists, ends with os._exit(argv[3]) (no ROS
+# goodbye: DDS lists it until its lease ends, whatever the code) or, without argv[3], takes 10 MiB
+# more every 20 ms until it is stopped.
 HOG = """
 import os, sys, time, rclpy
 rclpy.init()
@@ -207,6 +209,8 @@ n = rclpy.create_node(sys.argv[2])
 print("ready", flush=True)
 while not os.path.exists(sys.argv[1]):
     rclpy.spin_once(n, timeout_sec=0.1)
+if len(sys.argv) > 3:
+    os._exit(int(sys.argv[3]))
 chunks = []
 while True:
     chunks.append(bytearray(10 * 2**20))  # zero-filled: its pages are touched
@@ -303,19 +307,6 @@ def test_an_agent_says_a_process_of_its_host_the_oom_killer_ended(children, ros_
     _said_oom({e.member: e for e in exits})
 
 
-# A node that, once the file argv[1] exists, ends with os._exit(argv[3]): no ROS goodbye, so DDS
-# lists it until its lease ends, whatever the code.
-QUITTER = """
-import os, sys, rclpy
-rclpy.init()
-n = rclpy.create_node(sys.argv[2])
-print("ready", flush=True)
-while not os.path.exists(sys.argv[1]):
-    rclpy.spin_once(n, timeout_sec=0.1)
-os._exit(int(sys.argv[3]))
-"""
-
-
 def test_an_agent_says_how_a_process_of_its_host_ended(children, ros_domain, tmp_path):
     """On a computer of its own, a node whose process exits 0 without ROS's goodbye is no crash and
     one that exits 1 is: the agent reads the exit codes from the kernel and its report (encoded and
@@ -327,7 +318,7 @@ def test_an_agent_says_how_a_process_of_its_host_ended(children, ros_domain, tmp
     from stream_viz.model.ids import node_fqn
 
     go = tmp_path / "go"
-    ends = {name: children.python(QUITTER, str(go), name, code, name=name)
+    ends = {name: children.python(HOG, str(go), name, code, name=name)
             for name, code in (("clean", "0"), ("failing", "1"))}
     exits = []
     with Agent(ros_domain, 0.5, "b") as agent:
