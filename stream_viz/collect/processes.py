@@ -72,7 +72,7 @@ MIDDLEWARE_THREADS = ("dds.", "recv", "tev", "dq.", "xmit", "lease", "gc")
 RAN_SHARE = 1e-3  # a thread that ran less than this share of a core between two probes is idle
 # ... or less than this share of the busiest thread's CPU: a main thread that woke once while the
 # executor worked (or as it blocked) is not a second executor thread. An rclpy multi-threaded
-# executor's workers each use a tenth or less of its dispatching main thread's CPU at a light load.
+# executor's workers each use many times less CPU than its dispatching main thread (docs/collector.md).
 RAN_OF_BUSIEST = 0.01
 FIRST_PROBES = 4
 PROBE_MIN_S = 0.5  # probes closer than this say nothing (the sampler is called between samples too)
