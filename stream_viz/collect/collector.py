@@ -22,7 +22,7 @@ from rclpy.type_description_service import START_TYPE_DESCRIPTION_SERVICE_PARAM
 from stream_viz.collect.build import build_model
 from stream_viz.collect.cgroups import read_mounts
 from stream_viz.collect.diagnostics import DiagnosticsReader
-from stream_viz.collect.exitcodes import ExitCodes, describe_exit
+from stream_viz.collect.exitcodes import ExitCodes, describe_exit, note_exit_code
 from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.goals import STATUS_SUFFIX, GoalTracker
 from stream_viz.collect.graphsignal import GraphSignal
@@ -265,10 +265,7 @@ class Collector:
             data = {"pid": pid, "process": make_id("process", pid), "nodes": nodes, "name": r.name,
                     "still_listed": [make_id("node", n) for n in listed]}
             code = self.exits.take(pid) if self.exits is not None else None
-            if code is not None:
-                data["exit_code"] = code
-                if code == 0:  # exit(0) without ROS's goodbye: its nodes linger, nothing crashed
-                    level = "info" if listed else level
+            level = note_exit_code(code, level, bool(listed), data)
             text = (f"process {pid} ({r.name}) {describe_exit(code)}"
                     + (f" with nodes {', '.join(had)}" if had else ""))
             if (oom := ooms.get(pid)) is not None:

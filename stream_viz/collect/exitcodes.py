@@ -53,6 +53,15 @@ def describe_exit(code: int | None) -> str:
     return f"exited with code {code}"
 
 
+def note_exit_code(code: int | None, level: str, still_listed: bool, data: dict) -> str:
+    """Put a known exit ``code`` in an exit event's ``data`` and return the event's level: an
+    ``exit(0)`` without ROS's goodbye leaves its nodes listed, but nothing crashed (info)."""
+    if code is None:
+        return level
+    data["exit_code"] = code
+    return "info" if code == 0 and still_listed else level
+
+
 def parse(data: bytes) -> tuple[int, int] | None:
     """Return ``(pid, exit code)`` of a process exit in one netlink message, or None (another
     event, a thread's exit, a short message)."""

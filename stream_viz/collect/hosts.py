@@ -24,7 +24,7 @@ from typing import Any
 
 import networkx as nx
 
-from stream_viz.collect.exitcodes import describe_exit
+from stream_viz.collect.exitcodes import describe_exit, note_exit_code
 from stream_viz.collect.hostreport import AGENT_TOPIC, HostReport, StatusRow, decode, host_of_prefix
 from stream_viz.collect.processes import MachineSampler
 from stream_viz.collect.readings import PidInfo, ProcessReading
@@ -228,10 +228,7 @@ def remote_exits(t: float, host: str, before: HostReport, now: HostReport,
         data = {"pid": pid, "host": host, "process": proc, "nodes": nodes, "name": p.name,
                 "still_listed": [make_id("node", n) for n in listed]}
         code = now.exits.get(pid)  # where the agent reads exit codes
-        if code is not None:
-            data["exit_code"] = code
-            if code == 0:  # exit(0) without ROS's goodbye: its nodes linger, nothing crashed
-                level = "info" if still else level
+        level = note_exit_code(code, level, still, data)
         text = f"process {pid} ({p.name}) on host {host} {describe_exit(code)}" + (
             f" with nodes {', '.join(had)}" if had else "")
         if (oom := now.ooms.get(pid)) is not None:  # the agent read its memory group's OOM count

@@ -228,8 +228,10 @@ class NodeView:
         """As `active`, from its alerts alone (its own, its process's, those charged to it): no
         metric evidence."""
         x = max(self.own_direct if own else self.direct, self.charged)
-        evidence = set(self.metric_spans)
-        return x if overlaps([sp for sp in self.spans if sp not in evidence], t0, t1) else 0.0
+        if not x:
+            return 0.0
+        spans = [sp for sp in self.spans if sp not in self.metric_spans] if self.metric_spans else self.spans
+        return x if overlaps(spans, t0, t1) else 0.0
 
 
 def _clip(x: float) -> float:
