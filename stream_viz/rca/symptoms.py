@@ -487,12 +487,13 @@ def _upstream(
     all does not end the search: a fault crosses a node that raised nothing (its output merely
     went on late), so the walk goes on upstream through silent members, up to
     ``max_trajectory`` hops, each silent node passed weakening what is found behind it by
-    `SILENT_DECAY`; so does the walk from what ``n``'s silent siblings read (`_sibling_inputs`:
-    composed nodes share data in memory). A symptom charged to ``n`` never excuses it, and a topic
-    without a symptom of its own that carried no message in that time (`traffic.idle`: a teleop
-    topic nobody publishes on) passes nothing but, as ``n``'s own input, its publishers'
-    departure. A cause whose symptom is known to have begun after
-    ``n``'s (`began_after`: a log line stamped after the next message of ``n``'s silent output was
+    `SILENT_DECAY` (a symptom that began more than ``tolerance`` before ``n``'s and still held
+    when they began counts in full: `_led`); so does the walk from what ``n``'s silent siblings
+    read (`_sibling_inputs`: composed nodes share data in memory). A symptom charged to ``n``
+    never excuses it, and a topic without a symptom of its own that carried no message in that
+    time (`traffic.idle`: a teleop topic nobody publishes on) passes nothing but, as ``n``'s own
+    input, its publishers' departure. A cause whose symptom is known to have begun after ``n``'s
+    (`began_after`: a log line stamped after the next message of ``n``'s silent output was
     due) does not count.
     ``sources``: the members that can excuse at all (symptoms, candidates, evidence); the walk
     ends once it has passed every one of them. ``fellows``: nodes that stalled with ``n`` in one
@@ -538,6 +539,10 @@ def _upstream(
             when = (lo, hi, latest, settings.tolerance)
             bare = bare or (not is_node(G, p) and measured(G, p))
             found = _excuse(G, p, n, s, views, ev_passive, when, home, parents, bare)
+            # A symptom that led n's and still held is no coincidence behind the silent nodes: the
+            # time it took is its way through them (a timeout, a control loop winding down).
+            if found > 0 and w < 1.0 and _led(G, p, s, views, v.onset, settings.tolerance, parents):
+                w = 1.0
             worst = max(worst, w * found)
             if shut or found > 0 or w * SILENT_DECAY <= worst:
                 continue  # an alerting member ends its path: the earlier ones are its own causes
@@ -547,6 +552,22 @@ def _upstream(
             break
         frontier = nxt
     return _clip(worst)
+
+
+def _led(G: nx.MultiDiGraph, p: str, s: Symptoms, views: Mapping[str, NodeView], onset: float,
+         tolerance: float, parents: dict[str, list[str]]) -> bool:
+    """True when ``p``'s symptom (a topic without one: a publisher's) began before ``onset`` by more
+    than ``tolerance`` and still held at ``onset``: it led, and was no coincidence of sampling."""
+    def led(first: float, spans: list[Episode]) -> bool:
+        return first < onset - tolerance and overlaps(spans, onset - tolerance, onset + tolerance)
+    if not np.isfinite(onset):
+        return False
+    if p in s.onset:
+        return led(s.onset[p], s.episodes[p])
+    if is_node(G, p):
+        pv = views.get(p)
+        return pv is not None and led(pv.onset, pv.spans)
+    return any(q in views and led(views[q].onset, views[q].spans) for q in publishers(G, p, parents))
 
 
 def _sibling_inputs(

@@ -115,11 +115,11 @@ def test_process_alerts_and_metric_evidence_are_charged_to_hosted_nodes(G):
 
 
 def test_a_degraded_source_behind_a_silent_node_excuses_the_victim(G):
-    # /scan slows (warn), perception passes it on without a symptom of its own, then the
-    # planner's /cmd jitters: the planner is excused by /scan behind the silent perception
-    # (one silent node: 0.75 of /scan's anomaly), so the sensor is ranked first.
-    alerts = [al(SCAN, "topic_rate", 10, "warn"), al(CMD, "topic_latency", 13, "warn"),
-              al(SCAN, "topic_rate", 15, "warn"), al(CMD, "topic_latency", 18, "warn")]
+    # /scan slows (warn), perception passes it on without a symptom of its own, and the planner's
+    # /cmd jitters in the same sample: the planner is excused by /scan behind the silent
+    # perception (one silent node: 0.75 of /scan's anomaly), so the sensor is ranked first.
+    alerts = [al(SCAN, "topic_rate", 10, "warn"), al(CMD, "topic_latency", 10, "warn"),
+              al(SCAN, "topic_rate", 15, "warn"), al(CMD, "topic_latency", 15, "warn")]
     r = analyze(G, alerts, RcaSettings(), None)
     assert top(r).member == SENSOR
     planner = next(rc for rc in r.root_causes if rc.member == PLAN)
@@ -127,6 +127,22 @@ def test_a_degraded_source_behind_a_silent_node_excuses_the_victim(G):
     warn = s.severity["warn"] * s.charge  # a topic symptom charged to its publisher
     assert planner.evidence["upstream"] == pytest.approx(0.75 * s.severity["warn"])
     assert planner.evidence["hypothesis"] == pytest.approx(warn * (1 - 0.75 * s.severity["warn"]))
+
+
+def test_a_source_that_led_and_still_holds_excuses_in_full_behind_silent_nodes(G):
+    # /scan goes silent at 10 s and stays so; the controller logs an error 20 s later, three
+    # silent members away (perception, the planner): the time /scan's silence took to
+    # reach it is its way through them, so it excuses the controller in full, no decay.
+    s = RcaSettings(incident_hops=5)  # one incident: the controller is 5 hops below /scan
+    alerts = [al(SCAN, "topic_rate", t) for t in (10, 15, 20, 25, 30, 35)] + [al(CTRL, "rosout", 30)]
+    r = analyze(G, alerts, s, None)
+    ctrl = next(rc for rc in r.root_causes if rc.member == CTRL)
+    assert ctrl.evidence["upstream"] == pytest.approx(s.severity["error"])
+    assert top(r).member == SENSOR
+    # Ended before the controller's error (10 s before, within the episode gap): decayed again.
+    early = [al(SCAN, "topic_rate", t) for t in (10, 15, 20)] + [al(CTRL, "rosout", 30)]
+    ctrl = next(rc for rc in analyze(G, early, s, None).root_causes if rc.member == CTRL)
+    assert ctrl.evidence["upstream"] == pytest.approx(0.75 ** 2 * s.severity["error"])
 
 
 def test_a_service_server_is_upstream_of_its_client(G):
