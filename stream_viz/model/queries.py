@@ -112,6 +112,11 @@ def called_servers(G: nx.MultiDiGraph, node: str) -> list[str]:
     return _by_edge_kind(G, node, "send", incoming=False)
 
 
+def calling_clients(G: nx.MultiDiGraph, node: str) -> list[str]:
+    """Return the nodes that call ``node`` (``send`` edges client → server into it), sorted."""
+    return _by_edge_kind(G, node, "send", incoming=True)
+
+
 def nodes_of_process(G: nx.MultiDiGraph, process: str, *, by_pid: bool = False) -> list[str]:
     """Return the nodes ``process`` hosts (its node children in `PROCESS_TREE`), sorted; for a
     ``host:`` member every node below it.

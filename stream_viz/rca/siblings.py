@@ -8,7 +8,10 @@ candidate nodes of one process, the node whose own change came first (beyond the
 or at the same time but stronger, excuses its siblings in the hypothesis test (as a causal
 parent would): on one executor it can be their cause. A node with no own change at all is
 excused by any sibling that has one. Nodes whose own changes are the same (in time, strength
-and kind), and whose inputs explain them as much, cannot be told apart, and the verdict says so.
+and kind), and whose inputs explain them as much, cannot be told apart, and the verdict says so —
+unless a client calling one of them complained meanwhile (``awaited``): a process burning CPU
+while a client times out on one of its servers points at that server. In a stall of their
+executor it does not: every service of the process stops answering alike.
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ class OwnChange(Protocol):
     logged: float
     exited: float
     executor_stopped: bool
+    awaited: bool
 
 
 @dataclass
@@ -138,9 +142,11 @@ def _fed_by(G: nx.MultiDiGraph, n: str, others: set[str],
 
 
 def _same(a: OwnChange, b: OwnChange, tol: float) -> bool:
-    """Same own change, and explained as much by their inputs (else the data flow tells them apart)."""
+    """Same own change, and explained as much by their inputs (else the data flow tells them
+    apart), and both or neither waited on by a complaining client (else the one it called)."""
     return (_close(a.own_onset, b.own_onset, tol) and abs(a.own_anomaly - b.own_anomaly) <= EPS
-            and len(a.own_kinds) == len(b.own_kinds) and abs(a.upstream - b.upstream) <= EPS)
+            and len(a.own_kinds) == len(b.own_kinds) and abs(a.upstream - b.upstream) <= EPS
+            and a.awaited == b.awaited)
 
 
 def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float,

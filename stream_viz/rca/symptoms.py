@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import networkx as nx
 import numpy as np
 
-from stream_viz.model.queries import called_servers, nodes_of_process, process_of_node
+from stream_viz.model.queries import called_servers, calling_clients, nodes_of_process, process_of_node
 from stream_viz.model.traffic import idle, measured
 from stream_viz.rca import siblings
 from stream_viz.rca.causal import causes_in, is_node, outputs, publishers
@@ -183,7 +183,8 @@ class NodeView:
     ``exited``: when its process was seen to die; ``executor_stopped``: an output of its stopped
     with its executor (`Symptoms`). ``began``/``began_by``/``vague``: the earliest
     and latest its symptoms can have begun by their alerts' word, and the first time of those that
-    do not say (`Symptoms`): what `began_after` compares.
+    do not say (`Symptoms`): what `began_after` compares. ``awaited``: a client calling it
+    complained while its symptoms were on (`_await`).
     """
 
     member: str
@@ -214,6 +215,7 @@ class NodeView:
     began_by: float = INF
     vague: float = INF
     executor_stopped: bool = False
+    awaited: bool = False
 
     def active(self, t0: float, t1: float, own: bool = False) -> float:
         """Its anomaly when one of its symptoms held in ``[t0, t1]``; else its untimed evidence
@@ -298,6 +300,7 @@ def node_views(
     stalled = siblings.stalls(G, views, settings.tolerance)
     _settle(G, views, views, s, ev_passive, settings, stalled)
     _imply_servers(G, s, views, ev_passive, settings)
+    _await(G, views, settings)
     for n, verdict in siblings.judge(G, views, settings.tolerance, stalled).items():
         v = views[n]
         v.process, v.sibling, v.indistinguishable = verdict.process, verdict.excuse, verdict.indistinguishable
@@ -460,6 +463,19 @@ def _imply_servers(
                     (v.began, v.began_by, v.vague))
     views.update(implied)
     _settle(G, implied, views, s, ev_passive, settings)
+
+
+def _await(G: nx.MultiDiGraph, views: Mapping[str, NodeView], settings: RcaSettings) -> None:
+    """Mark the candidates a client was waiting on (``awaited``): a node that calls one complained
+    (its own alert or stalled output) from the candidate's onset up to ``episode_gap`` later.
+    Among nodes of one process with the same own changes, that tells the one being waited on
+    apart (`siblings.judge`)."""
+    for n, v in views.items():
+        if v.implied or v.onset == INF:
+            continue
+        lo, hi = v.onset - settings.tolerance, v.onset + settings.episode_gap
+        v.awaited = any((c := views.get(q)) is not None and c.own_kinds & {"alert", "output"}
+                        and lo <= c.own_onset <= hi for q in calling_clients(G, n))
 
 
 SILENT_DECAY = 0.75  # an excuse found behind a silent node counts this much less per such node

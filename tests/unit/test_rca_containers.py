@@ -89,6 +89,22 @@ def test_a_process_alert_alone_cannot_tell_its_nodes_apart(G):
     assert by[LIDAR].evidence["indistinguishable_from"] == [CAM, IMU]
 
 
+def test_a_client_waiting_on_one_of_the_nodes_tells_it_apart(G):
+    # The container burns CPU and arm, which calls lidar's service, logs a timeout: of nodes
+    # that share the process's alert alone, the one a complaining client waits on ranks first.
+    arm = "node:/arm"
+    add_member(G, arm)
+    add_flow_edge(G, arm, LIDAR, "send")
+    busy = [al(n, "process_resources", 9, "warn", process=BOX) for n in (CAM, LIDAR, IMU)]
+    by, order = rank(G, [*busy, al(arm, "rosout", 12)])
+    assert order[0] == LIDAR and "indistinguishable_from" not in by[LIDAR].evidence
+    assert by[CAM].evidence["indistinguishable_from"] == [IMU]
+    assert by[LIDAR].score > by[CAM].score
+    # A stall starves every service of the executor alike: the complaint tells no fellow apart.
+    by, _ = rank(G, silent(IMAGE, 10) + silent(SCAN, 10) + silent(IMUT, 11) + [al(arm, "rosout", 12)])
+    assert by[LIDAR].evidence["indistinguishable_from"] == [CAM, IMU]
+
+
 def test_an_own_error_log_tells_the_blocking_node_apart(G):
     # All outputs stop together, but cam also logs that its callback overran.
     alerts = [al(CAM, "rosout", 10, "warn", symptom="log"), *silent(IMAGE, 10), *silent(SCAN, 10),

@@ -127,3 +127,25 @@ def test_blind_robots_recorded_live_a_flaky_sensor_and_a_quiet_vouched_for(tmp_p
     assert flaky["root_causes"][0]["member"] == "node:/conveyor/plc_bridge", flaky["root_causes"][:3]
     healthy = replayed(RESULTS / "auv-live-9b34fb7" / "samples" / "healthy.jsonl.gz", tmp_path / "a")
     assert healthy["alerts"] == []
+
+
+MANIPULATOR = RESULTS / "manipulator-live-6b8bb75" / "samples"
+MCU = {"node:/mm/mcu/sonar", "node:/mm/mcu/bumpers", "node:/mm/mcu/battery"}
+
+
+@pytest.mark.parametrize(("run", "first"), [
+    # The MCU's one executor hangs: its three nodes tie first; the path follower's "Failed to make
+    # progress" 23 s later, five silent nodes below the sonar, is its effect.
+    ("hang_mcu_sonar", MCU),
+    # move_group's process burns CPU while the fleet adapter times out on its planning: of the
+    # process's two nodes, the one the client waits on, alone.
+    ("slow_move_group", {"node:/mm/move_group"}),
+    # The leaking recorder subscribes to everything: move_group's CPU bursts behind topics that
+    # showed nothing neither excuse nor explain it.
+    ("leak_rosbag2_recorder", {"node:/rosbag2_recorder"}),
+])
+def test_the_manipulators_live_runs_rank_their_fault_first(tmp_path, run, first):
+    report = replayed(MANIPULATOR / f"{run}.jsonl.gz", tmp_path)
+    causes = report["root_causes"]
+    best = [c["member"] for c in causes if c["score"] == causes[0]["score"]]
+    assert set(best) <= first and first & set(best), causes[:4]
