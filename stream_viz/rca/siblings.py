@@ -44,7 +44,7 @@ class OwnChange(Protocol):
     logged: float
     exited: float
     executor_stopped: bool
-    awaited: bool
+    awaited: list[str]
 
 
 @dataclass
@@ -146,7 +146,7 @@ def _same(a: OwnChange, b: OwnChange, tol: float) -> bool:
     apart), and both or neither waited on by a complaining client (else the one it called)."""
     return (_close(a.own_onset, b.own_onset, tol) and abs(a.own_anomaly - b.own_anomaly) <= EPS
             and len(a.own_kinds) == len(b.own_kinds) and abs(a.upstream - b.upstream) <= EPS
-            and a.awaited == b.awaited)
+            and bool(a.awaited) == bool(b.awaited))
 
 
 def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float,

@@ -183,8 +183,8 @@ class NodeView:
     ``exited``: when its process was seen to die; ``executor_stopped``: an output of its stopped
     with its executor (`Symptoms`). ``began``/``began_by``/``vague``: the earliest
     and latest its symptoms can have begun by their alerts' word, and the first time of those that
-    do not say (`Symptoms`): what `began_after` compares. ``awaited``: a client calling it
-    complained while its symptoms were on (`_await`).
+    do not say (`Symptoms`): what `began_after` compares. ``awaited``: the clients calling it
+    that complained while its symptoms were on (`_await`).
     """
 
     member: str
@@ -215,7 +215,7 @@ class NodeView:
     began_by: float = INF
     vague: float = INF
     executor_stopped: bool = False
-    awaited: bool = False
+    awaited: list[str] = field(default_factory=list)
 
     def active(self, t0: float, t1: float, own: bool = False) -> float:
         """Its anomaly when one of its symptoms held in ``[t0, t1]``; else its untimed evidence
@@ -466,16 +466,17 @@ def _imply_servers(
 
 
 def _await(G: nx.MultiDiGraph, views: Mapping[str, NodeView], settings: RcaSettings) -> None:
-    """Mark the candidates a client was waiting on (``awaited``): a node that calls one complained
-    (its own alert or stalled output) from the candidate's onset up to ``episode_gap`` later.
+    """Mark the candidates a client was waiting on (``awaited``: those clients): a node that calls
+    one complained (its own alert or stalled output) from the candidate's onset up to
+    ``episode_gap`` later.
     Among nodes of one process with the same own changes, that tells the one being waited on
     apart (`siblings.judge`)."""
     for n, v in views.items():
         if v.implied or v.onset == INF:
             continue
         lo, hi = v.onset - settings.tolerance, v.onset + settings.episode_gap
-        v.awaited = any((c := views.get(q)) is not None and c.own_kinds & {"alert", "output"}
-                        and lo <= c.own_onset <= hi for q in calling_clients(G, n))
+        v.awaited = [q for q in calling_clients(G, n) if (c := views.get(q)) is not None
+                     and c.own_kinds & {"alert", "output"} and lo <= c.own_onset <= hi]
 
 
 SILENT_DECAY = 0.75  # an excuse found behind a silent node counts this much less per such node

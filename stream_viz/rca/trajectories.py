@@ -247,6 +247,8 @@ def _evidence(v: NodeView, tr: Trajectory | None = None, **extra: Any) -> dict[s
         out["process"] = v.process
     if v.indistinguishable:
         out["indistinguishable_from"] = list(v.indistinguishable)
+    if v.process is not None and v.awaited:  # what told it apart from its siblings
+        out["awaited_by"] = list(v.awaited)
     if tr is not None:
         out.update(
             coverage=round(tr.coverage, 4),

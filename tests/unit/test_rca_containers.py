@@ -98,6 +98,7 @@ def test_a_client_waiting_on_one_of_the_nodes_tells_it_apart(G):
     busy = [al(n, "process_resources", 9, "warn", process=BOX) for n in (CAM, LIDAR, IMU)]
     by, order = rank(G, [*busy, al(arm, "rosout", 12)])
     assert order[0] == LIDAR and "indistinguishable_from" not in by[LIDAR].evidence
+    assert by[LIDAR].evidence["awaited_by"] == [arm] and "awaited_by" not in by[CAM].evidence
     assert by[CAM].evidence["indistinguishable_from"] == [IMU]
     assert by[LIDAR].score > by[CAM].score
     # A stall starves every service of the executor alike: the complaint tells no fellow apart.
