@@ -92,7 +92,8 @@ def report_markdown(
             lines.append(f"| {i} | **`{rc['member']}`** | {float(rc.get('score', 0.0)):.3f} | {traj} |")
         if len(root_causes) > top:
             lines += ["", f"… and {len(root_causes) - top} more."]
-        lines += _alike_notes(root_causes[:top]) + _host_notes(root_causes[:top])
+        lines += (_alike_notes(root_causes[:top]) + _awaited_notes(root_causes[:top])
+                  + _host_notes(root_causes[:top]))
     if len(incidents) > 1:
         lines += ["", "## Incidents (times UTC)", "",
                   "| incident | symptomatic members | from | to | top root cause |", "|---|---|---|---|---|"]
@@ -128,6 +129,18 @@ def _alike_notes(root_causes: Sequence[Mapping[str, Any]]) -> list[str]:
         names = ", ".join(f"`{m}`" for m in group)
         out.append(f"{names} run in `{ev.get('process', '?')}` and changed alike: the symptoms cannot "
                    "tell them apart (the fault is in that process).")
+    return ["", *out] if out else []
+
+
+def _awaited_notes(root_causes: Sequence[Mapping[str, Any]]) -> list[str]:
+    """One line per candidate told from its process's other nodes by clients waiting on it."""
+    out = []
+    for rc in root_causes:
+        ev = rc.get("evidence") or {}
+        if ev.get("awaited_by"):
+            clients = ", ".join(f"`{m}`" for m in ev["awaited_by"])
+            out.append(f"`{rc['member']}` runs in `{ev.get('process', '?')}` with other candidates; "
+                       f"{clients} waited on it as its symptoms began, which tells it from them.")
     return ["", *out] if out else []
 
 

@@ -50,3 +50,12 @@ def test_a_single_incident_reads_as_before():
                   "root_causes": causes}]
     assert report_markdown(causes, None, incidents=incidents) == report_markdown(causes)
     assert report_markdown([]).endswith("No root cause found yet.")
+
+
+def test_a_node_told_apart_by_a_waiting_client_says_so():
+    causes = [{"member": A, "score": 0.4, "trajectory": [C, A],
+               "evidence": {"process": "process:7", "awaited_by": [C]}},
+              {"member": B, "score": 0.2, "trajectory": [B], "evidence": {"process": "process:7"}}]
+    assert report_markdown(causes).splitlines()[-2:] == [
+        "", f"`{A}` runs in `process:7` with other candidates; `{C}` waited on it as its symptoms began, "
+        "which tells it from them."]

@@ -149,3 +149,5 @@ def test_the_manipulators_live_runs_rank_their_fault_first(tmp_path, run, first)
     causes = report["root_causes"]
     best = [c["member"] for c in causes if c["score"] == causes[0]["score"]]
     assert set(best) <= first and first & set(best), causes[:4]
+    if run == "slow_move_group":  # the report says what told it apart
+        assert causes[0]["evidence"]["awaited_by"] == ["node:/mm/fleet_adapter"]
