@@ -45,8 +45,11 @@ class Diagnostics(Plugin):
     news, as is any ERROR or STALE (``learn_s`` 0: every WARN alerts). A status that warned and
     went back to OK by itself warns again without an alert: its warning comes and goes. A new
     WARN counts once it has held ``warn_hold_s`` (robots warn for a while and recover by
-    themselves: a tank or battery running low until refilled, a temperature peak); an ERROR or a
-    STALE at once.
+    themselves: a tank or battery running low until refilled, a temperature peak); a STALE at
+    once; an ERROR once the next message of its status says ERROR too, or none came within
+    ``error_confirm_s`` (0: at once). An updater's frequency check reads ERROR ("no events") in
+    the instant between its node being enabled and its first event, then WARN or OK: that is no
+    fault, and a real one says ERROR again a period later.
 
     A status in its node's bring-up (the process's first ``startup_s``: a filter waiting for its
     first GPS fix, a driver opening its device) is not news, as `rosout`'s lines are not; one that
@@ -62,7 +65,8 @@ class Diagnostics(Plugin):
     name = "diagnostics"
     kinds = ("node",)
     settings: ClassVar[dict[str, Any]] = {"stale_severity": "warn", "watched_only": False, "hardware": [],
-                                          "learn_s": 10.0, "warn_hold_s": 60.0, "startup_s": STARTUP_S}
+                                          "learn_s": 10.0, "warn_hold_s": 60.0, "error_confirm_s": 3.0,
+                                          "startup_s": STARTUP_S}
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
         s = ctx.settings
@@ -70,16 +74,21 @@ class Diagnostics(Plugin):
         changed = _lifecycle(ctx)
         first = ctx.state.setdefault("first_t", ctx.t)  # the monitor's start: who says what not known yet
         live = ctx.state.setdefault("live", {})  # node -> when it last published a status of its own
-        for e in ctx.events:
-            if e.kind != "diag":
-                continue
+        pending = ctx.state.setdefault("pending", {})  # status name -> its first ERROR, unconfirmed
+        events = [e for e in ctx.events if e.kind == "diag"]
+        for e in events:
+            pending.pop(str(e.data.get("name", "")), None)  # a newer message of that status came
+        for e in _unconfirmed(ctx, s["error_confirm_s"]) + events:
             level = diag_level(e)
             standing = _standing(ctx, e, level, s["learn_s"])  # every status: when it was first seen
             held = _warned_for(ctx, e, level)  # every status: how long it has been WARN
+            began = _erred(ctx, e, level)  # every status: when its ERRORs began
             member, by = _mapped(ctx, e)
             if level != "stale" and e.data.get("publisher") == member:  # not an aggregator's copy
                 live[member] = max(e.t, live.get(member, e.t))
             if level == "ok" or (level == "warn" and (standing or held < s["warn_hold_s"])):
+                continue
+            if began is not None and not _confirmed(ctx, e, began, s["error_confirm_s"]):
                 continue
             if s["watched_only"] and member not in ctx.watch:
                 continue
@@ -90,16 +99,50 @@ class Diagnostics(Plugin):
             sev = s["stale_severity"] if level == "stale" else level
             sev = sev if sev in RANK else "warn"
             prev_sev, prev_by, statuses = worst.get(member, ("info", by, []))
+            later = began is not None and began < e.t  # confirmed after its first ERROR
             statuses.append({"name": e.data.get("name", ""), "level": level, "text": e.text,
-                             "mapped_by": by})
+                             "mapped_by": by, **({"since": began} if later else {})})
             if RANK[sev] > RANK[prev_sev]:
                 prev_sev, prev_by = sev, by
             worst[member] = (prev_sev, prev_by, statuses)
         for member, (sev, by, statuses) in sorted(worst.items()):
             texts = [st["text"] for st in statuses]  # the collector's "<name>: <LEVEL> <message>"
             more = f" (+{len(texts) - 3} more)" if len(texts) > 3 else ""
+            # An ERROR confirmed a message later began with its first: the RCA's order of symptoms.
+            began = [st["since"] for st in statuses if "since" in st]
             yield ctx.alert(member, sev, "diagnostics " + "; ".join(texts[:3]) + more + f" (mapped by {by})",
-                            symptom="diagnostics", statuses=statuses, mapped_by=by)
+                            symptom="diagnostics", statuses=statuses, mapped_by=by,
+                            **({"since": min(began)} if began and min(began) < ctx.t else {}))
+
+
+def _erred(ctx: PluginContext, e: Event, level: str) -> float | None:
+    """When ``e``'s status began its run of ERRORs (``e``'s own time for a first one); None when
+    ``e`` is no ERROR, which ends the run. Called for every status message."""
+    runs = ctx.state.setdefault("erred", {})  # status name -> when its ERRORs began
+    name = str(e.data.get("name", ""))
+    if level != "error":
+        runs.pop(name, None)
+        return None
+    return runs.setdefault(name, e.data.get("erred", e.t))
+
+
+def _confirmed(ctx: PluginContext, e: Event, began: float, confirm_s: float) -> bool:
+    """True when the ERROR ``e`` counts: an ERROR of its status came before it (``began``
+    earlier), or it waited ``confirm_s`` with no newer message (`_unconfirmed`); else it waits."""
+    pending = ctx.state["pending"]
+    if confirm_s <= 0 or began < e.t or e.data.get("waited"):
+        pending.pop(str(e.data.get("name", "")), None)  # its first, in this sample too
+        return True
+    pending[str(e.data.get("name", ""))] = e
+    return False
+
+
+def _unconfirmed(ctx: PluginContext, confirm_s: float) -> list[Event]:
+    """The first ERRORs of statuses that said nothing more for ``confirm_s``: they count now."""
+    pending: dict[str, Event] = ctx.state.get("pending", {})
+    due = [n for n, e in pending.items() if ctx.t - e.t >= confirm_s]
+    return [Event(ctx.t, e.kind, e.member, e.level, e.text, {**e.data, "waited": True, "erred": e.t})
+            for e in (pending.pop(n) for n in due)]
 
 
 def _lifecycle(ctx: PluginContext) -> dict[str, float]:

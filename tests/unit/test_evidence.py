@@ -319,10 +319,12 @@ def test_hardware_configured_for_the_plugin_maps_a_status():
     G = model()
     ev = [Event(1.0, "diag", "node:/detector", "error", "motors: ERROR hot",
                 {"name": "motors", "level": 2, "hardware_id": "roboteq-01", "mapped_by": "publisher"})]
-    (a,) = drive_alerts("diagnostics", [(1.0, G, ev)], settings={"hardware": ["roboteq-01=/camera"]})
+    at_once = {"error_confirm_s": 0.0}  # the ERROR alerts without waiting for its next message
+    table = {"hardware": ["roboteq-01=/camera"], **at_once}
+    (a,) = drive_alerts("diagnostics", [(1.0, G, ev)], settings=table)
     assert (a.member, a.data["mapped_by"]) == ("node:/camera", "hardware_id")
     assert "(mapped by hardware_id)" in a.message
-    (b,) = drive_alerts("diagnostics", [(1.0, G, ev)])
+    (b,) = drive_alerts("diagnostics", [(1.0, G, ev)], settings=at_once)
     assert (b.member, b.data["mapped_by"]) == ("node:/detector", "publisher")
 
 
@@ -390,7 +392,7 @@ def test_diagnostics_plugin_says_how_each_alert_was_mapped():
         _status("detector: inference", 2, "gpu0", "CUDA error"), _status("temperature", 1, "", "warm")]),
         1.0, "/camera", NodeNames({"/camera", "/detector"}))
     alerts = drive_alerts("diagnostics", [(1.0, G, evs)],
-                          settings={"learn_s": 0.0, "warn_hold_s": 0.0})  # warns alert at once
+                          settings={"learn_s": 0.0, "warn_hold_s": 0.0, "error_confirm_s": 0.0})  # at once
     assert [(a.member, a.severity, a.data["mapped_by"]) for a in alerts] == [
         ("node:/camera", "warn", "publisher"), ("node:/detector", "error", "name")]
     assert alerts[1].message == "diagnostics detector: inference: ERROR CUDA error (mapped by name)"

@@ -1406,9 +1406,32 @@ def test_diagnostics_levels():
           Event(1.0, "diag", "node:/camera", "warn", "temp: WARN hot", {"name": "temp", "level": 1}),
           Event(1.0, "diag", "node:/camera", "error", "lens: ERROR broken", {"name": "lens", "level": 2}),
           Event(1.0, "diag", "node:/detector", "warn", "x: STALE", {"name": "x", "level": 3})]
-    assert drive("diagnostics", [(1.0, G, ev)]) == [(1.0, "node:/camera", "error"),
-                                                    (1.0, "node:/detector", "warn")]
-    assert drive("diagnostics", [(1.0, G, ev[:1])]) == []
+    at_once = {"error_confirm_s": 0.0}  # an ERROR alerts without waiting for its next message
+    assert drive("diagnostics", [(1.0, G, ev)], settings=at_once) == [(1.0, "node:/camera", "error"),
+                                                                      (1.0, "node:/detector", "warn")]
+    assert drive("diagnostics", [(1.0, G, ev[:1])], settings=at_once) == []
+
+
+def test_diagnostics_an_error_counts_once_its_next_message_says_it_too():
+    G = model()
+
+    def frame(t, level, name="detector"):
+        return (float(t), G, [Event(float(t), "diag", "node:/camera", "info", f"{name}: {level}",
+                                    {"name": name, "level": level})] if level is not None else [])
+
+    # A frequency check enabled at 10: ERROR ("no events") for one message, then WARN, then OK.
+    assert drive("diagnostics", [frame(t, lvl) for t, lvl in enumerate([0] * 10 + [2, 1, 1, 0, 0])]) == []
+    # A real ERROR says so again a period later: it alerts then, and says when it began.
+    got = drive("diagnostics", [frame(t, lvl) for t, lvl in enumerate([0] * 10 + [2, 2, 2])], full=True)
+    assert [(a.t, a.severity, a.data["since"]) for a in got] == [(11.0, "error", 10.0), (12.0, "error", 10.0)]
+    # A status published once, on change, that says nothing more: it counts after error_confirm_s.
+    once = [frame(t, lvl) for t, lvl in enumerate([0] * 10 + [2] + [None] * 5)]
+    assert drive("diagnostics", once) == [(13.0, "node:/camera", "error")]
+    # Two messages of it in one sample (a 2 Hz updater) confirm each other at once.
+    two = [(float(t), G, [Event(t - 0.5, "diag", "node:/camera", "info", "d: 2", {"name": "d", "level": 2}),
+                          Event(float(t), "diag", "node:/camera", "info", "d: 2", {"name": "d", "level": 2})])
+           for t in (10, 11)]
+    assert drive("diagnostics", two) == [(10.0, "node:/camera", "error"), (11.0, "node:/camera", "error")]
 
 
 def test_diagnostics_a_standing_warning_is_the_status_normal_a_new_one_is_news():
@@ -1426,8 +1449,8 @@ def test_diagnostics_a_standing_warning_is_the_status_normal_a_new_one_is_news()
         frames.append((float(t), G, ev))
     alerts = drive("diagnostics", frames, settings={"warn_hold_s": 0.0})  # a WARN counts at once
     warned = [t for t, m, sev in alerts if m == "node:/camera" and sev == "warn"]
-    assert warned == [float(t) for t in range(20, 25)]
-    assert [t for t, m, sev in alerts if sev == "error"] == [float(t) for t in range(25, 40)]
+    assert warned == [float(t) for t in range(20, 26)]  # at 25 the lens's first ERROR waits for its next
+    assert [t for t, m, sev in alerts if sev == "error"] == [float(t) for t in range(26, 40)]  # confirmed
     assert [a for a in alerts if a[1] == "node:/detector"] == []  # warned as it appeared: its normal
     # learn_s 0: every WARN alerts, as robots without standing warnings may want
     assert len(drive("diagnostics", frames, settings={"learn_s": 0.0, "warn_hold_s": 0.0})) == 40 + 10
@@ -1446,8 +1469,7 @@ def test_diagnostics_a_new_warning_counts_once_it_has_held():
     assert drive("diagnostics", frames([0] * 20 + [1] * 34 + [0] * 20)) == []
     staying = drive("diagnostics", frames([0] * 20 + [1] * 70))
     assert [t for t, _, _ in staying] == [float(t) for t in range(80, 90)]
-    assert drive("diagnostics", frames([0] * 20 + [1] * 5 + [2] * 3)) == [(25.0, "node:/sprayer", "error"),
-                                                                           (26.0, "node:/sprayer", "error"),
+    assert drive("diagnostics", frames([0] * 20 + [1] * 5 + [2] * 3)) == [(26.0, "node:/sprayer", "error"),
                                                                            (27.0, "node:/sprayer", "error")]
 
 
@@ -1462,7 +1484,7 @@ def test_diagnostics_a_warning_that_came_and_went_by_itself_is_shown_once():
     alerts = drive("diagnostics", [frame(t, lvl) for t, lvl in enumerate(levels)],
                    settings={"warn_hold_s": 0.0})
     assert [t for t, _, sev in alerts if sev == "warn"] == [float(t) for t in range(20, 30)]
-    assert [t for t, _, sev in alerts if sev == "error"] == [float(t) for t in range(60, 65)]
+    assert [t for t, _, sev in alerts if sev == "error"] == [float(t) for t in range(61, 65)]
 
 
 def test_diagnostics_in_a_node_s_bring_up_are_not_news():
