@@ -174,14 +174,21 @@ def _message(r: Rhythm, newest: float, notable: float, margin: float, seen: floa
     """A message newer than any seen: a notable quiet before it ends, and is learned if healthy.
     On a settled topic, a quiet that reached its limit only between two samples (``seen``: the
     longest a sample saw) was a silence no sample could judge, and is not learned (a flapping
-    sensor's first dropout would make the next ones its rhythm)."""
+    sensor's first dropout would make the next ones its rhythm); on a settled continuous one,
+    neither is a quiet under the limit that would lift it at once (more than ``margin`` × the
+    longest quiet yet)."""
     if r.newest is None or r.explained:
         r.run_start = newest
     else:
         # A continuous topic's limit is its base one: what its own hiccups added is no rhythm.
         limit = quiet_limit(r, notable, margin) if r.gaps else notable
         missed = r.settled and seen < limit <= r.peak
-        learn = not (r.departed or missed or r.doubted)
+        # Nor is a settled continuous topic's hiccup that would at once lift its limit above the
+        # base, more than ``margin`` × its longest quiet yet: a flaky sensor's first dropout just
+        # under the floor, learned, would make every later one healthy.
+        jump = (r.settled and not r.gaps and notable / margin < r.peak < notable
+                and r.peak > margin * r.longest)
+        learn = not (r.departed or missed or r.doubted or jump)
         if learn:
             r.longest = max(r.longest, r.peak)
         if r.peak >= notable:

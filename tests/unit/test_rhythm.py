@@ -135,3 +135,19 @@ def test_a_settled_continuous_topic_s_dropout_between_two_samples_is_not_learned
     early, _ = run(samples[:5])
     follow(early, 5.0, 4.95, 20.0, **KW, gap=1.6)
     assert early.gaps == [1.0] and not early.settled  # newest to newest: 3.95 -> 4.95
+
+
+def test_a_settled_continuous_topic_s_hiccup_just_under_the_floor_is_not_learned():
+    # The manipulator's flaky bumpers (20 Hz, settled): a first dropout of 1.44 s, under the 1.5 s
+    # floor. Learned, its limit would be 2.88 s and the 1.7 s quiets after it healthy.
+    samples = [(float(t), t - 0.05, 20.0) for t in range(21)]
+    r, _ = run(samples)
+    follow(r, 21.0, 20.95, 20.0, **KW, gap=1.44)
+    assert quiet_limit(r, 1.5, 2.0) == 1.5 and r.longest < 0.1
+    # A hiccup within margin × its longest is learned as before: it lifts nothing at once.
+    follow(r, 22.0, 21.95, 20.0, **KW, gap=0.09)
+    assert r.longest == 0.09
+    # Before the topic settled, the same dropout is learned: its rhythm is still being found.
+    early, _ = run(samples[:5])
+    follow(early, 5.0, 4.95, 20.0, **KW, gap=1.44)
+    assert early.longest == 1.44 and quiet_limit(early, 1.5, 2.0) == 2.88
