@@ -15,13 +15,11 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import subprocess
-import sys
-import tempfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from bench.eval.provenance import code_version
+from bench.eval.reanalyze import replay_report
 from bench.replay_handwritten import FIELDS, score
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -46,13 +44,7 @@ def suites(root: Path = RESULTS) -> list[tuple[str, dict[str, dict], Path]]:
 
 def replay(samples: Path, setting: str, value: str) -> dict:
     """The report of ``stream-viz replay`` over ``samples`` with ``[rca] setting = value``."""
-    with tempfile.TemporaryDirectory() as d:
-        config, report = Path(d) / "sweep.toml", Path(d) / "report.json"
-        config.write_text(f"[rca]\n{setting} = {value}\n")
-        subprocess.run([sys.executable, "-m", "stream_viz.cli", "replay", str(samples), "--viewer", "none",
-                        "--config", str(config), "--report", str(report), "--db", str(Path(d) / "a.sqlite")],
-                       check=True, capture_output=True, timeout=1800)
-        return json.loads(report.read_text())
+    return replay_report(samples, f"[rca]\n{setting} = {value}\n")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -123,7 +123,7 @@ def _erred(ctx: PluginContext, e: Event, level: str) -> float | None:
     if level != "error":
         runs.pop(name, None)
         return None
-    return runs.setdefault(name, e.data.get("erred", e.t))
+    return runs.setdefault(name, e.t)
 
 
 def _confirmed(ctx: PluginContext, e: Event, began: float, confirm_s: float) -> bool:
@@ -141,7 +141,7 @@ def _unconfirmed(ctx: PluginContext, confirm_s: float) -> list[Event]:
     """The first ERRORs of statuses that said nothing more for ``confirm_s``: they count now."""
     pending: dict[str, Event] = ctx.state.get("pending", {})
     due = [n for n, e in pending.items() if ctx.t - e.t >= confirm_s]
-    return [Event(ctx.t, e.kind, e.member, e.level, e.text, {**e.data, "waited": True, "erred": e.t})
+    return [Event(ctx.t, e.kind, e.member, e.level, e.text, {**e.data, "waited": True})
             for e in (pending.pop(n) for n in due)]
 
 
