@@ -10,9 +10,19 @@ started in batches so start-up does not swamp a shared machine.
 
     .venv/bin/python bench/bench_agent.py --processes 10 50 100 --seconds 30
 
-One ROS domain holds at most about 120 participants per computer (Fast DDS's port mapping leaves
-room for about that many participant ids: ROS 2's documentation on ROS_DOMAIN_ID), so 200 ROS
-processes cannot run on one computer in one domain; 100 is the largest size measured.
+``--side-by-side SRC …`` compares agents of several source trees (``.`` and, say, a
+``git worktree`` of an older commit) on the same N processes at the same time: each runs as
+``stream-viz agent`` in its own process, and the CPU time of each process (all threads) is read
+over the same window, so the machine's load falls on all of them alike; the table gives each
+one's ratio to the first.
+
+    .venv/bin/python bench/bench_agent.py --processes 50 --side-by-side . /tmp/old
+
+The agents join the domain before the processes: on a LOCALHOST domain, a participant that
+joins after some 30 others found only 31-32 of 100 (it is announced only to the ports of the
+participant ids the others probe), and one that joined first found 96-100. One ROS domain holds
+about 120 participants per computer before its ports run into the next domain's (Fast DDS's port
+mapping: ROS 2's documentation on ROS_DOMAIN_ID).
 """
 
 from __future__ import annotations
@@ -23,6 +33,8 @@ import statistics
 import subprocess
 import sys
 import time
+
+import psutil
 
 from stream_viz.collect.agent import Agent
 from stream_viz.testing import claim_domain, ros_env, shm_clean
@@ -71,9 +83,10 @@ def measure(n: int, seconds: float, period: float, settle: float) -> dict[str, f
     domain = claim_domain()
     env = ros_env(domain)
     os.environ.update(env)
-    kids = start(n, env)
+    kids: list[subprocess.Popen] = []
     try:
         with Agent(domain, period) as agent:
+            kids = start(n, env)  # after the agent joined (the module's docstring)
             mapped = _mapped(agent, n)
             for _ in range(int(settle / period)):  # discovery of N participants calms down
                 agent.step()
@@ -98,13 +111,75 @@ def measure(n: int, seconds: float, period: float, settle: float) -> dict[str, f
             "bytes_per_s": statistics.mean(sizes) / period, "report_bytes": statistics.median(sizes)}
 
 
+AGENT = "import sys; from stream_viz.cli import main; sys.exit(main(sys.argv[1:]))"
+
+
+def _commit(src: str) -> str:
+    run = subprocess.run(["git", "-C", src, "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+    dirty = subprocess.run(["git", "-C", src, "status", "--porcelain", "--untracked-files=no"],
+                           capture_output=True, text=True).stdout.strip()
+    return (run.stdout.strip() or "?") + ("+changes" if dirty else "")
+
+
+def side_by_side(n: int, sources: list[str], seconds: float, period: float,
+                 settle: float) -> list[dict[str, float | str]]:
+    """The CPU (% of a core, all threads) of one `stream-viz agent` per source tree, all run at
+    once on the same ``n`` processes and read over the same window."""
+    domain = claim_domain()
+    env = ros_env(domain)
+    os.environ.update(env)
+    agents, kids = [], []
+    try:
+        # They join before the processes (the module's docstring).
+        for src in sources:
+            e = dict(env, PYTHONPATH=os.path.abspath(src))
+            agents.append(subprocess.Popen([sys.executable, "-c", AGENT, "agent", "--period", str(period)],
+                                           env=e, cwd=os.path.abspath(src), stdout=subprocess.DEVNULL,
+                                           stderr=subprocess.DEVNULL))
+        with Agent(domain, period) as probe:  # what an agent there maps
+            time.sleep(2.0)
+            kids = start(n, env)
+            mapped = _mapped(probe, n)
+        time.sleep(settle)
+        procs = [psutil.Process(a.pid) for a in agents]
+        before = [sum(p.cpu_times()[:2]) for p in procs]
+        t0 = time.monotonic()
+        time.sleep(seconds)
+        used = [sum(p.cpu_times()[:2]) - b for p, b in zip(procs, before, strict=True)]
+        wall = time.monotonic() - t0
+        alive = [a.poll() is None for a in agents]
+    finally:
+        for a in agents:
+            a.terminate()
+        for a in agents:
+            a.wait()
+        stop(kids)
+        shm_clean()
+    return [{"source": src, "commit": _commit(src), "processes": n, "mapped": mapped,
+             "cpu_percent": 100.0 * u / wall, "ratio": u / used[0] if used[0] else float("nan"),
+             "ran": ok} for src, u, ok in zip(sources, used, alive, strict=True)]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--processes", type=int, nargs="+", default=[10, 50, 100])
     ap.add_argument("--seconds", type=float, default=30.0)
     ap.add_argument("--period", type=float, default=1.0)
     ap.add_argument("--settle", type=float, default=15.0, help="seconds after discovery, unmeasured")
+    ap.add_argument("--side-by-side", nargs="+", metavar="SRC",
+                    help="source trees whose agents run at once on the same processes")
     a = ap.parse_args()
+    if a.side_by_side:
+        cols = ("ROS processes", "mapped", "source", "commit", "agent CPU, all threads (% of a core)",
+                "ratio to the first", "ran throughout")
+        print("| " + " | ".join(cols) + " |")
+        print("|" + "---|" * len(cols))
+        for n in a.processes:
+            for r in side_by_side(n, a.side_by_side, a.seconds, a.period, a.settle):
+                row = (r["processes"], r["mapped"], r["source"], r["commit"], f"{r['cpu_percent']:.2f}",
+                       f"{r['ratio']:.2f}", "yes" if r["ran"] else "no")
+                print("| " + " | ".join(map(str, row)) + " |", flush=True)
+        return
     cols = ("ROS processes", "mapped by the agent", "processes in the report (with ancestors)",
             "agent CPU, all threads (% of a core)", "of which the sample-and-publish step",
             "bytes/s published", "report (bytes)")

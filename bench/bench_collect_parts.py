@@ -11,6 +11,9 @@
    that every sample ran before (now the definition the sums are tested against), on
    the demo robot's topic rates (50, 20, 20, 15, 10 x4, 1 x3 Hz, 3 s window). Equal results
    (``tests/unit/test_collect_pure.py``).
+3. Reading the three /proc files of a tracked process (``stat``, ``status``, ``io``):
+   `read_file` (``os.open`` and one ``os.read``) vs a Python file object (``open(path, "rb",
+   buffering=0)``, what the sampler used before), in alternation on the children of part 1.
 
 Figures are main-thread CPU time (medians); compare the ratios, the machine is shared.
 
@@ -25,7 +28,7 @@ import subprocess
 import sys
 import time
 
-from stream_viz.collect.processes import ProcessSampler
+from stream_viz.collect.processes import ProcessSampler, read_file
 from stream_viz.collect.window import TopicWindow, window_metrics
 
 CHILD = ("import threading, time, tempfile\n"
@@ -65,9 +68,31 @@ def processes(n_children: int, rounds: int) -> None:
         print(f"   procfs / psutil = {us['procfs'] / us['psutil']:.2f} (median), "
               f"{mean['procfs'] / mean['psutil']:.2f} (mean); "
               f"probe1 / psutil = {us['probe1'] / us['psutil']:.2f}")
+        proc_files(pids, rounds)
     finally:
         for k in kids:
             k.kill()
+
+
+def _file_object(path: str) -> bytes:
+    with open(path, "rb", buffering=0) as f:
+        return f.read()
+
+
+def proc_files(pids: list[int], rounds: int) -> None:
+    paths = [f"/proc/{pid}/{name}" for pid in pids for name in ("stat", "status", "io")]
+    cost: dict[str, list[float]] = {"read_file": [], "file object": []}
+    for _ in range(rounds):
+        for name, read in (("read_file", read_file), ("file object", _file_object)):
+            t0 = time.thread_time()
+            for p in paths:
+                read(p)
+            cost[name].append(time.thread_time() - t0)
+    us = {k: 1e6 * statistics.median(v) / len(pids) for k, v in cost.items()}
+    print(f"3. the three /proc files of a process, {len(pids)} children, {rounds} rounds")
+    for k, v in us.items():
+        print(f"   {k:11s} {v:6.1f} µs per process")
+    print(f"   read_file / file object = {us['read_file'] / us['file object']:.2f}")
 
 
 def topic_metrics(rounds: int) -> None:

@@ -335,6 +335,20 @@ def test_parse_proc_stat_and_fields():
     assert parse_fields(io, (b"read_bytes", b"write_bytes")) == (4096, 8192)
 
 
+def test_read_file_returns_a_whole_file_longer_than_one_chunk_and_a_proc_file(tmp_path):
+    from stream_viz.collect.processes import CHUNK, read_file
+
+    long = tmp_path / "long"
+    long.write_bytes(bytes(range(256)) * (2 * CHUNK // 256 + 3))
+    assert read_file(str(long)) == long.read_bytes()
+    exact = tmp_path / "exact"  # a last read of a full chunk, then an empty one
+    exact.write_bytes(b"x" * CHUNK)
+    assert read_file(str(exact)) == b"x" * CHUNK
+    assert read_file("/proc/self/status").startswith(b"Name:")
+    with pytest.raises(FileNotFoundError):
+        read_file(str(tmp_path / "none"))
+
+
 def test_topic_window_running_sums_equal_a_fresh_computation():
     from stream_viz.collect.window import TopicWindow
 
