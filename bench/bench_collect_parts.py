@@ -100,7 +100,8 @@ def topic_metrics(rounds: int) -> None:
     streams = []
     for rate in DEMO_RATES:  # 3 s of records, then one more second arriving per sample
         step = 10**9 // rate
-        recs = [(t, t - 2_000_000, 500, i, None, None) for i, t in enumerate(range(t_end - 4 * 10**9, t_end, step))]
+        times = range(t_end - 4 * 10**9, t_end, step)
+        recs = [(t, t - 2_000_000, 500, i, None, None) for i, t in enumerate(times)]
         streams.append(recs)
     cost: dict[str, list[float]] = {"running sums": [], "fresh numpy": []}
     for _ in range(rounds):
