@@ -73,6 +73,9 @@ class RcaSettings:
     incident_lead : float
         Longest a symptom may begin before that of a member only upstream of it and still be in
         its incident (the upstream one's detection lagged; a cause comes first).
+    led_max : float
+        Longest an upstream symptom may lead a node's behind silent members and still excuse it
+        in full (`symptoms._led`); one that held longer is a standing condition, decayed as any.
     """
 
     policy: str = setting("both", choices=POLICIES)
@@ -94,6 +97,7 @@ class RcaSettings:
     episode_gap: float = setting(15.0, gt=0)
     incident_hops: int = setting(4, ge=1)
     incident_lead: float = setting(10.0, ge=0)
+    led_max: float = setting(60.0, gt=0)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], where: str) -> RcaSettings:

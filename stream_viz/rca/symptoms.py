@@ -558,7 +558,7 @@ def _upstream(
             found = _excuse(G, p, n, s, views, ev_passive, when, home, parents, bare)
             # A symptom that led n's and still held is no coincidence behind the silent nodes: the
             # time it took is its way through them (a timeout, a control loop winding down).
-            if found > 0 and w < 1.0 and _led(G, p, s, views, v.onset, settings.tolerance, parents):
+            if found > 0 and w < 1.0 and _led(G, p, s, views, v.onset, settings, parents):
                 w = 1.0
             worst = max(worst, w * found)
             if shut or found > 0 or w * SILENT_DECAY <= worst:
@@ -572,11 +572,15 @@ def _upstream(
 
 
 def _led(G: nx.MultiDiGraph, p: str, s: Symptoms, views: Mapping[str, NodeView], onset: float,
-         tolerance: float, parents: dict[str, list[str]]) -> bool:
+         settings: RcaSettings, parents: dict[str, list[str]]) -> bool:
     """True when ``p``'s symptom (a topic without one: a publisher's) began before ``onset`` by more
-    than ``tolerance`` and still held at ``onset``: it led, and was no coincidence of sampling."""
+    than ``tolerance``, at most ``led_max``, and still held at ``onset``: it led, and was no
+    coincidence of sampling nor a standing condition (a warning held for minutes)."""
+    tolerance = settings.tolerance
+
     def led(first: float, spans: list[Episode]) -> bool:
-        return first < onset - tolerance and overlaps(spans, onset - tolerance, onset + tolerance)
+        return (onset - settings.led_max <= first < onset - tolerance
+                and overlaps(spans, onset - tolerance, onset + tolerance))
     if not np.isfinite(onset):
         return False
     if p in s.onset:
