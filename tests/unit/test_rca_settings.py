@@ -26,7 +26,7 @@ def test_roundtrip_through_asdict():
     ("d", "message"),
     [
         ({"polcy": "both"}, "[rca] unknown key 'polcy' (known: charge, direct_plugins, episode_gap, "
-                            "icp_iterations, incident_hops, incident_lead, max_offset, max_trajectory, "
+                            "icp_iterations, incident_hops, incident_lead, led_max, max_offset, max_trajectory, "
                             "method, metric, pagerank_alpha, policy, replay, severity, shortlist, tolerance, "
                             "top_k, weights, window)"),
         ({"policy": "sideways"}, '[rca] policy = "sideways": expected one of downstream, upstream, both'),
@@ -43,6 +43,7 @@ def test_roundtrip_through_asdict():
          "[rca.severity] unknown key 'critical' (known: error, fatal, info, warn)"),
         ({"top_k": 0}, "[rca] top_k = 0: expected an integer >= 1"),
         ({"episode_gap": 0}, "[rca] episode_gap = 0: expected a number > 0"),
+        ({"led_max": -1}, "[rca] led_max = -1: expected a number > 0"),
         ({"incident_hops": 0}, "[rca] incident_hops = 0: expected an integer >= 1"),
         ({"top_k": True}, "[rca] top_k = true: expected an integer >= 1"),
         ({"tolerance": "2s"}, '[rca] tolerance = "2s": expected a number > 0'),
