@@ -26,9 +26,9 @@ def test_roundtrip_through_asdict():
     ("d", "message"),
     [
         ({"polcy": "both"}, "[rca] unknown key 'polcy' (known: charge, direct_plugins, episode_gap, "
-                            "icp_iterations, incident_hops, incident_lead, led_max, max_offset, max_trajectory, "
-                            "method, metric, pagerank_alpha, policy, replay, severity, shortlist, tolerance, "
-                            "top_k, weights, window)"),
+                            "icp_iterations, incident_hops, incident_lead, led_max, max_offset, "
+                            "max_trajectory, method, metric, pagerank_alpha, policy, replay, severity, "
+                            "shortlist, tolerance, top_k, weights, window)"),
         ({"policy": "sideways"}, '[rca] policy = "sideways": expected one of downstream, upstream, both'),
         ({"method": "magic"},
          '[rca] method = "magic": expected one of trajectory, pagerank, hypothesis, count'),
