@@ -22,7 +22,12 @@ The agents join the domain before the processes: on a LOCALHOST domain, a partic
 joins after some 30 others found only 31-32 of 100 (it is announced only to the ports of the
 participant ids the others probe), and one that joined first found 96-100. One ROS domain holds
 about 120 participants per computer before its ports run into the next domain's (Fast DDS's port
-mapping: ROS 2's documentation on ROS_DOMAIN_ID).
+mapping: ROS 2's documentation on ROS_DOMAIN_ID). ``--lab`` runs the whole benchmark in one
+computer of a `stream_viz.testing_hosts.Lab` (network, PID and mount namespaces of its own),
+where discovery goes over its subnet by multicast, heard by every participant however late it
+joins: there 200 processes can be measured, and no traffic leaves the namespaces.
+
+    .venv/bin/python bench/bench_agent.py --lab --processes 10 50 200
 """
 
 from __future__ import annotations
@@ -32,12 +37,16 @@ import os
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
+from collections.abc import Callable
+from pathlib import Path
 
 import psutil
 
 from stream_viz.collect.agent import Agent
 from stream_viz.testing import claim_domain, ros_env, shm_clean
+from stream_viz.testing_hosts import Lab, lab_env, why_not
 
 CHILD = ("import sys, rclpy\n"
          "rclpy.init()\n"
@@ -79,9 +88,10 @@ def _mapped(agent: Agent, n: int, timeout: float = 180.0, steady: float = 40.0) 
     return best
 
 
-def measure(n: int, seconds: float, period: float, settle: float) -> dict[str, float]:
+def measure(n: int, seconds: float, period: float, settle: float,
+            env_of: Callable[[int], dict[str, str]] = ros_env) -> dict[str, float]:
     domain = claim_domain()
-    env = ros_env(domain)
+    env = env_of(domain)
     os.environ.update(env)
     kids: list[subprocess.Popen] = []
     try:
@@ -121,12 +131,12 @@ def _commit(src: str) -> str:
     return (run.stdout.strip() or "?") + ("+changes" if dirty else "")
 
 
-def side_by_side(n: int, sources: list[str], seconds: float, period: float,
-                 settle: float) -> list[dict[str, float | str]]:
+def side_by_side(n: int, sources: list[str], seconds: float, period: float, settle: float,
+                 env_of: Callable[[int], dict[str, str]] = ros_env) -> list[dict[str, float | str]]:
     """The CPU (% of a core, all threads) of one `stream-viz agent` per source tree, all run at
     once on the same ``n`` processes and read over the same window."""
     domain = claim_domain()
-    env = ros_env(domain)
+    env = env_of(domain)
     os.environ.update(env)
     agents, kids = [], []
     try:
@@ -160,6 +170,23 @@ def side_by_side(n: int, sources: list[str], seconds: float, period: float,
              "ran": ok} for src, u, ok in zip(sources, used, alive, strict=True)]
 
 
+def in_lab(argv: list[str]) -> int:
+    """Run this benchmark with ``argv`` (and ``--subnet``) inside one computer of a `Lab`; print
+    what it printed."""
+    reason = why_not()
+    if reason is not None:
+        print(f"no lab here: {reason}", file=sys.stderr)
+        return 2
+    work = Path(tempfile.mkdtemp(prefix="bench_agent_lab_"))
+    with Lab(work) as lab:
+        host = lab.add("robot")
+        log = work / "bench.log"
+        p = host.run([sys.executable, os.path.abspath(__file__), *argv, "--subnet"], os.environ.copy(), log)
+        code = p.wait()
+    print(log.read_text(), end="")
+    return code
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--processes", type=int, nargs="+", default=[10, 50, 100])
@@ -168,14 +195,21 @@ def main() -> None:
     ap.add_argument("--settle", type=float, default=15.0, help="seconds after discovery, unmeasured")
     ap.add_argument("--side-by-side", nargs="+", metavar="SRC",
                     help="source trees whose agents run at once on the same processes")
+    ap.add_argument("--lab", action="store_true",
+                    help="run in a computer of its own (network, PID and mount namespaces), "
+                         "discovery over its subnet: room for 200 processes")
+    ap.add_argument("--subnet", action="store_true", help=argparse.SUPPRESS)  # set inside the lab
     a = ap.parse_args()
+    if a.lab:
+        sys.exit(in_lab([x for x in sys.argv[1:] if x != "--lab"]))
+    env_of = lab_env if a.subnet else ros_env
     if a.side_by_side:
         cols = ("ROS processes", "mapped", "source", "commit", "agent CPU, all threads (% of a core)",
                 "ratio to the first", "ran throughout")
         print("| " + " | ".join(cols) + " |")
         print("|" + "---|" * len(cols))
         for n in a.processes:
-            for r in side_by_side(n, a.side_by_side, a.seconds, a.period, a.settle):
+            for r in side_by_side(n, a.side_by_side, a.seconds, a.period, a.settle, env_of):
                 row = (r["processes"], r["mapped"], r["source"], r["commit"], f"{r['cpu_percent']:.2f}",
                        f"{r['ratio']:.2f}", "yes" if r["ran"] else "no")
                 print("| " + " | ".join(map(str, row)) + " |", flush=True)
@@ -186,7 +220,7 @@ def main() -> None:
     print("| " + " | ".join(cols) + " |")
     print("|" + "---|" * len(cols))
     for n in a.processes:
-        r = measure(n, a.seconds, a.period, a.settle)
+        r = measure(n, a.seconds, a.period, a.settle, env_of)
         row = (r["processes"], r["mapped"], r["tracked"], f"{r['cpu_percent']:.2f}",
                f"{r['step_percent']:.2f}", f"{r['bytes_per_s']:.0f}", f"{r['report_bytes']:.0f}")
         print("| " + " | ".join(map(str, row)) + " |", flush=True)
