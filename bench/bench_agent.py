@@ -39,14 +39,18 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import psutil
 
-from stream_viz.collect.agent import Agent
-from stream_viz.testing import claim_domain, ros_env, shm_clean
-from stream_viz.testing_hosts import Lab, lab_env, why_not
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # run as a script too: `bench.eval` is a package of the repository
+
+from bench.eval.provenance import code_version  # noqa: E402
+from stream_viz.collect.agent import Agent  # noqa: E402
+from stream_viz.testing import claim_domain, ros_env, shm_clean  # noqa: E402
+from stream_viz.testing_hosts import Lab, lab_env, why_not  # noqa: E402
 
 CHILD = ("import sys, rclpy\n"
          "rclpy.init()\n"
@@ -125,10 +129,8 @@ AGENT = "import sys; from stream_viz.cli import main; sys.exit(main(sys.argv[1:]
 
 
 def _commit(src: str) -> str:
-    run = subprocess.run(["git", "-C", src, "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
-    dirty = subprocess.run(["git", "-C", src, "status", "--porcelain", "--untracked-files=no"],
-                           capture_output=True, text=True).stdout.strip()
-    return (run.stdout.strip() or "?") + ("+changes" if dirty else "")
+    v = code_version(Path(src).resolve())
+    return (v["commit"] or "?")[:7] + ("+changes" if v["dirty"] else "")
 
 
 def side_by_side(n: int, sources: list[str], seconds: float, period: float, settle: float,
@@ -187,6 +189,14 @@ def in_lab(argv: list[str]) -> int:
     return code
 
 
+def _table(cols: tuple[str, ...], rows: Iterable[tuple]) -> None:
+    """A Markdown table, each row printed as it is measured."""
+    print("| " + " | ".join(cols) + " |")
+    print("|" + "---|" * len(cols))
+    for row in rows:
+        print("| " + " | ".join(map(str, row)) + " |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--processes", type=int, nargs="+", default=[10, 50, 100])
@@ -206,25 +216,17 @@ def main() -> None:
     if a.side_by_side:
         cols = ("ROS processes", "mapped", "source", "commit", "agent CPU, all threads (% of a core)",
                 "ratio to the first", "ran throughout")
-        print("| " + " | ".join(cols) + " |")
-        print("|" + "---|" * len(cols))
-        for n in a.processes:
-            for r in side_by_side(n, a.side_by_side, a.seconds, a.period, a.settle, env_of):
-                row = (r["processes"], r["mapped"], r["source"], r["commit"], f"{r['cpu_percent']:.2f}",
+        _table(cols, ((r["processes"], r["mapped"], r["source"], r["commit"], f"{r['cpu_percent']:.2f}",
                        f"{r['ratio']:.2f}", "yes" if r["ran"] else "no")
-                print("| " + " | ".join(map(str, row)) + " |", flush=True)
+                      for n in a.processes
+                      for r in side_by_side(n, a.side_by_side, a.seconds, a.period, a.settle, env_of)))
         return
     cols = ("ROS processes", "mapped by the agent", "processes in the report (with ancestors)",
             "agent CPU, all threads (% of a core)", "of which the sample-and-publish step",
             "bytes/s published", "report (bytes)")
-    print("| " + " | ".join(cols) + " |")
-    print("|" + "---|" * len(cols))
-    for n in a.processes:
-        r = measure(n, a.seconds, a.period, a.settle, env_of)
-        row = (r["processes"], r["mapped"], r["tracked"], f"{r['cpu_percent']:.2f}",
-               f"{r['step_percent']:.2f}", f"{r['bytes_per_s']:.0f}", f"{r['report_bytes']:.0f}")
-        print("| " + " | ".join(map(str, row)) + " |", flush=True)
-
+    _table(cols, ((r["processes"], r["mapped"], r["tracked"], f"{r['cpu_percent']:.2f}",
+                   f"{r['step_percent']:.2f}", f"{r['bytes_per_s']:.0f}", f"{r['report_bytes']:.0f}")
+                  for r in (measure(n, a.seconds, a.period, a.settle, env_of) for n in a.processes)))
 
 if __name__ == "__main__":
     main()
