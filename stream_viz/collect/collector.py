@@ -36,6 +36,7 @@ from stream_viz.collect.readings import GraphReading, PidInfo, ProcessReading, T
 from stream_viz.collect.rosgraph import GidCache, QosCache, StructureCache, read_graph
 from stream_viz.collect.services import ServiceCalls, ServiceStats, party
 from stream_viz.collect.topics import DIAGNOSTICS, TopicMonitor, log_event
+from stream_viz.collect.undiscovered import UndiscoveredWatch, explain
 from stream_viz.errors import CollectError
 from stream_viz.model.diff import diff
 from stream_viz.model.graph import new_graph
@@ -154,6 +155,7 @@ class Collector:
         self.diagnostics = DiagnosticsReader()
         self.goals = GoalTracker()
         self.calls = ServiceCalls(window_s=window_s)
+        self.undiscovered = UndiscoveredWatch(domain_id)
         self._prev = new_graph()
         self._prev_pids: dict[str, int | None] = {}
         self._left: dict[str, float] = {}  # node fqn → when it left the graph
@@ -249,6 +251,7 @@ class Collector:
         self._prev, self._prev_pids = G, node_pids
         live = {p.prefix for p in pids.values() if p.prefix}
         self.resolver.forget(live)
+        self.undiscovered.update(self._participant_gids, self.resolver.own_host, t)
         return Sample(t, G, events, d, unreadable)
 
     def _process_events(self, t: float, exited: dict[int, ProcessReading],
@@ -376,12 +379,22 @@ class Collector:
                 for waited, cg, sg in st.open_calls[:10]]
         return stats, calls
 
+    def _participant_gids(self) -> list[bytes]:
+        # Every node, hidden ones too, publishes /rosout or /parameter_events; an observer like
+        # ours has neither but subscribes to /rosout.
+        eps = [*self.node.get_publishers_info_by_topic("/rosout"),
+               *self.node.get_publishers_info_by_topic("/parameter_events"),
+               *self.node.get_subscriptions_info_by_topic("/rosout")]
+        return [bytes(e.endpoint_gid) for e in eps]
+
     def limits(self) -> dict[str, str]:
         """What this collector cannot do on this system, and why (empty when it does it all).
 
         Each is a fallback the samples go on with: the graph read in full every sample (no graph
         change signal), topics taken through rclpy without their publishers' gids (a topic's
-        rate and age are not split per publisher, so all its publishers share its symptoms).
+        rate and age are not split per publisher, so all its publishers share its symptoms). And
+        each local process on our domain that was never discovered (`collect.undiscovered`): its
+        nodes are missing from the model.
         """
         out: dict[str, str] = {}
         signal = self.structure.signal
@@ -394,6 +407,9 @@ class Collector:
         if rcl is not None and not rcl.available:
             out["publisher gids"] = (f"{rcl.why}; a topic's rate and message age are not split per "
                                      "publisher")
+        for p in self.undiscovered.found:
+            out[f"discovery of process {p.pid}"] = explain(p, self.domain_id, os.environ,
+                                                           self.undiscovered.grace_s)
         return out
 
     def close(self) -> None:

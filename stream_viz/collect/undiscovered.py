@@ -1,0 +1,154 @@
+"""Processes on this computer that take part in our ROS domain but were never discovered.
+
+A node the observer does not discover is missing from the model without a trace: no alert can
+name it. That happens on a LOCALHOST domain crowded enough that a late joiner finds only part of
+it (docs/robustness.md, *Notes*), with a discovery range or discovery server the observer does
+not share, or with a firewall. So every ``every_s`` the collector lists this computer's processes
+that have Fast DDS loaded and our ``ROS_DOMAIN_ID`` in their environment, and names those of them
+whose PID no discovered participant's GUID prefix carries (`collect.pidmap`: the prefix holds the
+low 16 bits of the PID the process sees itself as).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+
+import psutil
+
+from stream_viz.collect.fastdds import decode_gid
+from stream_viz.collect.pidmap import inner_pid
+
+# The Fast DDS libraries themselves: loaded when rclpy.init() loads rmw_fastrtps, not on import.
+PARTICIPANT_MARKERS = (b"libfastrtps", b"libfastdds")
+RANGE_VARS = ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOCALHOST_ONLY", "ROS_STATIC_PEERS",
+              "ROS_DISCOVERY_SERVER")
+
+
+@dataclass(frozen=True)
+class Participant:
+    """A local process with Fast DDS loaded on our domain: our PID, its own, its name, its start,
+    and the discovery settings of its environment (``RANGE_VARS`` that are set)."""
+
+    pid: int
+    inner: int
+    name: str
+    started: float
+    discovery: tuple[tuple[str, str], ...] = ()
+
+
+def discovered_low16(gids: Iterable[bytes], own_host: int | None) -> set[int]:
+    """Return the PID bits of every participant of this computer among endpoint ``gids``.
+
+    Parameters
+    ----------
+    gids : iterable of bytes
+        Endpoint gids read from the graph (other vendors' are skipped).
+    own_host : int or None
+        This computer's Fast DDS host id; None keeps every Fast DDS gid.
+    """
+    out = set()
+    for g in gids:
+        info = decode_gid(g)
+        if info is not None and (own_host is None or info.host_id == own_host):
+            out.add(info.pid_low16)
+    return out
+
+
+def undiscovered(participants: Iterable[Participant], low16: set[int], now: float,
+                 grace_s: float) -> list[Participant]:
+    """Return the ``participants`` older than ``grace_s`` whose PID bits are not in ``low16``."""
+    return sorted((p for p in participants if p.inner & 0xFFFF not in low16 and now - p.started >= grace_s),
+                  key=lambda p: p.pid)
+
+
+def explain(p: Participant, domain_id: int, ours: Mapping[str, str], grace_s: float) -> str:
+    """Say why ``p`` may be unseen and what to do, from its discovery settings and ``ours``."""
+    text = (f"process {p.pid} ({p.name}) has Fast DDS loaded with ROS_DOMAIN_ID={domain_id}, but no "
+            f"participant of it was discovered in {grace_s:.0f} s: its nodes are not in the model")
+    theirs = dict(p.discovery)
+    differ = sorted(k for k in RANGE_VARS if theirs.get(k, "") != ours.get(k, ""))
+    if differ:
+        return text + "; its discovery settings differ from the monitor's: " + ", ".join(
+            f"{k}={theirs.get(k, '(unset)')} (monitor: {ours.get(k, '(unset)')})" for k in differ)
+    if theirs.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "").upper() == "LOCALHOST":
+        return text + ("; on a LOCALHOST domain a participant that joins after some 30 others may "
+                       "not discover them all: start the monitor before the robot, or use SUBNET")
+    return text
+
+
+class UndiscoveredWatch:
+    """Every ``every_s``, the local participants of ``domain_id`` that were never discovered.
+
+    A process discovered once is not named again: its nodes leaving the graph while it runs (a
+    stopped process's lease ending) is a symptom the model shows, not a blind spot.
+
+    A process's environment is read once while it lives; its memory maps until Fast DDS shows in
+    them or it is older than ``grace_s`` (rclpy loads Fast DDS at ``init``, not on import).
+    """
+
+    def __init__(self, domain_id: int, every_s: float = 10.0, grace_s: float = 10.0) -> None:
+        self.domain_id, self.every_s, self.grace_s = domain_id, every_s, grace_s
+        self._own = os.getpid()
+        self._known: dict[int, Participant | float | None] = {}  # None: not one; float: look again after
+        self._due = 0.0
+        self.found: list[Participant] = []
+        self._ever: set[int] = set()  # pids discovered once: their leaving is the model's to show
+
+    def update(self, read_gids: Callable[[], Iterable[bytes]], own_host: int | None,
+               now: float | None = None) -> list[Participant]:
+        """Return the local participants not discovered, looked for again when due (else the last).
+
+        ``read_gids`` returns the gids of endpoints every participant has (called only when due).
+        """
+        now = time.time() if now is None else now
+        if now < self._due:
+            return self.found
+        self._due = now + self.every_s
+        live = set(psutil.pids()) - {self._own}
+        known = self._known
+        self._known = {p: self._read(p, now) if p not in known or _again(known[p], now) else known[p]
+                       for p in live}
+        found = [p for p in self._known.values() if isinstance(p, Participant)]
+        try:
+            low16 = discovered_low16(read_gids(), own_host) if found else set()
+        except Exception:  # the graph unreadable now (rclpy shutting down): say nothing new
+            return self.found
+        self._ever = {p.pid for p in found if p.inner & 0xFFFF in low16} | (self._ever & live)
+        self.found = [p for p in undiscovered(found, low16, now, self.grace_s)
+                      if p.pid not in self._ever and _in_dds(p.pid)]
+        return self.found
+
+    def _read(self, pid: int, now: float) -> Participant | float | None:
+        try:
+            with open(f"/proc/{pid}/environ", "rb") as f:
+                env = dict(kv.split(b"=", 1) for kv in f.read().split(b"\0") if b"=" in kv)
+            if int(env.get(b"ROS_DOMAIN_ID", b"0").strip() or 0) != self.domain_id:
+                return None
+            proc = psutil.Process(pid)
+            started = proc.create_time()
+            with open(f"/proc/{pid}/maps", "rb") as f:
+                maps = f.read()
+            if not any(m in maps for m in PARTICIPANT_MARKERS):
+                return None if now - started >= self.grace_s else now + self.every_s
+            discovery = tuple((k, env[k.encode()].decode(errors="replace")) for k in RANGE_VARS
+                              if k.encode() in env)
+            return Participant(pid, inner_pid(pid), proc.name(), started, discovery)
+        except (OSError, ValueError, psutil.Error):  # gone, not ours to read, or a malformed value
+            return None
+
+
+def _in_dds(pid: int) -> bool:
+    """True while ``pid`` runs with a UDP socket open: a participant always has one (discovery
+    traffic), an exited process (a zombie) or one after ``rclpy.shutdown()`` has none."""
+    try:
+        proc = psutil.Process(pid)
+        return proc.status() != psutil.STATUS_ZOMBIE and bool(proc.net_connections(kind="udp"))
+    except (psutil.Error, OSError):
+        return False
+
+
+def _again(entry: Participant | float | None, now: float) -> bool:
+    return isinstance(entry, float) and now >= entry
