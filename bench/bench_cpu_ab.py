@@ -21,6 +21,8 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from bench.eval.provenance import short_version  # noqa: E402
 
 
 def run_once(code_root: Path, seconds: float, out: Path, fault: str | None, robot: str) -> dict:
@@ -48,10 +50,8 @@ def main(argv: list[str] | None = None) -> int:
     if not (base / "stream_viz/testing.py").exists():
         shutil.copy(ROOT / "stream_viz/testing.py", base / "stream_viz/testing.py")
     try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                             text=True).stdout.strip()
         print(f"monitor CPU on the {args.robot} robot, % of one core over {args.seconds:.0f} s, fault "
-              f"{args.fault or 'none'}: {args.base} vs this tree ({rev}{'+changes' if _dirty() else ''})")
+              f"{args.fault or 'none'}: {args.base} vs this tree ({short_version(ROOT)})")
         print(f"{'round':>5s} {'base':>7s} {'this':>7s} {'ratio':>6s}   {'base main/native':>17s} "
               f"{'this main/native':>17s}  load")
         ratios = []
@@ -71,11 +71,6 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         subprocess.run(["git", "worktree", "remove", "--force", str(base)], cwd=ROOT, capture_output=True)
     return 0
-
-
-def _dirty() -> bool:
-    return bool(subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=ROOT,
-                               capture_output=True, text=True).stdout.strip())
 
 
 if __name__ == "__main__":

@@ -24,7 +24,6 @@ import argparse
 import os
 import platform
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -172,15 +171,11 @@ def diagnose_at(run: dict, alerts: int = 1000) -> str:
 
 
 def commit() -> str:
-    here = Path(__file__).resolve().parent
-    try:
-        rev = subprocess.run(["git", "-C", str(here), "rev-parse", "--short", "HEAD"], capture_output=True,
-                             text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(here), "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, check=True).stdout.strip()
-        return rev + ("-dirty" if dirty else "")
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
+    """This tree's short commit, ``-dirty`` with uncommitted changes (`provenance.short_version`)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from bench.eval.provenance import short_version
+
+    return short_version()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -27,6 +27,15 @@ def code_version(root: Path = ROOT) -> dict:
     return {"commit": commit, "dirty": bool(status) if status is not None else None}
 
 
+def short_version(root: Path = ROOT) -> str:
+    """``code_version`` as a label: the short commit, ``-dirty`` with uncommitted changes to
+    tracked files, ``unknown`` outside git."""
+    v = code_version(root)
+    if not v["commit"]:
+        return "unknown"
+    return v["commit"][:7] + ("-dirty" if v["dirty"] else "")
+
+
 def machine() -> dict:
     """Cores, CPU model, RAM, OS and Python of this machine."""
     model = platform.processor() or None
