@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import statistics
 import subprocess
 import sys
@@ -180,6 +181,8 @@ def in_lab(argv: list[str]) -> int:
         print(f"no lab here: {reason}", file=sys.stderr)
         return 2
     work = Path(tempfile.mkdtemp(prefix="bench_agent_lab_"))
+    # SIGTERM (timeout, a CI) ends it as Ctrl-C does: the lab's processes go with it.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(128 + signal.SIGTERM))
     with Lab(work) as lab:
         host = lab.add("robot")
         log = work / "bench.log"
