@@ -220,7 +220,8 @@ class Monitor:
 
         def write() -> None:
             report.update(build_report(self.seen, self.store.alerts(), self.engine.result().to_report(),
-                                       self.started_at, ended_at, self.injected, self.store.problems()))
+                                       self.started_at, ended_at, self.injected, self.store.problems(),
+                                       self._limits))
             if self.report_path:
                 write_report(self.report_path, report)
 

@@ -27,6 +27,7 @@ def build_report(
     ended_at: float,
     injected: Mapping[str, Any] | None = None,
     problems: Iterable[Mapping[str, Any]] = (),
+    limits: Mapping[str, str] | None = None,
 ) -> dict[str, Any]:
     """Return the report dict for the model ``G``, the alerts and the RCA's ``to_report()`` output.
 
@@ -46,6 +47,9 @@ def build_report(
     problems : iterable of mapping, optional
         The store's problems (`AlertStore.problems`); the plugins' go in the report, so a reader
         knows when a plugin failed or was disabled and its symptoms could not be seen.
+    limits : mapping, optional
+        What the collector could not do or see, and why (`Collector.limits`: a fallback, a
+        local process never discovered); absent from the report when empty.
     """
     members = []
     for m, attrs in sorted(G.nodes(data=True)):
@@ -84,6 +88,8 @@ def build_report(
     }
     if injected:
         report["injected"] = dict(injected)
+    if limits:
+        report["collector_limits"] = dict(limits)
     return report
 
 

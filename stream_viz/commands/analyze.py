@@ -33,9 +33,9 @@ def run(args: argparse.Namespace) -> int:
         check_writable(args.report, "report")
     if args.save:
         check_writable(args.save, "recording")
-    G, alerts, watch, started, ended, injected, problems = read_run(args.db)
+    G, alerts, watch, started, ended, injected, problems, limits = read_run(args.db)
     result = analyze(G, alerts, settings, set(watch) if watch else None)
-    report = build_report(G, alerts, result.to_report(), started, ended, injected, problems)
+    report = build_report(G, alerts, result.to_report(), started, ended, injected, problems, limits)
     for rank, rc in enumerate(report["root_causes"][:10], 1):
         print(f"{rank}. {rc['member']}  score {rc['score']:.2f}  trajectory: {' <- '.join(rc['trajectory'])}")
     if args.report:
@@ -63,8 +63,9 @@ def _rca_settings(args: argparse.Namespace) -> Any:
     return settings
 
 
-def read_run(db: Path) -> tuple[Any, list[Any], Any, float, float, Any, list[dict[str, Any]]]:
-    """The model, alerts, saved watchlist, start, end, injected fault and problems of the run in ``db``."""
+def read_run(db: Path) -> tuple[Any, list[Any], Any, float, float, Any, list[dict[str, Any]], dict[str, str]]:
+    """The model, alerts, saved watchlist, start, end, injected fault, problems and collector limits
+    of the run in ``db``."""
     from stream_viz.detect.store import AlertStore
     from stream_viz.errors import StoreError
 
@@ -77,10 +78,11 @@ def read_run(db: Path) -> tuple[Any, list[Any], Any, float, float, Any, list[dic
         ended = store.get_meta("ended_at") or (alerts[-1].t if alerts else started)
         injected = store.get_meta("injected")
         problems = store.problems()
+        limits = store.get_meta("collector_limits") or {}
     finally:
         store.close()
     if G is None:
         raise StoreError(f"{db}: holds no model snapshot (was it written by stream-viz monitor?)")
     if not alerts:
         raise StoreError(f"{db}: holds no alerts, nothing to analyse")
-    return G, alerts, watch, started, ended, injected, problems
+    return G, alerts, watch, started, ended, injected, problems, limits

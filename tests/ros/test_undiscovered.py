@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import sys
+import threading
 
 import pytest
 
@@ -35,3 +37,36 @@ def test_a_participant_with_discovery_off_is_named_and_a_discovered_one_is_not(r
         assert "ROS_AUTOMATIC_DISCOVERY_RANGE=OFF (monitor: LOCALHOST)" in text
         assert "node:/hidden_talker" not in col.sample().graph
         assert seen.poll() is None and hidden.poll() is None and done.poll() is None
+
+
+def test_the_monitor_says_it_and_keeps_it_in_its_database_and_report(ros_domain, children, tmp_path):
+    from stream_viz.config import load_config
+    from stream_viz.detect.store import AlertStore
+    from stream_viz.monitor import Monitor
+    from stream_viz.progress import Progress
+
+    said = []
+
+    class Said(Progress):
+        def say(self, text: str) -> None:
+            said.append(text)
+
+    env = {**ros_env(ros_domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"}
+    code = TALKER.replace('"talker"', '"off_talker"').replace('"listener"', '"off_listener"')
+    hidden = children.run([sys.executable, "-c", code], name="off", env=env)
+    children.python(TALKER, name="seen")
+    mon = Monitor(load_config(None), db=tmp_path / "a.sqlite", report=tmp_path / "r.json", viewer="none",
+                  domain_id=ros_domain, progress=Said())
+    try:
+        mon.run(23.0, threading.Event())  # the watch looks every 10 s at processes 10 s old
+    finally:
+        report = mon.close()
+    key = f"discovery of process {hidden.pid}"
+    assert [t for t in said if t.startswith(f"collector: no {key}: ")] != []
+    assert key in report["collector_limits"]
+    assert key in json.loads((tmp_path / "r.json").read_text())["collector_limits"]
+    store = AlertStore(tmp_path / "a.sqlite", readonly=True)
+    try:
+        assert key in store.get_meta("collector_limits")
+    finally:
+        store.close()

@@ -170,3 +170,15 @@ def test_nodes_that_cannot_be_told_apart_are_named_in_the_report(G):
     VALIDATOR.validate(json.loads(json.dumps(rep)))
     ev = {rc["member"]: rc["evidence"] for rc in rep["root_causes"]}
     assert ev[CAM]["process"] == "process:7" and ev[CAM]["indistinguishable_from"] == ["node:/cam2"]
+
+
+def test_a_report_carries_the_collectors_limits_only_when_there_are_some(G):
+    result = analyze(G, [], RcaSettings(), None).to_report()
+    limits = {"discovery of process 4242": "process 4242 (cam) has Fast DDS loaded …"}
+    rep = build_report(G, [], result, 90.0, 91.0, None, (), limits)
+    VALIDATOR.validate(json.loads(json.dumps(rep)))
+    assert rep["collector_limits"] == limits
+    assert "collector_limits" not in build_report(G, [], result, 90.0, 91.0, None, (), {})
+    rep["collector_limits"] = {"x": 1}
+    with pytest.raises(jsonschema.ValidationError):
+        VALIDATOR.validate(rep)
