@@ -83,7 +83,8 @@ def build_model(
         info = pids.get(fqn, PidInfo(None, "unknown"))
         proc = processes.get(info.pid) if info.pid is not None else None
         attrs = {"name": nr.name, "namespace": nr.namespace, "pid": info.pid, "pid_status": info.status,
-                 "alive": proc.alive if proc is not None else True, "instances": nr.instances}
+                 "alive": proc.alive if proc is not None else True,
+                 "instances": instances(nr.instances, reading.participants.get(fqn, 0))}
         if info.status == "ambiguous":
             attrs["pid_candidates"] = list(info.candidates)
         add_member(G, make_id("node", fqn), **attrs)
@@ -100,6 +101,24 @@ def build_model(
         G.nodes[make_id("node", fqn)]["theta"] = make_theta("node", c)
     _add_process_tree(G, reading, pids, processes)
     return G
+
+
+def instances(listed: int, participants: int) -> int:
+    """How many nodes share a name: those DDS lists, but no more than the participants that
+    publish its /rosout or /parameter_events when any do.
+
+    A participant that ended can leave its node names in the graph cache without any endpoint
+    (its last discovery-info sample arriving after its removal: a "ghost" that stays until the
+    observer restarts); the node restarted under that name then lists twice, one process.
+
+    Parameters
+    ----------
+    listed : int
+        The name's entries in the node listing.
+    participants : int
+        Distinct GUID prefixes among its /rosout and /parameter_events publishers (0: unknown).
+    """
+    return min(listed, participants) if participants else listed
 
 
 def publisher_rates(by_gid: dict[bytes, float], gid_nodes: dict[bytes, str]) -> dict[str, float]:

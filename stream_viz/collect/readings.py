@@ -44,6 +44,7 @@ class GraphReading:
     publishers: dict[str, list[Endpoint]] = field(default_factory=dict)  # topic -> endpoints
     subscribers: dict[str, list[Endpoint]] = field(default_factory=dict)
     rosout_gids: dict[str, bytes] = field(default_factory=dict)  # node fqn -> gid of its /rosout pub
+    participants: dict[str, int] = field(default_factory=dict)  # node fqn -> participants with its /rosout
     publisher_gids: dict[str, dict[bytes, str]] = field(default_factory=dict)  # topic -> gid -> node
     service_events: dict[str, str] = field(default_factory=dict)  # service -> its event topic's type
     goal_status: dict[str, list[str]] = field(default_factory=dict)  # action status topic -> servers

@@ -168,6 +168,7 @@ class GidCache:
         self.every_s, self.settle_s = every_s, settle_s
         self.reads = 0  # calls to the graph API so far (for tests and benchmarks)
         self._gids: dict[str, bytes] = {}
+        self._prefixes: dict[str, set[bytes]] = {}  # node → GUID prefixes of its participants
         self._names: frozenset[str] = frozenset()
         self._read_at: float | None = None
         self._changed_at = 0.0
@@ -184,15 +185,20 @@ class GidCache:
         missing = not names <= self._gids.keys()
         if (self._read_at is None or now - self._read_at >= self.every_s
                 or (missing and now - self._changed_at < self.settle_s)):
-            self._gids = {}
+            self._gids, self._prefixes = {}, {}
             for topic in ("/rosout", "/parameter_events"):
                 for ep in _endpoints(node.get_publishers_info_by_topic(topic), topic, nodes):
                     self._gids.setdefault(ep.node, ep.gid)
+                    self._prefixes.setdefault(ep.node, set()).add(ep.gid[:12])
                 self.reads += 1
                 if names <= self._gids.keys():
                     break
             self._read_at = now
         return {n: g for n, g in self._gids.items() if n in names}
+
+    def participants(self) -> dict[str, int]:
+        """Node → how many participants publish its /rosout (or /parameter_events), as last read."""
+        return {n: len(p) for n, p in self._prefixes.items()}
 
 
 @dataclass
@@ -335,6 +341,7 @@ def read_graph(node: Node, *, own: str, include_hidden: bool = False,
         r.publisher_gids[topic] = qos.publisher_gids(topic)
     qos.forget(set(r.topics))
     r.rosout_gids = gids.get(node, r.nodes, time.monotonic())
+    r.participants = gids.participants()
     r.qos_version = qos.version
     return r
 

@@ -476,3 +476,12 @@ def test_with_a_discovery_server_the_observer_is_a_super_client_unless_told_not(
     assert not observe_as_super_client(env) and env["ROS_SUPER_CLIENT"] == "False"  # the user's
     env = {"ROS_DISCOVERY_SERVER": " ", "ROS_SUPER_CLIENT": "False"}
     assert observe_as_super_client(env)  # set but empty: no server
+
+
+def test_instances_are_the_listed_names_no_more_than_their_participants():
+    from stream_viz.collect.build import instances
+
+    assert instances(2, 1) == 1  # a ghost entry beside the node restarted under its name
+    assert instances(2, 2) == 2  # two live processes, one name
+    assert instances(2, 0) == 2  # no /rosout nor /parameter_events gid known: the listing
+    assert instances(1, 0) == 1
