@@ -11,6 +11,7 @@ from stream_viz.records import SEVERITY_RANK as RANK
 from stream_viz.records import Alert
 
 STAMP_SLACK_S = 1.0  # s a line may be stamped before the last call and still be on this clock
+WAIT_S = 5.0  # longest a line waits for its node to be discovered (its bring-up judged then)
 
 
 class Rosout(Plugin):
@@ -18,7 +19,9 @@ class Rosout(Plugin):
     the first line. Alerts whether or not the member is watched unless ``watched_only``.
 
     Lines a node logs in its process's first ``startup_s`` are its bring-up (waiting for a peer
-    that is not up yet): no alert; a later alert of the node counts them.
+    that is not up yet): no alert; a later alert of the node counts them. A line can come before
+    its node is discovered (a node that complains as it starts): a line of a node never in the
+    model waits until it is, at most ``WAIT_S``, so its process's start is known when judged.
     """
 
     name = "rosout"
@@ -30,10 +33,18 @@ class Rosout(Plugin):
         s = ctx.settings
         floor = RANK.get(s["min_level"], RANK["error"])
         seen: dict[str, list] = {}
-        for e in ctx.events:
-            if e.kind != "log" or RANK.get(e.level, -1) < floor:
+        known = ctx.state.setdefault("known", set())  # nodes in the model at some time
+        known.update(m for m in ctx.diff.added_members if m.startswith("node:"))
+        waiting = ctx.state.get("waiting", [])  # (when first seen, line) of nodes not discovered yet
+        ctx.state["waiting"] = []
+        lines = [*waiting, *((ctx.t, e) for e in ctx.events if e.kind == "log")]
+        for at, e in lines:
+            if RANK.get(e.level, -1) < floor:
                 continue
             if s["watched_only"] and e.member not in ctx.watch:
+                continue
+            if e.member not in known and ctx.t - at < WAIT_S:
+                ctx.state["waiting"].append((at, e))
                 continue
             if starting(ctx, e.member, e.t, s["startup_s"]):
                 hold_back(ctx, e.member)

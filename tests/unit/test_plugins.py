@@ -1560,6 +1560,23 @@ def test_rosout_lines_of_a_nodes_bring_up_are_counted_not_alerted():
         (float(t), "node:/camera", "error") for t in range(101, 106)]
 
 
+def test_rosout_a_line_before_its_node_is_discovered_waits_for_it():
+    # The camera logs at 2 s, before it is discovered; at 3 s it is in the model, its process
+    # started at 1.5 s: its bring-up. Its process started long before: the line alerts when the
+    # camera is in the model; waiting more than 5 s, it is judged as it is.
+    def camera(created=1.5):
+        G = model()
+        G.nodes["process:100"]["create_time"] = created
+        return G
+
+    line = [Event(2.0, "log", "node:/camera", "error", "Failed to open /dev/video4: busy")]
+    assert drive("rosout", [(2.0, new_graph(), line), (3.0, camera(), []), (20.0, camera(), [])]) == []
+    assert drive("rosout", [(2.0, new_graph(), line), (4.0, camera(-100.0), [])]) == [
+        (4.0, "node:/camera", "error")]
+    late = [(2.0, new_graph(), line), (4.0, new_graph(), []), (7.0, camera(6.5), [])]
+    assert drive("rosout", late) == [(7.0, "node:/camera", "error")]
+
+
 # --------------------------------------------------------------------------- graph_anomalies
 
 def _qos(node, role, rel="reliable", dur="volatile"):
