@@ -38,6 +38,7 @@ FORGET_S = 600.0  # as long as the monitor keeps a vanished member by default (f
 SINGLE_RUN_S = 0.5  # a run of messages this short is one answer (a few messages at most)
 STOP_CONFIRM = 2  # samples in a row a withholding node's executor must work less
 ANSWERS_HZ = 1.0  # a server's topic at most this fast while publishing can be its answers
+UPSTREAM_HOPS = 2  # a rate follows what stopped this many inputs up (commands -> base -> odometry)
 CLOCK = "topic:/clock"  # simulated time (`stream_viz.collect.simclock`)
 PAUSED = 0.05  # the simulation's pace under this share of its usual: paused
 STEADY_SAMPLES = 15  # a publisher that sent in this many samples in a row sends continuously
@@ -97,8 +98,10 @@ class TopicRate(Plugin):
       publishers the same processes (a downlink throttled while the link is poor), no deeper
       than half that and no longer than ``gap_margin`` × its longest — the first time, a drop;
       nor when every publisher has an input that went quiet (by its base limit) up to
-      ``input_grace_s`` before the drop began (`_input_stopped`: a gait state slows as the
-      robot's velocity commands stop; the input's quiet is judged on the input);
+      ``input_grace_s`` before the drop began, or one such input of an input's publisher
+      (`_input_stopped`: a gait state slows as the robot's velocity commands stop, a localiser as
+      the odometry, fed by those commands, shows the robot standing; the input's quiet is judged
+      on the input);
     * below expectation (warn): ``rate < (1 - expected_tolerance) × expected_rate_hz`` from the
       config, for ``confirm`` samples;
     * a slowed simulation (warn, on ``/clock``): its pace (``sim_pace``, its real-time factor)
@@ -536,15 +539,16 @@ def _thread_ended(ctx: PluginContext, node: str, q: dict[str, Any], r: Rhythm) -
 
 
 def _on_request(ctx: PluginContext, topic: str, r: Rhythm) -> bool:
-    """True when ``topic`` is published on request: it comes one message at a time — every run
-    between its healthy gaps under ``SINGLE_RUN_S``, or, without gaps, at most ``ANSWERS_HZ``
-    while publishing — from nodes that each serve a service or an action someone calls. A
-    detector that publishes what it found when asked, a planner its plan: its quiet is its
-    clients' not asking, which nothing observed without introspection tells from a hang. The
-    server's own failure shows at its clients (the ``services`` plugin: their timeouts and
-    errors name it), not in this topic's silence."""
+    """True when ``topic`` is published on request: it comes one message at a time — at most
+    ``ANSWERS_HZ`` while publishing, or in runs between its healthy gaps each under
+    ``SINGLE_RUN_S`` — from nodes that each serve a service or an action someone calls. A
+    detector that publishes what it found when asked, a planner its plan (a navigator replans at
+    1 Hz along a leg and asks nothing between legs): its quiet is its clients' not asking, which
+    nothing observed without introspection tells from a hang. The server's own failure shows at
+    its clients (the ``services`` plugin: their timeouts and errors name it), not in this topic's
+    silence."""
     pubs = ctx.publishers(topic)
-    answers = max(r.runs) <= SINGLE_RUN_S if r.gaps and r.runs else not r.gaps and 0 < r.rate <= ANSWERS_HZ
+    answers = 0 < r.rate <= ANSWERS_HZ or bool(r.gaps and r.runs and max(r.runs) <= SINGLE_RUN_S)
     if not pubs or not answers:
         return False
     served = ctx.structural(lambda: {n for kind in ("service", "action") for m in ctx.members(kind)
@@ -800,27 +804,33 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
 
 
 def _input_stopped(ctx: PluginContext, topic: str, since: float, rhythms: dict[str, Rhythm]) -> bool:
-    """True when every publisher of ``topic`` has an input whose last message came at most
-    ``input_grace_s`` before its drop began (``since``) and no later, and that is quiet by its own
-    base limit now: the publisher runs slower as what it follows stops (a legged robot's gait
-    state, 50 Hz walking and 10 Hz standing, slows as its velocity commands stop), as `_inherited`
-    makes a quiet the input's. The input's quiet is judged on the input."""
+    """True when every publisher of ``topic`` has an input, or an input of an input's publisher
+    (``UPSTREAM_HOPS``), whose last message came at most ``input_grace_s`` before its drop began
+    (``since``) and no later, and that is quiet by its own base limit now: the publisher runs
+    slower as what it follows stops, as `_inherited` makes a quiet the input's. A legged robot's
+    gait state, 50 Hz walking and 10 Hz standing, slows as its velocity commands stop; a
+    localiser that updates on motion slows as the base's odometry, which goes on, shows it
+    standing, its commands having stopped one hop further up. The input's quiet is judged on the
+    input."""
     pubs = ctx.publishers(topic)
     if not pubs:
         return False
     s = ctx.settings
 
-    def stopped(node: str) -> bool:
+    def stopped(node: str, hops: int, seen: set[str]) -> bool:
         for name in ctx.subscribed_topics(node):
             i = rhythms.get(name)
-            if name == topic or i is None or i.newest is None:
+            if name in seen or i is None or i.newest is None:
                 continue
+            seen.add(name)
             if since - s["input_grace_s"] <= i.newest <= since \
                     and ctx.t - i.newest >= _base_limit(s, _ref_hz(i, None)):
                 return True
+            if hops > 1 and any(stopped(p, hops - 1, seen) for p in ctx.publishers(name)):
+                return True
         return False
 
-    return all(stopped(p) for p in pubs)
+    return all(stopped(p, UPSTREAM_HOPS, {topic}) for p in pubs)
 
 
 def _drop_run(ctx: PluginContext, topic: str, low: bool, ratio: float,

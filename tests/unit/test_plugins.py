@@ -999,6 +999,14 @@ def test_topic_rate_a_topic_published_on_request_is_not_silent_when_nobody_asks(
     assert drive("topic_rate", frames) == []
     frames = [(t, served_model(False, False, **seen(often, t)), []) for t in HALF[:100]]
     assert [a for a in drive("topic_rate", frames) if a[2] == "error"][:1] == [(52.5, "topic:/img", "error")]
+    # Answers at 1 Hz while a client asks (a navigator replanning along a leg, 6-9 s), none
+    # between legs (4-8 s, then 30 s at a lift): its clients' rhythm, not a hang.
+    legs = [(5.0, 8), (17.0, 6), (27.0, 9), (40.0, 7), (79.0, 8), (93.0, 6)]
+    replans = [s + k * 1.02 for s, n in legs for k in range(n)]
+    frames = [(t, served_model(**seen(replans, t, span=3.0)), []) for t in HALF[:110]]
+    assert drive("topic_rate", frames) == []
+    frames = [(t, served_model(False, False, **seen(replans, t)), []) for t in HALF[:110]]
+    assert [a for a in drive("topic_rate", frames) if a[2] == "error"][:1] != []
     # A burst topic of a server (10 Hz for 2 s) is not on request: its hang is a silence.
     burst = bursts(range(0, 50, 8))
     frames = [(t, served_model(**seen(burst, t)), []) for t in HALF[:90]]
@@ -1913,4 +1921,43 @@ def test_topic_rate_a_rate_that_falls_as_its_publishers_input_stops_follows_the_
     assert [a for a in drive("topic_rate", frames(stops)) if a[1] == "topic:/img"] == []
     goes_on = [i / 20 for i in range(900)]
     assert [a for a in drive("topic_rate", frames(goes_on)) if a[1] == "topic:/img"][:1] == [
+        (32.5, "topic:/img", "warn")]
+
+
+def test_topic_rate_a_rate_that_falls_as_a_command_upstream_stops_follows_it():
+    # AMCL-like: /camera publishes /img at 10 Hz while the robot moves, 2 Hz still. It reads
+    # /odom (20 Hz always, from /base), and /base follows /cmd (20 Hz from /teleop while it
+    # drives, last at 29.6): the robot stopping is seen two hops up, in /cmd. No drop then; the
+    # same fall while /cmd goes on is a drop. Three hops up is too far to say.
+    msgs = [i / 10 for i in range(300)] + [30 + i / 2 for i in range(60)]
+    odom = [i / 20 for i in range(900)]
+
+    def topic(G, name, pub, sub, times, t):
+        st = seen(times, t)
+        add_member(G, f"node:{pub}")
+        add_member(G, f"topic:{name}", theta=make_theta("topic", {
+            "rate_hz": st["rate"], "publishers": 1, "subscribers": 1,
+            **({"age_s": st["age"]} if "age" in st else {})}))
+        add_flow_edge(G, f"node:{pub}", f"topic:{name}", "pub")
+        add_flow_edge(G, f"topic:{name}", f"node:{sub}", "sub")
+
+    def frames(cmd, hops=2):
+        out = []
+        for t in HALF[:45]:
+            G = model(**seen(msgs, t))
+            topic(G, "/odom", "/base", "/camera", odom, t)
+            if hops == 2:
+                topic(G, "/cmd", "/teleop", "/base", cmd, t)
+            else:
+                topic(G, "/cmd_in", "/mux", "/base", odom, t)
+                topic(G, "/cmd", "/teleop", "/mux", cmd, t)
+            out.append((t, G, []))
+        return out
+
+    stops = [i / 20 for i in range(593)]  # last at 29.6
+    assert [a for a in drive("topic_rate", frames(stops)) if a[1] == "topic:/img"] == []
+    goes_on = [i / 20 for i in range(900)]
+    assert [a for a in drive("topic_rate", frames(goes_on)) if a[1] == "topic:/img"][:1] == [
+        (32.5, "topic:/img", "warn")]
+    assert [a for a in drive("topic_rate", frames(stops, hops=3)) if a[1] == "topic:/img"][:1] == [
         (32.5, "topic:/img", "warn")]
