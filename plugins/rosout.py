@@ -58,5 +58,17 @@ class Rosout(Plugin):
             more += bring_up_note(ctx, member)
             first = min(e.t for e in evs)
             began = {"since": first} if prev - STAMP_SLACK_S <= first <= ctx.t else {}
+            named = _named_inputs(ctx, member, evs)
             yield ctx.alert(member, worst.level, f"logged {worst.level.upper()}: {evs[0].text}{more}",
-                            symptom="log", lines=len(evs), **began)
+                            symptom="log", lines=len(evs), **began, **({"names": named} if named else {}))
+
+
+def _named_inputs(ctx: PluginContext, member: str, evs: list) -> list[str]:
+    """The nodes ``member``'s lines name (the collector's ``nodes``) that it depends on: a
+    publisher of a topic it reads, a server it calls. "Robot pose is 1.5 s old (amcl)" is about
+    the localiser, whose silence may look healthy (it was deactivated): the RCA charges it."""
+    named = {n for e in evs for n in e.data.get("nodes", ()) if isinstance(n, str)} - {member}
+    if not named:
+        return []
+    inputs = {p for t in ctx.subscribed_topics(member) for p in ctx.publishers(t)}
+    return sorted(named & (inputs | set(ctx.called_servers(member))))

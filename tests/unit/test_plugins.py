@@ -1585,6 +1585,19 @@ def test_rosout_a_line_before_its_node_is_discovered_waits_for_it():
     assert drive("rosout", late) == [(7.0, "node:/camera", "error")]
 
 
+def test_rosout_a_line_naming_a_node_it_reads_from_names_it():
+    # The detector reads /img from the camera: its ERROR naming the camera points at it (data
+    # ``names``: the RCA charges it); /planner, named too, is nothing the detector depends on.
+    G = model()
+    add_member(G, "node:/planner")
+    text = "no image from camera for 2 s (planner waits)"
+    line = [Event(1.0, "log", "node:/detector", "error", text, {"nodes": ["node:/camera", "node:/planner"]})]
+    got = drive("rosout", [(1.0, G, line)], full=True)
+    assert [(a.member, a.data.get("names")) for a in got] == [("node:/detector", ["node:/camera"])]
+    alone = [Event(1.0, "log", "node:/detector", "error", text, {"nodes": ["node:/planner"]})]
+    assert "names" not in drive("rosout", [(1.0, G, alone)], full=True)[0].data
+
+
 # --------------------------------------------------------------------------- graph_anomalies
 
 def _qos(node, role, rel="reliable", dur="volatile"):
