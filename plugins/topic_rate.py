@@ -67,7 +67,10 @@ class TopicRate(Plugin):
       or quiet the topic has shown, or, for a topic whose arrivals are irregular, the longest
       quiet random arrivals at its rate show in ``irregular_horizon_s`` (`_by_chance`). Judged
       only once the topic's rhythm is settled: it published for ``warmup_s`` without such a
-      quiet, or showed ``min_gaps`` healthy gaps. Never while it has
+      quiet, or showed ``min_gaps`` healthy gaps; a topic that left the graph, or had no
+      publisher, after its last message from the sample its publishers were back (an
+      operator's joystick, its node gone with the operator, is back a second before it
+      publishes). Never while it has
       no publisher (graph_anomalies' orphans), while all its publishers are transient-local (a
       latched topic publishes when its data changes; ``judge_latched``), or when a publisher
       changed state within ``transition_grace_s`` of the last message — a lifecycle transition
@@ -101,7 +104,8 @@ class TopicRate(Plugin):
       ``input_grace_s`` before the drop began, or one such input of an input's publisher
       (`_input_stopped`: a gait state slows as the robot's velocity commands stop, a localiser as
       the odometry, fed by those commands, shows the robot standing; the input's quiet is judged
-      on the input);
+      on the input), and for ``input_grace_s`` after the input resumed (the recent rate still
+      counts the slow intervals);
     * below expectation (warn): ``rate < (1 - expected_tolerance) × expected_rate_hz`` from the
       config, for ``confirm`` samples;
     * a slowed simulation (warn, on ``/clock``): its pace (``sim_pace``, its real-time factor)
@@ -168,6 +172,7 @@ class TopicRate(Plugin):
             yield slowed
         transitions = _transitions(ctx)
         relearn = ctx.state.setdefault("relearn", {})  # topic -> learned anew from (a reconfiguration)
+        back = ctx.state.setdefault("back", {})  # topic -> the last sample it had no publisher
         followed = []  # every rhythm is followed before any is judged: a quiet is judged with its inputs'
         for topic in watched:
             rate = ctx.value(topic, "rate_hz")
@@ -175,6 +180,8 @@ class TopicRate(Plugin):
                 continue  # not measured
             base = cached_baseline(ctx, topic, "rate_hz", frozen=topic in alerting, since=relearn.get(topic))
             r = rhythms.setdefault(topic, Rhythm())
+            if topic in ctx.diff.added_members or ctx.value(topic, "publishers") == 0:
+                back[topic] = ctx.t  # its publishers (back) are judged from now on: `_silence`
             followed.append((topic, r, rate, base, _follow(ctx, r, topic, rate, base)))
         followed = _reconfigured(ctx, followed, rhythms)
         for topic, r, rate, base, quiet in followed:
@@ -291,7 +298,8 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
 
 def _forget(ctx: PluginContext, rhythms: dict[str, Rhythm]) -> None:
     """Drop the rhythms of topics gone from the graph with no message for ``FORGET_S`` (a topic
-    back sooner keeps what it showed: its quiet while gone is a gap like any other)."""
+    back sooner keeps what it showed: its quiet while gone is a gap like any other, judged from
+    its return)."""
     for topic in [m for m, r in rhythms.items() if m not in ctx.graph
                   and (r.newest is None or ctx.t - r.newest > FORGET_S)]:
         del rhythms[topic]
@@ -329,6 +337,9 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
         return None
     pace = _pace(ctx, topic)  # on simulated time a quiet lasts 1/pace as long on our clock
     judged = quiet * pace if 0 < pace < 1 else quiet
+    back = ctx.state["back"].get(topic, -math.inf)
+    if r.newest is not None and back > r.newest:  # gone, or without a publisher, since its last
+        judged = min(judged, ctx.t - back)  # message: its publishers are judged from their return
     # A quiet its publisher complained of (a driver's "no data-ready interrupt") is a silence
     # from ``complained_min_s``: the floor guards against our own sampling, which it confirms.
     complained = r.doubted
@@ -790,8 +801,16 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
         modes[:] = learn_mode(modes, *run)
     if samples < s["confirm"] or lasted < r.longest:
         return None
-    if _input_stopped(ctx, topic, ctx.t - lasted, rhythms):
-        return None  # its rate follows what reaches it: a gait published slower as its commands stop
+    # Its rate follows what reaches it (a gait published slower as its commands stop); once so,
+    # this drop stays the input's for input_grace_s after the input resumed: the recent rate
+    # still counts the slow intervals when the input's first messages are back.
+    follows = ctx.state.setdefault("drop_follows", {})  # topic -> (its drop's start, last explained)
+    start = ctx.state["_held"][(topic, "drop")]
+    if _input_stopped(ctx, topic, start, rhythms):
+        follows[topic] = (start, ctx.t)
+        return None
+    if follows.get(topic, (None, -math.inf))[0] == start and ctx.t - follows[topic][1] <= s["input_grace_s"]:
+        return None
     if in_mode(modes, ratio, lasted, s["gap_margin"]):
         return None  # a lower rate it has shown and left by itself (a link throttled, a mode)
     steady = per_sim is not None and per_sim[1] <= STEADY_PER_SIM * per_sim[0]

@@ -340,6 +340,26 @@ def bursts(starts, on=2.0, hz=10):
 HALF = [k + 0.5 for k in range(120)]  # samples at 0.5, 1.5, ... (between message times)
 
 
+def test_topic_rate_a_topic_back_in_the_graph_is_judged_from_its_return():
+    # An operator's joystick at 20 Hz until 30 s; its node leaves with the operator (the topic
+    # gone from the graph 31-42 s) and is back at 43.5, publishing from 45: no silence (its quiet
+    # while gone was no publisher's). Back at 43.5 and never publishing: silent from its return.
+    def frames(msgs):
+        out = []
+        for t in HALF[:55]:
+            if 31 <= t <= 43:
+                G = model()
+                G.remove_node("topic:/img")
+            else:
+                G = model(**seen(msgs, t))
+            out.append((t, G, []))
+        return out
+
+    joy = [i / 20 for i in range(600)] + [45 + i / 20 for i in range(300)]
+    assert drive("topic_rate", frames(joy)) == []
+    assert drive("topic_rate", frames(joy[:600]))[:1] == [(45.5, "topic:/img", "error")]
+
+
 def test_topic_rate_bursty_topic_is_quiet_when_healthy_and_silent_when_hung_past_its_own_gaps():
     healthy = bursts(range(0, 120, 8))  # 10 Hz for 2 s, then 6 s without a message, repeated
     assert drive("topic_rate", sampled(healthy, HALF)) == []
@@ -1935,6 +1955,33 @@ def test_topic_rate_a_rate_that_falls_as_its_publishers_input_stops_follows_the_
     goes_on = [i / 20 for i in range(900)]
     assert [a for a in drive("topic_rate", frames(goes_on)) if a[1] == "topic:/img"][:1] == [
         (32.5, "topic:/img", "warn")]
+
+
+def test_topic_rate_a_drop_that_followed_its_input_stays_its_inputs_as_the_input_resumes():
+    # /img 10 Hz, 2 Hz while /cmd stops (29.6 to 33.45), 10 Hz again from 33.47: at 33.5 the
+    # recent rate still counts the slow intervals, while /cmd publishes again; the drop was the
+    # input's, and stays so. The same drop held after /cmd resumed (for more than
+    # input_grace_s, 5 s) is one.
+    def frames(msgs, cmd):
+        out = []
+        for t in HALF[:50]:
+            G, st = model(**seen(msgs, t)), seen(cmd, t)
+            add_member(G, "node:/teleop")
+            add_member(G, "topic:/cmd", theta=make_theta("topic", {
+                "rate_hz": st["rate"], "publishers": 1, "subscribers": 1,
+                **({"age_s": st["age"]} if "age" in st else {})}))
+            add_flow_edge(G, "node:/teleop", "topic:/cmd", "pub")
+            add_flow_edge(G, "topic:/cmd", "node:/camera", "sub")
+            out.append((t, G, []))
+        return out
+
+    cmd = [i / 20 for i in range(593)] + [33.45 + i / 20 for i in range(400)]
+    slow = [30 + i / 2 for i in range(7)]
+    back = [i / 10 for i in range(300)] + slow + [33.47 + i / 10 for i in range(200)]
+    assert [a for a in drive("topic_rate", frames(back, cmd)) if a[1] == "topic:/img"] == []
+    low = [i / 10 for i in range(300)] + [30 + i / 2 for i in range(60)]
+    assert [a for a in drive("topic_rate", frames(low, cmd)) if a[1] == "topic:/img"][:1] == [
+        (38.5, "topic:/img", "warn")]
 
 
 def test_topic_rate_a_rate_that_falls_as_a_command_upstream_stops_follows_it():
