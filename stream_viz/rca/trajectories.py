@@ -32,6 +32,7 @@ import numpy as np
 
 from stream_viz.model.traffic import TRAFFIC, idle, measured
 from stream_viz.rca.causal import is_node, path_back, trace
+from stream_viz.rca.charge import pointed_nodes
 from stream_viz.rca.cooccurrence import cooccurrence
 from stream_viz.rca.episodes import Evidence
 from stream_viz.rca.hosts import lift_hosts
@@ -146,6 +147,10 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
     path = path_back(back, start, c)
     # Dependencies: consecutive symptomatic members on the path (effect first, then its cause).
     alerting = [m for m in path if m in s.times]
+    # A candidate with no symptom of its own that a complaint names (a localiser deactivated, its
+    # readers' ERRORs naming it) stands at its trajectory's end as the first who named it.
+    if c not in s.times and (named := _named_by(ctx, c, own)) and named not in alerting:
+        alerting.append(named)
     co, lag = [], []
     for effect, cause in itertools.pairwise(alerting):
         pair = ctx._pairs.get((effect, cause))
@@ -166,6 +171,13 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
         float(np.mean(lag)) if lag else None,
         coverage,
     )
+
+
+def _named_by(ctx: Context, c: str, own: list[str]) -> str | None:
+    """The earliest of ``own`` (the symptoms charged to ``c``) whose alerts name ``c``, or None."""
+    s = ctx.symptoms
+    by = [m for (m, name) in s.named if m in own and c in pointed_nodes(ctx.G, m, [name])]
+    return min(by, key=lambda m: (s.onset[m], m)) if by else None
 
 
 def _unblocked(ctx: Context, c: str, cost: dict[str, float], back: dict[str, str]) -> dict[str, float]:

@@ -170,3 +170,25 @@ def test_an_unnamed_server_of_an_unexplained_client_is_a_weaker_candidate():
     # A client explained by its input (the goals stopped) makes no suspect of its server.
     _, order = causes_of(service_graph(), [al(GOAL, "topic_rate", 9), *alerts])
     assert PLANNER not in order and order[0] == GOALS
+
+
+def test_a_node_only_named_by_its_readers_errors_ranks_first():
+    # A localiser deactivated: its silence is healthy to the rate rule, so it has no alert; its
+    # readers (the navigator, then the controller) log ERRORs, the controller's naming it. The
+    # named localiser takes its trajectory's dependency from the controller that named it.
+    g = new_graph()
+    for m in (LOC, NAV, BT, POSE, CMD):
+        add_member(g, m)
+    add_flow_edge(g, LOC, POSE, "pub")
+    add_flow_edge(g, POSE, NAV, "sub")
+    add_flow_edge(g, POSE, BT, "sub")
+    add_flow_edge(g, NAV, CMD, "pub")
+    follow = "action:/follow_path"  # the navigator waits on the controller's action
+    add_member(g, follow, servers=["/nav"], clients=["/bt"])
+    add_flow_edge(g, BT, NAV, "send", services=[follow])
+    named = {"symptom": "log", "names": [LOC]}
+    alerts = [al(BT, "rosout", 10.0, symptom="log"), al(NAV, "rosout", 10.2, **named),
+              al(BT, "rosout", 20.0, symptom="log"), al(NAV, "rosout", 20.2, **named)]
+    by, order = causes_of(g, alerts)
+    assert order[0] == LOC, order
+    assert by[LOC].trajectory[-1] == LOC and by[LOC].evidence["cooccurrence"] is not None
