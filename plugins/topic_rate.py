@@ -161,7 +161,10 @@ class TopicRate(Plugin):
         watched = list(ctx.watched())
         # Every topic's rhythm is followed, so one the RCA starts watching later is judged at once.
         topics = ctx.structural(lambda: set(ctx.members("topic")), key="topics")
+        back = ctx.state.setdefault("back", {})  # topic -> the last sample it had no publisher
+        ctx.state["prev_t"], ctx.state["now_t"] = ctx.state.get("now_t"), ctx.t
         for topic in topics.difference(watched):
+            _note_back(ctx, back, topic)
             rate = ctx.value(topic, "rate_hz")
             if not math.isnan(rate):
                 _follow(ctx, rhythms.setdefault(topic, Rhythm()), topic, rate, None)
@@ -172,16 +175,14 @@ class TopicRate(Plugin):
             yield slowed
         transitions = _transitions(ctx)
         relearn = ctx.state.setdefault("relearn", {})  # topic -> learned anew from (a reconfiguration)
-        back = ctx.state.setdefault("back", {})  # topic -> the last sample it had no publisher
         followed = []  # every rhythm is followed before any is judged: a quiet is judged with its inputs'
         for topic in watched:
+            _note_back(ctx, back, topic)
             rate = ctx.value(topic, "rate_hz")
             if math.isnan(rate):
                 continue  # not measured
             base = cached_baseline(ctx, topic, "rate_hz", frozen=topic in alerting, since=relearn.get(topic))
             r = rhythms.setdefault(topic, Rhythm())
-            if topic in ctx.diff.added_members or ctx.value(topic, "publishers") == 0:
-                back[topic] = ctx.t  # its publishers (back) are judged from now on: `_silence`
             followed.append((topic, r, rate, base, _follow(ctx, r, topic, rate, base)))
         followed = _reconfigured(ctx, followed, rhythms)
         for topic, r, rate, base, quiet in followed:
@@ -294,6 +295,16 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
         if not moved:
             break
     return out
+
+
+def _note_back(ctx: PluginContext, back: dict[str, float], topic: str) -> None:
+    """Note now in ``back`` when ``topic`` was not followed at the previous call (gone from the
+    graph, or not yet listed as a topic) or has no publisher: its publishers are judged from
+    then on (`_silence`)."""
+    followed = ctx.state.setdefault("followed_at", {})
+    if followed.get(topic) != ctx.state.get("prev_t") or ctx.value(topic, "publishers") == 0:
+        back[topic] = ctx.t
+    followed[topic] = ctx.t
 
 
 def _forget(ctx: PluginContext, rhythms: dict[str, Rhythm]) -> None:
