@@ -1939,25 +1939,28 @@ def test_topic_rate_a_rate_that_falls_as_its_publishers_input_stops_follows_the_
     # stops at 29.6 (a gait state slowing as the robot stands): no drop. The same fall while
     # /cmd goes on is a drop.
     msgs = [i / 10 for i in range(300)] + [30 + i / 2 for i in range(60)]
-
-    def frames(cmd):
-        out = []
-        for t in HALF[:45]:
-            G, st = model(**seen(msgs, t)), seen(cmd, t)
-            add_member(G, "node:/teleop")
-            add_member(G, "topic:/cmd", theta=make_theta("topic", {
-                "rate_hz": st["rate"], "publishers": 1, "subscribers": 1,
-                **({"age_s": st["age"]} if "age" in st else {})}))
-            add_flow_edge(G, "node:/teleop", "topic:/cmd", "pub")
-            add_flow_edge(G, "topic:/cmd", "node:/camera", "sub")
-            out.append((t, G, []))
-        return out
-
     stops = [i / 20 for i in range(593)]  # last at 29.6
-    assert [a for a in drive("topic_rate", frames(stops)) if a[1] == "topic:/img"] == []
-    goes_on = [i / 20 for i in range(900)]
-    assert [a for a in drive("topic_rate", frames(goes_on)) if a[1] == "topic:/img"][:1] == [
-        (32.5, "topic:/img", "warn")]
+
+    def img(cmd):
+        return [a for a in drive("topic_rate", commanded(msgs, cmd, HALF[:45])) if a[1] == "topic:/img"]
+
+    assert img(stops) == []
+    assert img([i / 20 for i in range(900)])[:1] == [(32.5, "topic:/img", "warn")]  # /cmd goes on
+
+
+def commanded(msgs, cmd, times):
+    """Frames of `model` (/img at ``msgs``) whose /camera also reads /cmd (at ``cmd``, from /teleop)."""
+    out = []
+    for t in times:
+        G, st = model(**seen(msgs, t)), seen(cmd, t)
+        add_member(G, "node:/teleop")
+        add_member(G, "topic:/cmd", theta=make_theta("topic", {
+            "rate_hz": st["rate"], "publishers": 1, "subscribers": 1,
+            **({"age_s": st["age"]} if "age" in st else {})}))
+        add_flow_edge(G, "node:/teleop", "topic:/cmd", "pub")
+        add_flow_edge(G, "topic:/cmd", "node:/camera", "sub")
+        out.append((t, G, []))
+    return out
 
 
 def test_topic_rate_a_drop_that_followed_its_input_stays_its_inputs_as_the_input_resumes():
@@ -1966,17 +1969,7 @@ def test_topic_rate_a_drop_that_followed_its_input_stays_its_inputs_as_the_input
     # input's, and stays so. The same drop held after /cmd resumed (for more than
     # input_grace_s, 5 s) is one.
     def frames(msgs, cmd):
-        out = []
-        for t in HALF[:50]:
-            G, st = model(**seen(msgs, t)), seen(cmd, t)
-            add_member(G, "node:/teleop")
-            add_member(G, "topic:/cmd", theta=make_theta("topic", {
-                "rate_hz": st["rate"], "publishers": 1, "subscribers": 1,
-                **({"age_s": st["age"]} if "age" in st else {})}))
-            add_flow_edge(G, "node:/teleop", "topic:/cmd", "pub")
-            add_flow_edge(G, "topic:/cmd", "node:/camera", "sub")
-            out.append((t, G, []))
-        return out
+        return commanded(msgs, cmd, HALF[:50])
 
     cmd = [i / 20 for i in range(593)] + [33.45 + i / 20 for i in range(400)]
     slow = [30 + i / 2 for i in range(7)]
