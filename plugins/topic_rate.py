@@ -816,7 +816,7 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     # this drop stays the input's for input_grace_s after the input resumed: the recent rate
     # still counts the slow intervals when the input's first messages are back.
     follows = ctx.state.setdefault("drop_follows", {})  # topic -> (its drop's start, last explained)
-    start = ctx.state["_held"][(topic, "drop")]
+    start = ctx.state["_held"].get((topic, "drop"), ctx.t - lasted)
     if _input_stopped(ctx, topic, start, rhythms):
         follows[topic] = (start, ctx.t)
         return None
