@@ -161,7 +161,7 @@ class TopicRate(Plugin):
         watched = list(ctx.watched())
         # Every topic's rhythm is followed, so one the RCA starts watching later is judged at once.
         topics = ctx.structural(lambda: set(ctx.members("topic")), key="topics")
-        back = ctx.state.setdefault("back", {})  # topic -> the last sample it had no publisher
+        back = ctx.state.setdefault("back", {})  # topic -> the last sample it was new or had no publisher
         ctx.state["prev_t"], ctx.state["now_t"] = ctx.state.get("now_t"), ctx.t
         for topic in topics.difference(watched):
             _note_back(ctx, back, topic)
