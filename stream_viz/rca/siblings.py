@@ -11,7 +11,9 @@ excused by any sibling that has one. Nodes whose own changes are the same (in ti
 and kind), and whose inputs explain them as much, cannot be told apart, and the verdict says so —
 unless a client calling one of them complained meanwhile (``awaited``): a process burning CPU
 while a client times out on one of its servers points at that server. In a stall of their
-executor it does not: every service of the process stops answering alike.
+executor it does not: every service of the process stops answering alike. What tells the fellows
+of a stall apart is when each one's next message was due (`blocked_first`): a callback that blocks
+before it publishes stops the executor at its own node's due, before anyone else missed a beat.
 """
 
 from __future__ import annotations
@@ -31,6 +33,12 @@ EPS = 1e-9
 
 
 HOPS = 6  # how far upstream a stalled node's inputs are followed to a fellow (a few topics/nodes)
+# A hang blocks the callback that publishes (a read, a lock, a call made before the message) this
+# often; otherwise another callback (a subscription that only keeps state, a service).
+OUTPUT_PRIOR = 0.7
+LATE_S = 0.01  # a timer due while another callback runs waits for it (and the receiver's clock)
+BEAT_ERROR = 0.05  # a beat learned from a rate is off by up to this fraction
+TELLS = 3.0  # a fellow this many times likelier to have blocked the executor tells it apart
 
 
 class OwnChange(Protocol):
@@ -45,6 +53,9 @@ class OwnChange(Protocol):
     exited: float
     executor_stopped: bool
     awaited: list[str]
+    due: float
+    beat: float
+    last: float
 
 
 @dataclass
@@ -53,12 +64,14 @@ class Verdict:
 
     ``process``: the process it shares; ``excuse``: how strongly a sibling that changed first
     (or more) explains it, in [0, 1]; ``indistinguishable``: siblings whose own changes are the
-    same as its own and explained as much by their inputs (empty when it is excused).
+    same as its own and explained as much by their inputs (empty when it is excused);
+    ``blocked``: in a stall, how likely its callback blocked the executor (`blocked_first`).
     """
 
     process: str
     excuse: float = 0.0
     indistinguishable: list[str] = field(default_factory=list)
+    blocked: float | None = None
 
 
 def _close(a: float, b: float, tol: float) -> bool:
@@ -66,12 +79,13 @@ def _close(a: float, b: float, tol: float) -> bool:
 
 
 def _before(a: OwnChange, b: OwnChange, tol: float) -> bool:
-    """True when ``a``'s own change came before ``b``'s, or with it but stronger or wider."""
+    """True when ``a``'s own change came before ``b``'s (`_stopped`), or with it but stronger or
+    wider."""
     if a.own_anomaly <= 0:
         return False
-    if b.own_anomaly <= 0 or a.own_onset < b.own_onset - tol:
+    if b.own_anomaly <= 0 or _stopped(a) < _stopped(b) - tol:
         return True
-    if not _close(a.own_onset, b.own_onset, tol):
+    if not _close(_stopped(a), _stopped(b), tol):
         return False
     if abs(a.own_anomaly - b.own_anomaly) > EPS:
         return a.own_anomaly > b.own_anomaly
@@ -81,7 +95,8 @@ def _before(a: OwnChange, b: OwnChange, tol: float) -> bool:
 def stalls(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> dict[str, set[str]]:
     """Return node → the fellow nodes of its process that stopped with it, for one common cause.
 
-    Nodes of one process whose outputs went silent together (own onsets within ``tol``) are one
+    Nodes of one process whose outputs went silent together (within ``tol``: by the next message
+    due of each one's first silent output, else by its own onset) are one
     stall of their executor when at least two of them are independent: neither is fed, through
     the data flow, by another of them (a lidar and an IMU driver that share nothing but the
     thread); or when an output's alert said its executor stopped while its input arrived
@@ -100,8 +115,8 @@ def stalls(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> di
     for nodes in by_process.values():
         silent = [n for n in nodes if "output" in views[n].own_kinds]
         if silent:
-            start = min(views[n].own_onset for n in silent)
-            group = {n for n in silent if _close(views[n].own_onset, start, tol)}
+            start = min(_stopped(views[n]) for n in silent)
+            group = {n for n in silent if _close(_stopped(views[n]), start, tol)}
             free = (n for n in group if not _fed_by(G, n, group - {n}, parents))
             # A lone node is no stall; two independent ones are enough to tell, the rest not walked.
             if len(group) > 1 and (any(views[n].executor_stopped for n in group)
@@ -113,6 +128,50 @@ def stalls(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> di
             for n in dead:
                 out[n] = out.get(n, set()) | (dead - {n})
     return out
+
+
+def blocked_first(dues: Mapping[str, tuple[float, float, float]]) -> dict[str, float]:
+    """Return node → how likely its callback blocked the executor the nodes shared (sums to 1).
+
+    ``dues``: node → (its newest message before the stall, when its next one was due, its beat),
+    in seconds. A callback that blocks before it publishes stops the executor at its node's due:
+    nobody else had missed a beat by then (each other due is later, within `LATE_S` and the
+    beat's error), and each other due fell anywhere within its beat after it. So a node whose
+    due fits is the blocker with a likelihood ∝ its beat: a slow node due just as the executor
+    stopped is less of a chance than a fast one. Another callback (one that publishes nothing)
+    may have blocked instead (1 − `OUTPUT_PRIOR`) anywhere from the newest message of them all
+    to the first due: alike for every node, ∝ that window.
+    """
+    if len(dues) < 2:
+        return {}
+    first = min(due for _, due, _ in dues.values())
+    window = max(0.0, first - max(last for last, _, _ in dues.values())) + LATE_S
+    out = {}
+    for n, (_, due, beat) in dues.items():
+        slack = LATE_S + BEAT_ERROR * beat
+        fits = due <= first + slack
+        out[n] = OUTPUT_PRIOR * (beat + slack) * fits + (1 - OUTPUT_PRIOR) * window
+    total = sum(out.values())
+    return {n: x / total for n, x in out.items()}
+
+
+def _timing(views: Mapping[str, OwnChange], n: str, fellows: set[str],
+            cache: dict[frozenset[str], dict[str, float]]) -> dict[str, float]:
+    """`blocked_first` of ``n``'s stall with ``fellows`` (empty when a fellow died, or has no
+    silence with a beat: a crash stops every thread at once, and an untimed silence says nothing)."""
+    group = frozenset(fellows | {n})
+    if group not in cache:
+        vs = {m: views[m] for m in group}
+        timed = all(v.exited == INF and v.due < INF and v.beat > 0 for v in vs.values())
+        cache[group] = blocked_first({m: (v.last, v.due, v.beat) for m, v in vs.items()}) if timed else {}
+    return cache[group]
+
+
+def _stopped(v: OwnChange) -> float:
+    """When ``v``'s own change began: its first silent output's next message due, if known (a
+    slow output's silence is noticed later than a fast one's that stopped with it), else its
+    own onset."""
+    return min(v.due, v.own_onset)
 
 
 def _spoke(v: OwnChange, tol: float) -> bool:
@@ -144,7 +203,7 @@ def _fed_by(G: nx.MultiDiGraph, n: str, others: set[str],
 def _same(a: OwnChange, b: OwnChange, tol: float) -> bool:
     """Same own change, and explained as much by their inputs (else the data flow tells them
     apart), and both or neither waited on by a complaining client (else the one it called)."""
-    return (_close(a.own_onset, b.own_onset, tol) and abs(a.own_anomaly - b.own_anomaly) <= EPS
+    return (_close(_stopped(a), _stopped(b), tol) and abs(a.own_anomaly - b.own_anomaly) <= EPS
             and len(a.own_kinds) == len(b.own_kinds) and abs(a.upstream - b.upstream) <= EPS
             and bool(a.awaited) == bool(b.awaited))
 
@@ -153,9 +212,11 @@ def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float,
           stalled: Mapping[str, set[str]] | None = None) -> dict[str, Verdict]:
     """Return a `Verdict` for every candidate that shares its process with another candidate.
 
-    Fellows of one stall or one dead process (``stalled``, from `stalls`) are told apart only by
-    their own log lines (a node that logs was running, one that wrote its last words before the
-    crash): whatever else came with the stall (silent outputs, a stale diagnostic) is its
+    Fellows of one stall or one dead process (``stalled``, from `stalls`) are told apart by their
+    own log lines (a node that logs was running, one that wrote its last words before the
+    crash), then in a stall by when each one's next message was due (`blocked_first`: a fellow
+    `TELLS` times likelier to have blocked the executor excuses the other by the ratio's
+    complement): whatever else came with the stall (silent outputs, a stale diagnostic) is its
     consequence on all.
 
     Parameters
@@ -171,6 +232,7 @@ def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float,
         Node → the fellows of its stall.
     """
     stalled = stalled or {}
+    timings: dict[frozenset[str], dict[str, float]] = {}
     groups: dict[str, list[str]] = {}
     for n, v in views.items():
         p = None if v.implied else process_of_node(G, n)
@@ -188,9 +250,15 @@ def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float,
                     continue
                 w = views[m]
                 if m in stalled.get(n, ()):
-                    if _spoke(w, tol) and not _spoke(v, tol):
-                        verdict.excuse = max(verdict.excuse, w.own_anomaly * (1.0 - w.upstream))
-                    elif _spoke(w, tol) == _spoke(v, tol):
+                    odds = _timing(views, n, stalled[n], timings)
+                    verdict.blocked = odds.get(n)
+                    if _spoke(w, tol) != _spoke(v, tol):  # only the one that logged was running
+                        if _spoke(w, tol):
+                            verdict.excuse = max(verdict.excuse, w.own_anomaly * (1.0 - w.upstream))
+                    elif odds and odds[m] >= TELLS * odds[n]:  # m's callback blocked them, likelier
+                        verdict.excuse = max(verdict.excuse,
+                                             (1.0 - odds[n] / odds[m]) * w.own_anomaly * (1.0 - w.upstream))
+                    elif not odds or odds[n] < TELLS * odds[m]:
                         verdict.indistinguishable.append(m)
                 elif _before(w, v, tol):
                     # a sibling explained by its own inputs explains its siblings less

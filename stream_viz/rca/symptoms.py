@@ -50,9 +50,12 @@ class Symptoms:
     (``since`` + data ``since_within``: a silence began by the next message due); ``vague`` the
     first time of its alerts that do not say (their symptom began up to ``tolerance`` before);
     ``culprits`` the publishers a topic's alerts name as the ones whose own messages are the
-    symptom (data ``publishers``: stale stamps of one of ``/tf``'s publishers, one stopped);
+    symptom (data ``publishers``: stale stamps of one of ``/tf``'s publishers, one stopped), with
+    the first time each was named;
     ``executor_stopped`` the members an alert said stopped with their publisher's executor (data
-    ``executor_stopped``: its thread idle while its input arrives).
+    ``executor_stopped``: its thread idle while its input arrives); ``silence`` a silent member's
+    newest message, the next one due and its beat (data ``since``, ``since`` + ``since_within``,
+    ``since_within``), of its newest silence.
     """
 
     times: dict[str, np.ndarray] = field(default_factory=dict)
@@ -70,8 +73,9 @@ class Symptoms:
     began: dict[str, float] = field(default_factory=dict)
     began_by: dict[str, float] = field(default_factory=dict)
     vague: dict[str, float] = field(default_factory=dict)
-    culprits: dict[str, set[str]] = field(default_factory=dict)
+    culprits: dict[str, dict[str, float]] = field(default_factory=dict)
     executor_stopped: set[str] = field(default_factory=set)
+    silence: dict[str, tuple[float, float, float]] = field(default_factory=dict)
     latest: float = -INF
     count: int = 0
 
@@ -136,11 +140,16 @@ def collect_symptoms(
         if data and data.get("executor_stopped") is True:
             s.executor_stopped.add(m)
         if data and isinstance(data.get("publishers"), list) and m.startswith("topic:"):
-            s.culprits.setdefault(m, set()).update(p for p in data["publishers"] if isinstance(p, str))
+            named_at = s.culprits.setdefault(m, {})
+            for p in data["publishers"]:
+                if isinstance(p, str):
+                    named_at[p] = min(named_at.get(p, INF), t)
         if data and isinstance(since := data.get("since"), int | float):
             s.began[m] = min(s.began.get(m, INF), float(since), t)
             within = data.get("since_within", 0.0)
             within = float(within) if isinstance(within, int | float) and within > 0 else 0.0
+            if within and float(since) > s.silence.get(m, (-INF,))[0]:  # its newest silence
+                s.silence[m] = (float(since), float(since) + within, within)
             s.began_by[m] = min(s.began_by.get(m, INF), float(since) + within, t)
         else:
             s.vague[m] = min(s.vague.get(m, INF), t)
@@ -184,7 +193,10 @@ class NodeView:
     with its executor (`Symptoms`). ``began``/``began_by``/``vague``: the earliest
     and latest its symptoms can have begun by their alerts' word, and the first time of those that
     do not say (`Symptoms`): what `began_after` compares. ``awaited``: the clients calling it
-    that complained while its symptoms were on (`_await`).
+    that complained while its symptoms were on (`_await`). ``due``/``beat``/``last``: of its
+    silent outputs, when the first next message was due and that output's beat, and its newest
+    message (`siblings.blocked_first` reads them); ``blocked``: how likely its callback blocked
+    the executor of a stall it is in (None: not told by that).
     """
 
     member: str
@@ -216,6 +228,10 @@ class NodeView:
     vague: float = INF
     executor_stopped: bool = False
     awaited: list[str] = field(default_factory=list)
+    due: float = INF
+    beat: float = 0.0
+    last: float = -INF
+    blocked: float | None = None
 
     def active(self, t0: float, t1: float, own: bool = False) -> float:
         """Its anomaly when one of its symptoms held in ``[t0, t1]``; else its untimed evidence
@@ -304,6 +320,7 @@ def node_views(
     for n, verdict in siblings.judge(G, views, settings.tolerance, stalled).items():
         v = views[n]
         v.process, v.sibling, v.indistinguishable = verdict.process, verdict.excuse, verdict.indistinguishable
+        v.blocked = verdict.blocked
         v.upstream = max(v.upstream, v.sibling)
     for v in views.values():
         v.ht = v.anomaly * (1.0 - v.upstream)
@@ -379,6 +396,7 @@ def _alert_views(
             for n in nodes if len(nodes) == 1 else ():
                 _charge(_view(views, n), m, a * charge, s.onset[m], s.episodes[m], "output", _starts_of(s, m))
                 views[n].executor_stopped |= m in s.executor_stopped
+                _beat(views[n], s, m)
     for (m, name), (t, w) in s.named.items():
         spans = [(max(a, t), b) for a, b in s.episodes[m] if b >= t]
         since = _waited_since(views.get(m), t, tolerance)
@@ -387,6 +405,16 @@ def _alert_views(
         for n in pointed_nodes(G, m, [name]):
             _charge(_view(views, n), m, _clip(w * charge), since, spans, "named")
     return shared_by
+
+
+def _beat(v: NodeView, s: Symptoms, m: str) -> None:
+    """Note the silence of ``v``'s output ``m``: when its next message was due and its beat, and
+    its newest message before it (what told when a stalled executor blocked, `siblings`)."""
+    if m in s.silence:
+        last, due, beat = s.silence[m]
+        if due < v.due:
+            v.due, v.beat = due, beat
+        v.last = max(v.last, last)
 
 
 def _waited_since(client: NodeView | None, t: float, tolerance: float) -> float:
@@ -404,7 +432,9 @@ def _charge_shared(
 ) -> None:
     """Charge the symptoms of members with several publishers: each publisher's share follows its
     own traffic or the evidence of its own around the symptom (`charge.publisher_shares`), judged
-    on what was charged before any such member."""
+    on what was charged before any such member; a publisher the alerts named only later than the
+    topic's first alert (its own stop came later: `/diagnostics` from a container's nodes) is
+    charged from then."""
     gap = settings.episode_gap
     shares = {}
     for m, nodes in shared_by:
@@ -415,9 +445,15 @@ def _charge_shared(
     for m, nodes in shared_by:
         for n in nodes:
             x = s.anomaly[m] * settings.charge * shares[m][n]
-            if x > 0:
-                _charge(views.setdefault(n, NodeView(n)), m, x, s.onset[m], s.episodes[m], "output",
-                        _starts_of(s, m))
+            if x <= 0:
+                continue
+            v = views.setdefault(n, NodeView(n))
+            at = s.culprits.get(m, {}).get(n, -INF)
+            if at > s.onset[m]:  # named later than the topic's first alert: its own stop is later
+                _charge(v, m, x, at, [(max(a, at), b) for a, b in s.episodes[m] if b >= at], "output",
+                        (INF, INF, at))
+            else:
+                _charge(v, m, x, s.onset[m], s.episodes[m], "output", _starts_of(s, m))
 
 
 def _settle(

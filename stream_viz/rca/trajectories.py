@@ -261,6 +261,8 @@ def _evidence(v: NodeView, tr: Trajectory | None = None, **extra: Any) -> dict[s
         out["indistinguishable_from"] = list(v.indistinguishable)
     if v.process is not None and v.awaited:  # what told it apart from its siblings
         out["awaited_by"] = list(v.awaited)
+    if v.blocked is not None:  # in a stall: how likely its callback blocked the executor
+        out["blocked"] = round(v.blocked, 3)
     if tr is not None:
         out.update(
             coverage=round(tr.coverage, 4),

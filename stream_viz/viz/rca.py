@@ -93,7 +93,7 @@ def report_markdown(
         if len(root_causes) > top:
             lines += ["", f"… and {len(root_causes) - top} more."]
         lines += (_alike_notes(root_causes[:top]) + _awaited_notes(root_causes[:top])
-                  + _host_notes(root_causes[:top]))
+                  + _blocked_notes(root_causes[:top]) + _host_notes(root_causes[:top]))
     if len(incidents) > 1:
         lines += ["", "## Incidents (times UTC)", "",
                   "| incident | symptomatic members | from | to | top root cause |", "|---|---|---|---|---|"]
@@ -141,6 +141,21 @@ def _awaited_notes(root_causes: Sequence[Mapping[str, Any]]) -> list[str]:
             clients = ", ".join(f"`{m}`" for m in ev["awaited_by"])
             out.append(f"`{rc['member']}` runs in `{ev.get('process', '?')}` with other candidates; "
                        f"{clients} waited on it as its symptoms began, which tells it from them.")
+    return ["", *out] if out else []
+
+
+def _blocked_notes(root_causes: Sequence[Mapping[str, Any]]) -> list[str]:
+    """One line per stalled process whose likeliest blocker is told apart from its fellows."""
+    out, seen = [], set()
+    for rc in root_causes:  # best first: the first of a process is its likeliest
+        ev = rc.get("evidence") or {}
+        p = ev.get("process")
+        if ev.get("blocked") is None or p in seen:
+            continue
+        seen.add(p)
+        if not ev.get("indistinguishable_from"):
+            out.append(f"`{rc['member']}` is the likeliest of `{p}`'s stalled nodes to have blocked its "
+                       f"executor ({float(ev['blocked']):.0%}): its next message was due as they stopped.")
     return ["", *out] if out else []
 
 

@@ -149,6 +149,20 @@ def test_nodes_in_separate_processes_are_not_siblings(G):
     assert "process" not in by[CAM].evidence and "process" not in by[DET].evidence
 
 
+def test_a_shared_topic_charges_each_publisher_from_when_it_was_named(G):
+    # The three drivers publish /diagnostics too. The camera stops first (its own stop named at
+    # 10, its image silent at 11); the lidar's and imu's diagnostics are named stopped at 15 only.
+    # Before: each was charged from the topic's first alert (10), and the three tied.
+    add_member(G, "topic:/diagnostics")
+    for n in (CAM, LIDAR, IMU):
+        add_flow_edge(G, n, "topic:/diagnostics", "pub")
+    diag = [al("topic:/diagnostics", "topic_rate", 10, "warn", publishers=[CAM]),
+            al("topic:/diagnostics", "topic_rate", 15, "warn", publishers=[CAM, LIDAR, IMU])]
+    by, order = rank(G, diag + silent(IMAGE, 11))
+    assert order[0] == CAM and "indistinguishable_from" not in by[CAM].evidence
+    assert by[LIDAR].evidence["upstream"] > 0 and by[IMU].evidence["upstream"] > 0  # excused by the camera
+
+
 MERGE, MERGED = "node:/merger", "topic:/merged"
 
 

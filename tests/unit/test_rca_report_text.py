@@ -59,3 +59,13 @@ def test_a_node_told_apart_by_a_waiting_client_says_so():
     assert report_markdown(causes).splitlines()[-2:] == [
         "", f"`{A}` runs in `process:7` with other candidates; `{C}` waited on it as its symptoms began, "
         "which tells it from them."]
+
+
+def test_the_likeliest_blocker_of_a_stalled_executor_says_so():
+    causes = [{"member": n, "score": x, "trajectory": [n], "evidence": {"process": "process:7", "blocked": x}}
+              for n, x in ((A, 0.84), (B, 0.16))]
+    assert report_markdown(causes).splitlines()[-2:] == [
+        "", f"`{A}` is the likeliest of `process:7`'s stalled nodes to have blocked its executor (84%): "
+        "its next message was due as they stopped."]
+    tied = [{**rc, "evidence": {**rc["evidence"], "indistinguishable_from": [B]}} for rc in causes[:1]]
+    assert "blocked" not in report_markdown(tied).split("|---|")[-1]

@@ -1,0 +1,93 @@
+"""A stall of a single-threaded executor: which fellow's callback blocked it, from when each
+one's next message was due (`siblings.blocked_first`)."""
+
+from __future__ import annotations
+
+import pytest
+
+from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
+from stream_viz.rca import RcaSettings, analyze
+from stream_viz.rca.siblings import BEAT_ERROR, LATE_S, OUTPUT_PRIOR, blocked_first
+from stream_viz.records import Alert
+
+CAM, LIDAR, IMU = "node:/cam", "node:/lidar", "node:/imu"
+IMAGE, SCAN, IMUT = "topic:/image", "topic:/scan", "topic:/imu"
+BOX = "process:7"
+
+
+def test_a_slow_node_due_as_the_executor_stopped_blocked_it_likelier_than_a_fast_one():
+    # The 6 Hz camera's next frame was due at 10.125 and never came; the 100 Hz IMU published
+    # until 10.115 (due 10.125 too), the 15 Hz lidar until 10.075 (due 10.142: it had not missed
+    # a beat). The lidar does not fit (the IMU missed its beat 17 ms before the lidar's due).
+    odds = blocked_first({"cam": (9.958, 10.125, 1 / 6), "imu": (10.115, 10.125, 0.01),
+                          "lidar": (10.075, 10.142, 1 / 15)})
+    hidden = (1 - OUTPUT_PRIOR) * (0.010 + LATE_S)  # another callback, between 10.115 and 10.125
+
+    def fit(beat):
+        return OUTPUT_PRIOR * (beat + LATE_S + BEAT_ERROR * beat) + hidden
+
+    total = fit(1 / 6) + fit(0.01) + hidden
+    assert odds["cam"] == pytest.approx(fit(1 / 6) / total)
+    assert odds["imu"] == pytest.approx(fit(0.01) / total)
+    assert odds["lidar"] == pytest.approx(hidden / total)
+    assert odds["cam"] > 6 * odds["imu"] > 0
+
+
+def test_two_nodes_of_one_beat_due_together_are_alike_and_one_node_says_nothing():
+    odds = blocked_first({"a": (9.0, 10.0, 1.0), "b": (9.004, 10.004, 1.0)})
+    assert odds["a"] == pytest.approx(0.5) and odds["b"] == pytest.approx(0.5)
+    assert blocked_first({"a": (9.0, 10.0, 1.0)}) == {}
+
+
+@pytest.fixture
+def G():
+    """A sensor container (process 7: cam, lidar, imu on one executor)."""
+    g = new_graph()
+    for m in (CAM, LIDAR, IMU, IMAGE, SCAN, IMUT, BOX):
+        add_member(g, m)
+    for node, topic in ((CAM, IMAGE), (LIDAR, SCAN), (IMU, IMUT)):
+        add_flow_edge(g, node, topic, "pub")
+        add_tree_edge(g, BOX, node)
+    return g
+
+
+def silent(topic, last, beat, t0=11.0):
+    """topic_rate's silence alerts: the newest message at ``last``, one every ``beat`` before."""
+    return [Alert(topic, "topic_rate", t0 + 5 * k, "error", "silent", {"since": last, "since_within": beat})
+            for k in range(3)]
+
+
+def rank(G, alerts):
+    r = analyze(G, alerts, RcaSettings(), None)
+    return {rc.member: rc for rc in r.root_causes}, [rc.member for rc in r.root_causes]
+
+
+def test_the_node_whose_frame_was_due_as_its_container_stalled_ranks_first(G):
+    # Before: the three tied (one executor, outputs silent together), each 1/3 likely first.
+    alerts = silent(IMAGE, 9.958, 1 / 6) + silent(IMUT, 10.115, 0.01) + silent(SCAN, 10.075, 1 / 15)
+    by, order = rank(G, alerts)
+    assert order[0] == CAM
+    assert by[CAM].score > by[IMU].score > by[LIDAR].score
+    assert "indistinguishable_from" not in by[CAM].evidence
+    assert by[CAM].evidence["blocked"] > 0.8
+    assert by[LIDAR].evidence["upstream"] > by[IMU].evidence["upstream"] > 0  # excused by the camera
+
+
+def test_fellows_due_alike_stay_tied(G):
+    # Three 10 Hz drivers all due within 4 ms of each other: nothing tells which one blocked.
+    alerts = silent(IMAGE, 10.0, 0.1) + silent(IMUT, 10.002, 0.1) + silent(SCAN, 10.004, 0.1)
+    by, order = rank(G, alerts)
+    box = {CAM, LIDAR, IMU}
+    assert set(order) == box and len({by[n].score for n in box}) == 1
+    for n in box:
+        assert by[n].evidence["indistinguishable_from"] == sorted(box - {n})
+
+
+def test_a_slow_node_whose_silence_is_noticed_later_is_still_a_fellow_of_the_stall(G):
+    # The 2 Hz camera blocks at its due, 10.5; the 100 Hz IMU's silence is noticed at 11, the
+    # camera's only at 14 (a slow topic takes longer to be called silent). Before: the IMU,
+    # noticed first, excused the camera and ranked first.
+    alerts = silent(IMAGE, 10.0, 0.5, t0=14.0) + silent(IMUT, 10.495, 0.01, t0=11.0)
+    by, order = rank(G, alerts)
+    assert order[0] == CAM and by[CAM].evidence["blocked"] > 0.9
+    assert by[IMU].evidence["upstream"] > 0
