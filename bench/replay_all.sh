@@ -1,6 +1,7 @@
 #!/bin/bash
 # Replay every committed samples file (bench/results/**/*.jsonl.gz) through the code of a work tree;
-# print one line per file: its alert count and top 3 (and plugin problems, if any).
+# print one line per file: its alert count and top 3 (how many share the first place when more
+# than one, and plugin problems, if any).
 #
 #   bash bench/replay_all.sh [TREE] > out.txt     # TREE: a work tree (default: this repository)
 #
@@ -31,8 +32,11 @@ try:
 except Exception as e:
     print(f, "ERROR", e)
     sys.exit()
-top = [c["member"] for c in r["root_causes"][:3]]
+causes = r["root_causes"]
+top = [c["member"] for c in causes[:3]]
+first = sum(1 for c in causes if causes and c["score"] == causes[0]["score"])  # how many share first place
 probs = sum(1 for line in open(log) if "plugin problem" in line)
-print(f"{f}: alerts={len(r['alerts'])} top3={top}" + (f" plugin_problems={probs}" if probs else ""))
+print(f"{f}: alerts={len(r['alerts'])} top3={top}" + (f" first_tied={first}" if first > 1 else "")
+      + (f" plugin_problems={probs}" if probs else ""))
 PY
 done < "$work/files"

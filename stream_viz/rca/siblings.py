@@ -36,8 +36,8 @@ HOPS = 6  # how far upstream a stalled node's inputs are followed to a fellow (a
 # A hang blocks the callback that publishes (a read, a lock, a call made before the message) this
 # often; otherwise another callback (a subscription that only keeps state, a service).
 OUTPUT_PRIOR = 0.7
-LATE_S = 0.01  # a timer due while another callback runs waits for it (and the receiver's clock)
-BEAT_ERROR = 0.05  # a beat learned from a rate is off by up to this fraction
+LATE_S = 0.003  # a timer due while another callback runs waits for it (a few ms in rclpy)
+BEAT_ERROR = 0.01  # a beat learned from a steady rate is off by up to this fraction
 TELLS = 3.0  # a fellow this many times likelier to have blocked the executor tells it apart
 
 
@@ -140,19 +140,27 @@ def blocked_first(dues: Mapping[str, tuple[float, float, float]]) -> dict[str, f
     due fits is the blocker with a likelihood ∝ its beat: a slow node due just as the executor
     stopped is less of a chance than a fast one. Another callback (one that publishes nothing)
     may have blocked instead (1 − `OUTPUT_PRIOR`) anywhere from the newest message of them all
-    to the first due: alike for every node, ∝ that window.
+    to the first due: alike for every node, ∝ that window. Of fellows in step (one beat, due
+    together: fed by one message, or timers in phase), the executor runs them in the same order
+    every round: one that published after another in their last round cannot have blocked it.
     """
     if len(dues) < 2:
         return {}
     first = min(due for _, due, _ in dues.values())
     window = max(0.0, first - max(last for last, _, _ in dues.values())) + LATE_S
+    fit = {n for n, (_, due, beat) in dues.items() if due <= first + LATE_S + BEAT_ERROR * beat}
     out = {}
-    for n, (_, due, beat) in dues.items():
-        slack = LATE_S + BEAT_ERROR * beat
-        fits = due <= first + slack
-        out[n] = OUTPUT_PRIOR * (beat + slack) * fits + (1 - OUTPUT_PRIOR) * window
+    for n, (_, _, beat) in dues.items():
+        fits = n in fit and not any(_ahead(dues[m], dues[n]) for m in fit - {n})
+        out[n] = OUTPUT_PRIOR * (beat + LATE_S + BEAT_ERROR * beat) * fits + (1 - OUTPUT_PRIOR) * window
     total = sum(out.values())
     return {n: x / total for n, x in out.items()}
+
+
+def _ahead(a: tuple[float, float, float], b: tuple[float, float, float]) -> bool:
+    """True when fellow ``a`` runs before ``b`` on their executor: in step with it (the same beat,
+    due together) and it published first in their last round."""
+    return (abs(a[2] - b[2]) <= BEAT_ERROR * b[2] and abs(a[1] - b[1]) <= LATE_S and a[0] < b[0])
 
 
 def _timing(views: Mapping[str, OwnChange], n: str, fellows: set[str],

@@ -16,7 +16,13 @@ from dataclasses import dataclass, field
 import networkx as nx
 import numpy as np
 
-from stream_viz.model.queries import called_servers, calling_clients, nodes_of_process, process_of_node
+from stream_viz.model.queries import (
+    called_servers,
+    calling_clients,
+    nodes_of_process,
+    process_of_node,
+    subscribed_topics,
+)
 from stream_viz.model.traffic import idle, measured
 from stream_viz.rca import siblings
 from stream_viz.rca.causal import causes_in, is_node, outputs, publishers
@@ -28,6 +34,7 @@ from stream_viz.records import Alert
 INF = float("inf")
 IMPLIED_SERVER = 0.5  # a server suspected only because a client of it stands unexplained
 UNEXPLAINED = 0.5  # a client whose inputs explain less than this makes its servers suspects
+FOLLOWS = 0.1  # an output whose beat is within this fraction of its input's follows it one to one
 
 
 @dataclass
@@ -313,6 +320,7 @@ def node_views(
     ev_passive = _metric_views(G, views, evidence or {}, settings.metric)
     shared_by = _alert_views(G, views, s, settings.charge, settings.tolerance)
     _charge_shared(G, s, views, shared_by, settings)
+    _fed_dues(G, s, views)
     stalled = siblings.stalls(G, views, settings.tolerance)
     _settle(G, views, views, s, ev_passive, settings, stalled)
     _imply_servers(G, s, views, ev_passive, settings)
@@ -415,6 +423,20 @@ def _beat(v: NodeView, s: Symptoms, m: str) -> None:
         if due < v.due:
             v.due, v.beat = due, beat
         v.last = max(v.last, last)
+
+
+def _fed_dues(G: nx.MultiDiGraph, s: Symptoms, views: Mapping[str, NodeView]) -> None:
+    """Move a silent node's due to its input's newest message when its outputs follow that input
+    one to one (the same beat, within `FOLLOWS`) and the input's newest message came after the
+    node's own newest output: its callback on that message never published (a filter in a
+    container's pipeline whose predecessor published its last message)."""
+    for n, v in views.items():
+        if v.due == INF:
+            continue
+        for t in subscribed_topics(G, n):
+            got = s.silence.get(t)
+            if got is not None and got[0] > v.last and abs(got[2] - v.beat) <= FOLLOWS * v.beat:
+                v.due = min(v.due, got[0])
 
 
 def _waited_since(client: NodeView | None, t: float, tolerance: float) -> float:

@@ -51,10 +51,10 @@ def G():
     return g
 
 
-def silent(topic, last, beat, t0=11.0):
+def silent(topic, last, beat, t0=11.0, **data):
     """topic_rate's silence alerts: the newest message at ``last``, one every ``beat`` before."""
-    return [Alert(topic, "topic_rate", t0 + 5 * k, "error", "silent", {"since": last, "since_within": beat})
-            for k in range(3)]
+    data = {"since": last, "since_within": beat, **data}
+    return [Alert(topic, "topic_rate", t0 + 5 * k, "error", "silent", data) for k in range(3)]
 
 
 def rank(G, alerts):
@@ -73,9 +73,19 @@ def test_the_node_whose_frame_was_due_as_its_container_stalled_ranks_first(G):
     assert by[LIDAR].evidence["upstream"] > by[IMU].evidence["upstream"] > 0  # excused by the camera
 
 
-def test_fellows_due_alike_stay_tied(G):
-    # Three 10 Hz drivers all due within 4 ms of each other: nothing tells which one blocked.
+def test_of_fellows_in_step_the_one_that_published_first_blocked_them(G):
+    # Three 10 Hz drivers in step: the executor runs them in the same order every round, the
+    # camera first (its last message 2 ms before the IMU's): the IMU and the lidar cannot have
+    # blocked it before it published.
     alerts = silent(IMAGE, 10.0, 0.1) + silent(IMUT, 10.002, 0.1) + silent(SCAN, 10.004, 0.1)
+    by, order = rank(G, alerts)
+    assert order[0] == CAM and "indistinguishable_from" not in by[CAM].evidence
+    assert by[IMU].evidence["upstream"] > 0 and by[LIDAR].evidence["upstream"] > 0
+
+
+def test_fellows_due_alike_stay_tied(G):
+    # Three 10 Hz outputs whose last messages came together: nothing tells which one blocked.
+    alerts = silent(IMAGE, 10.0, 0.1) + silent(IMUT, 10.0, 0.1) + silent(SCAN, 10.0, 0.1)
     by, order = rank(G, alerts)
     box = {CAM, LIDAR, IMU}
     assert set(order) == box and len({by[n].score for n in box}) == 1
@@ -91,3 +101,30 @@ def test_a_slow_node_whose_silence_is_noticed_later_is_still_a_fellow_of_the_sta
     by, order = rank(G, alerts)
     assert order[0] == CAM and by[CAM].evidence["blocked"] > 0.9
     assert by[IMU].evidence["upstream"] > 0
+
+
+def test_a_filter_that_never_answered_its_input_blocked_the_pipeline():
+    # A filter container (process 2, one executor): crop → /cropped → ground and voxel, each 10 Hz,
+    # one output per input; the raw scan comes from outside and goes on. The crop's last cloud
+    # came at 10.017, after the ground's and the voxel's last outputs: each was due then (not a
+    # beat after its own last output), the ground first in their round (9.917 before 9.918).
+    # topic_rate said the crop's executor stopped while its input arrived: one stall.
+    crop, ground, voxel = "node:/crop", "node:/ground", "node:/voxel"
+    g = new_graph()
+    for m in ("node:/driver", "topic:/raw", crop, "topic:/cropped", ground, "topic:/no_ground", voxel,
+              "topic:/down", "process:1", "process:2"):
+        add_member(g, m)
+    add_tree_edge(g, "process:1", "node:/driver")
+    for n in (crop, ground, voxel):
+        add_tree_edge(g, "process:2", n)
+    flow = (("node:/driver", "topic:/raw", (crop,)), (crop, "topic:/cropped", (ground, voxel)),
+            (ground, "topic:/no_ground", ()), (voxel, "topic:/down", ()))
+    for pub, topic, subs in flow:
+        add_flow_edge(g, pub, topic, "pub")
+        for s in subs:
+            add_flow_edge(g, topic, s, "sub")
+    alerts = (silent("topic:/cropped", 10.017, 0.1, executor_stopped=True)
+              + silent("topic:/no_ground", 9.917, 0.1) + silent("topic:/down", 9.918, 0.1))
+    by, order = rank(g, alerts)
+    assert order[0] == ground and by[ground].evidence["blocked"] > 0.9
+    assert "indistinguishable_from" not in by[ground].evidence
