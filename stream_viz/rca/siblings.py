@@ -19,7 +19,7 @@ before it publishes stops the executor at its own node's due, before anyone else
 from __future__ import annotations
 
 import itertools
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -56,6 +56,7 @@ class OwnChange(Protocol):
     due: float
     beat: float
     last: float
+    inputs: list[tuple[float, float]]
 
 
 @dataclass
@@ -130,7 +131,8 @@ def stalls(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float) -> di
     return out
 
 
-def blocked_first(dues: Mapping[str, tuple[float, float, float]]) -> dict[str, float]:
+def blocked_first(dues: Mapping[str, tuple[float, float, float]],
+                  inputs: Mapping[str, Sequence[tuple[float, float]]] | None = None) -> dict[str, float]:
     """Return node → how likely its callback blocked the executor the nodes shared (sums to 1).
 
     ``dues``: node → (its newest message before the stall, when its next one was due, its beat),
@@ -143,18 +145,34 @@ def blocked_first(dues: Mapping[str, tuple[float, float, float]]) -> dict[str, f
     to the first due: alike for every node, ∝ that window. Of fellows in step (one beat, due
     together: fed by one message, or timers in phase), the executor runs them in the same order
     every round: one that published after another in their last round cannot have blocked it.
+    ``inputs``: node → (arrival, beat) of the newest message of each stopped input whose callback
+    publishes nothing (not the one its outputs follow): one that arrived as the last of them all
+    (within `LATE_S` of the newest message) is a callback that may have blocked at that arrival,
+    weighed as a due that fits (a merger that blocks in its IMU callback).
     """
     if len(dues) < 2:
         return {}
     first = min(due for _, due, _ in dues.values())
-    window = max(0.0, first - max(last for last, _, _ in dues.values())) + LATE_S
-    fit = {n for n, (_, due, beat) in dues.items() if due <= first + LATE_S + BEAT_ERROR * beat}
+    newest = max(last for last, _, _ in dues.values())
+    window = max(0.0, first - newest) + LATE_S
+    fit = {n for n, (_, due, beat) in dues.items() if due <= first + _slack(beat)}
     out = {}
     for n, (_, _, beat) in dues.items():
-        fits = n in fit and not any(_ahead(dues[m], dues[n]) for m in fit - {n})
-        out[n] = OUTPUT_PRIOR * (beat + LATE_S + BEAT_ERROR * beat) * fits + (1 - OUTPUT_PRIOR) * window
+        beats = [beat] if n in fit and not any(_ahead(dues[m], dues[n]) for m in fit - {n}) else []
+        beats += [b for at, b in (inputs or {}).get(n, ()) if newest - LATE_S <= at <= first + LATE_S]
+        out[n] = OUTPUT_PRIOR * max([_weight(b) for b in beats], default=0.0) + (1 - OUTPUT_PRIOR) * window
     total = sum(out.values())
     return {n: x / total for n, x in out.items()}
+
+
+def _slack(beat: float) -> float:
+    """How late after the first due a due at a beat of ``beat`` s still counts as first."""
+    return LATE_S + BEAT_ERROR * beat
+
+
+def _weight(beat: float) -> float:
+    """The likelihood of a blocked callback due at a beat of ``beat`` s (with its slack)."""
+    return beat + _slack(beat)
 
 
 def _ahead(a: tuple[float, float, float], b: tuple[float, float, float]) -> bool:
@@ -171,7 +189,8 @@ def _timing(views: Mapping[str, OwnChange], n: str, fellows: set[str],
     if group not in cache:
         vs = {m: views[m] for m in group}
         timed = all(v.exited == INF and v.due < INF and v.beat > 0 for v in vs.values())
-        cache[group] = blocked_first({m: (v.last, v.due, v.beat) for m, v in vs.items()}) if timed else {}
+        cache[group] = blocked_first({m: (v.last, v.due, v.beat) for m, v in vs.items()},
+                                     {m: v.inputs for m, v in vs.items()}) if timed else {}
     return cache[group]
 
 
@@ -253,13 +272,13 @@ def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float,
         for n in nodes:
             v = views[n]
             verdict = Verdict(p)
+            odds = _timing(views, n, stalled[n], timings) if n in stalled else {}
+            verdict.blocked = odds.get(n)
             for m in nodes:
                 if m == n:
                     continue
                 w = views[m]
                 if m in stalled.get(n, ()):
-                    odds = _timing(views, n, stalled[n], timings)
-                    verdict.blocked = odds.get(n)
                     if _spoke(w, tol) != _spoke(v, tol):  # only the one that logged was running
                         if _spoke(w, tol):
                             verdict.excuse = max(verdict.excuse, w.own_anomaly * (1.0 - w.upstream))

@@ -61,8 +61,8 @@ class Symptoms:
     the first time each was named;
     ``executor_stopped`` the members an alert said stopped with their publisher's executor (data
     ``executor_stopped``: its thread idle while its input arrives); ``silence`` a silent member's
-    newest message, the next one due and its beat (data ``since``, ``since`` + ``since_within``,
-    ``since_within``), of its newest silence.
+    newest message and its beat (data ``since``, ``since_within``: its next was due at their sum),
+    of its newest silence.
     """
 
     times: dict[str, np.ndarray] = field(default_factory=dict)
@@ -82,7 +82,7 @@ class Symptoms:
     vague: dict[str, float] = field(default_factory=dict)
     culprits: dict[str, dict[str, float]] = field(default_factory=dict)
     executor_stopped: set[str] = field(default_factory=set)
-    silence: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    silence: dict[str, tuple[float, float]] = field(default_factory=dict)
     latest: float = -INF
     count: int = 0
 
@@ -156,7 +156,7 @@ def collect_symptoms(
             within = data.get("since_within", 0.0)
             within = float(within) if isinstance(within, int | float) and within > 0 else 0.0
             if within and float(since) > s.silence.get(m, (-INF,))[0]:  # its newest silence
-                s.silence[m] = (float(since), float(since) + within, within)
+                s.silence[m] = (float(since), within)
             s.began_by[m] = min(s.began_by.get(m, INF), float(since) + within, t)
         else:
             s.vague[m] = min(s.vague.get(m, INF), t)
@@ -202,7 +202,8 @@ class NodeView:
     do not say (`Symptoms`): what `began_after` compares. ``awaited``: the clients calling it
     that complained while its symptoms were on (`_await`). ``due``/``beat``/``last``: of its
     silent outputs, when the first next message was due and that output's beat, and its newest
-    message (`siblings.blocked_first` reads them); ``blocked``: how likely its callback blocked
+    message (`siblings.blocked_first` reads them), and ``inputs`` the newest arrival and beat of
+    each stopped input its outputs do not follow; ``blocked``: how likely its callback blocked
     the executor of a stall it is in (None: not told by that).
     """
 
@@ -239,6 +240,7 @@ class NodeView:
     beat: float = 0.0
     last: float = -INF
     blocked: float | None = None
+    inputs: list[tuple[float, float]] = field(default_factory=list)
 
     def active(self, t0: float, t1: float, own: bool = False) -> float:
         """Its anomaly when one of its symptoms held in ``[t0, t1]``; else its untimed evidence
@@ -419,23 +421,28 @@ def _beat(v: NodeView, s: Symptoms, m: str) -> None:
     """Note the silence of ``v``'s output ``m``: when its next message was due and its beat, and
     its newest message before it (what told when a stalled executor blocked, `siblings`)."""
     if m in s.silence:
-        last, due, beat = s.silence[m]
-        if due < v.due:
-            v.due, v.beat = due, beat
+        last, beat = s.silence[m]
+        if last + beat < v.due:
+            v.due, v.beat = last + beat, beat
         v.last = max(v.last, last)
 
 
 def _fed_dues(G: nx.MultiDiGraph, s: Symptoms, views: Mapping[str, NodeView]) -> None:
-    """Move a silent node's due to its input's newest message when its outputs follow that input
-    one to one (the same beat, within `FOLLOWS`) and the input's newest message came after the
-    node's own newest output: its callback on that message never published (a filter in a
-    container's pipeline whose predecessor published its last message)."""
+    """Read a silent node's stopped inputs. When its outputs follow one one to one (the same beat,
+    within `FOLLOWS`) and its newest message came after the node's own newest output, move the
+    node's due to it: its callback on that message never published (a filter in a container's
+    pipeline whose predecessor published its last message). Another input (whose callback
+    publishes nothing) goes to ``inputs``: its newest arrival may be where a callback blocked."""
     for n, v in views.items():
         if v.due == INF:
             continue
         for t in subscribed_topics(G, n):
             got = s.silence.get(t)
-            if got is not None and got[0] > v.last and abs(got[2] - v.beat) <= FOLLOWS * v.beat:
+            if got is None:
+                continue
+            if abs(got[1] - v.beat) > FOLLOWS * v.beat:
+                v.inputs.append(got)
+            elif got[0] > v.last:
                 v.due = min(v.due, got[0])
 
 

@@ -580,11 +580,16 @@ def test_a_stalled_executor_silences_its_nodes_together_and_the_rca_ties_them(ch
         silent = {a.member for a in mon.store.alerts(since=t0) if a.data.get("symptom") == "silence"}
         causes = mon.engine.result().root_causes
         if mode == "hang":
-            # The merger stopped the thread: all three go quiet at once, and which node blocked it
-            # cannot be told from the order of their quiets. The merger is not excused by its input.
+            # The merger stopped the thread: all three go quiet at once. Its IMU callback publishes
+            # nothing, so when each next message was due cannot single it out: it blocked at the
+            # IMU's last arrival, the last thing the thread did, and stays in the first place, tied
+            # with a node whose due was first (which one depends on the timers' phase). The merger
+            # is not excused by its input.
             assert silent == {"topic:/raw", "topic:/imu", "topic:/merged"}, mon.store.alerts(since=t0)
-            first = [c.member for c in causes if abs(c.score - causes[0].score) < 1e-6]
-            assert set(first) == {"node:/driver", "node:/imu", "node:/merger"}, causes[:4]
+            first = [c for c in causes if abs(c.score - causes[0].score) < 1e-6]
+            box = {"node:/driver", "node:/imu", "node:/merger"}
+            assert "node:/merger" in {c.member for c in first} <= box and len(first) >= 2, causes[:4]
+            assert next(c for c in first if c.member == "node:/merger").evidence["upstream"] == 0.0
         else:
             # The thread goes on (the IMU publishes): the merger's quiet is its input's.
             assert silent == {"topic:/raw"}, mon.store.alerts(since=t0)

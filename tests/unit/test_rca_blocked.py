@@ -9,6 +9,7 @@ from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new
 from stream_viz.rca import RcaSettings, analyze
 from stream_viz.rca.siblings import BEAT_ERROR, LATE_S, OUTPUT_PRIOR, blocked_first
 from stream_viz.records import Alert
+from tests.unit.test_rca_containers import GROUND, pipeline
 
 CAM, LIDAR, IMU = "node:/cam", "node:/lidar", "node:/imu"
 IMAGE, SCAN, IMUT = "topic:/image", "topic:/scan", "topic:/imu"
@@ -109,22 +110,22 @@ def test_a_filter_that_never_answered_its_input_blocked_the_pipeline():
     # came at 10.017, after the ground's and the voxel's last outputs: each was due then (not a
     # beat after its own last output), the ground first in their round (9.917 before 9.918).
     # topic_rate said the crop's executor stopped while its input arrived: one stall.
-    crop, ground, voxel = "node:/crop", "node:/ground", "node:/voxel"
-    g = new_graph()
-    for m in ("node:/driver", "topic:/raw", crop, "topic:/cropped", ground, "topic:/no_ground", voxel,
-              "topic:/down", "process:1", "process:2"):
-        add_member(g, m)
-    add_tree_edge(g, "process:1", "node:/driver")
-    for n in (crop, ground, voxel):
-        add_tree_edge(g, "process:2", n)
-    flow = (("node:/driver", "topic:/raw", (crop,)), (crop, "topic:/cropped", (ground, voxel)),
-            (ground, "topic:/no_ground", ()), (voxel, "topic:/down", ()))
-    for pub, topic, subs in flow:
-        add_flow_edge(g, pub, topic, "pub")
-        for s in subs:
-            add_flow_edge(g, topic, s, "sub")
     alerts = (silent("topic:/cropped", 10.017, 0.1, executor_stopped=True)
               + silent("topic:/no_ground", 9.917, 0.1) + silent("topic:/down", 9.918, 0.1))
-    by, order = rank(g, alerts)
-    assert order[0] == ground and by[ground].evidence["blocked"] > 0.9
-    assert "indistinguishable_from" not in by[ground].evidence
+    by, order = rank(pipeline(), alerts)
+    assert order[0] == GROUND and by[GROUND].evidence["blocked"] > 0.9
+    assert "indistinguishable_from" not in by[GROUND].evidence
+
+
+def test_an_input_whose_callback_publishes_nothing_may_be_where_it_blocked():
+    # A merger republishes the 10 Hz /raw and reads the 30 Hz /imu; its IMU callback blocks. All
+    # three last published at 10.0; the IMU's next was due first (10.033). Without its inputs the
+    # IMU would be the blocker (3.4 times the others); the IMU message that arrived last (10.0) is
+    # a callback of the merger's that may have blocked there, weighed as the IMU's due.
+    dues = {"imu": (10.0, 10.0 + 1 / 30, 1 / 30), "driver": (10.0, 10.1, 0.1), "merger": (10.0, 10.1, 0.1)}
+    alone = blocked_first(dues)
+    assert alone["imu"] > 3 * alone["merger"] and alone["merger"] == pytest.approx(alone["driver"])
+    odds = blocked_first(dues, {"merger": [(10.0, 1 / 30)]})
+    assert odds["merger"] == pytest.approx(odds["imu"]) and odds["imu"] > 3 * odds["driver"]
+    late = blocked_first(dues, {"merger": [(9.9, 1 / 30)]})  # an older arrival: it was answered
+    assert late == pytest.approx(alone)

@@ -228,26 +228,35 @@ def test_the_last_words_before_a_crash_tell_the_crashed_node_apart(G):
     assert by[CAM].evidence["upstream"] > 0 and by[IMU].evidence["upstream"] > 0  # excused by the lidar
 
 
+CROP, GROUND, VOXEL = "node:/crop", "node:/ground", "node:/voxel"
+
+
+def pipeline():
+    """A lidar driver (process 1) feeding a filter container (process 2): crop → /cropped → ground
+    → /no_ground, crop → /cropped → voxel → /down."""
+    g = new_graph()
+    for m in ("node:/driver", "topic:/raw", CROP, "topic:/cropped", GROUND, "topic:/no_ground", VOXEL,
+              "topic:/down", "process:1", "process:2"):
+        add_member(g, m)
+    add_tree_edge(g, "process:1", "node:/driver")
+    for n in (CROP, GROUND, VOXEL):
+        add_tree_edge(g, "process:2", n)
+    flow = (("node:/driver", "topic:/raw", (CROP,)), (CROP, "topic:/cropped", (GROUND, VOXEL)),
+            (GROUND, "topic:/no_ground", ()), (VOXEL, "topic:/down", ()))
+    for pub, topic, subs in flow:
+        add_flow_edge(g, pub, topic, "pub")
+        for sub in subs:
+            add_flow_edge(g, topic, sub, "sub")
+    return g
+
+
 def test_a_pipeline_in_one_container_whose_executor_stopped_ties_its_filters():
     # A lidar driver (process 1) feeds a filter container (process 2, one executor): crop → /cropped
     # → ground → /no_ground, crop → /cropped → voxel → /down. The raw scan goes on; all three
     # outputs stop at once. Only the crop filter is fed from outside the container, so the data
     # flow alone blames it; the crop output's alert saying its executor stopped while its input
     # arrived makes it one stall: the three tie (the ground filter had hung).
-    crop, ground, voxel = "node:/crop", "node:/ground", "node:/voxel"
-    g = new_graph()
-    for m in ("node:/driver", "topic:/raw", crop, "topic:/cropped", ground, "topic:/no_ground", voxel,
-              "topic:/down", "process:1", "process:2"):
-        add_member(g, m)
-    add_tree_edge(g, "process:1", "node:/driver")
-    for n in (crop, ground, voxel):
-        add_tree_edge(g, "process:2", n)
-    flow = (("node:/driver", "topic:/raw", (crop,)), (crop, "topic:/cropped", (ground, voxel)),
-            (ground, "topic:/no_ground", ()), (voxel, "topic:/down", ()))
-    for pub, topic, subs in flow:
-        add_flow_edge(g, pub, topic, "pub")
-        for s in subs:
-            add_flow_edge(g, topic, s, "sub")
+    g, crop, ground, voxel = pipeline(), CROP, GROUND, VOXEL
     others = silent("topic:/no_ground", 10) + silent("topic:/down", 10)
     by, order = rank(g, silent("topic:/cropped", 10) + others)
     assert order[0] == crop and "indistinguishable_from" not in by[crop].evidence
