@@ -13,7 +13,9 @@ the healthy run and before each injection).
 
 Faults: ``kill`` SIGKILLs the process; ``cpu`` / ``leak`` write ``FAULT_DIR/<process>.<how>``
 (the process starts its CPU burner or its leak); ``file:<what>`` writes ``<what>`` to the
-target node's fault file (`Robot.fault_file`); a robot adds its own kinds in `Robot.inject`.
+target node's fault file (`Robot.fault_file`); `LaunchedRobot` adds launch's ``respawn:<word>``
+(a crash loop) and ``restart:<word>`` (a redeployment with a new configuration); a robot adds its
+own kinds in `Robot.inject`.
 """
 
 from __future__ import annotations
@@ -124,6 +126,67 @@ class NamespacedRobot(Robot):
 
     def fault_file(self, target: str) -> Path:
         return self.fault_dir / target.strip("/").replace("/", ".")
+
+
+RESPAWN_DELAY_S = 1.0  # the launch file's respawn_delay
+
+
+class LaunchedRobot(NamespacedRobot):
+    """The hand-written robot plus two launch-file behaviours: ``respawn:<word>`` (the word goes to the
+    node's fault file, the process dies by itself and is started again ``RESPAWN_DELAY_S`` after each
+    exit) and ``restart:<word>`` (the word goes to the node's fault file, a redeployment ends the
+    process with Ctrl-C and starts it again once, reading its new configuration)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._threads: list[threading.Thread] = []
+        self._spawn_lock = threading.Lock()
+
+    def inject(self, fault: str) -> None:
+        how, target, process = self.design.faults[fault]
+        kind, _, word = how.partition(":")
+        if kind not in ("respawn", "restart"):
+            super().inject(fault)
+            return
+        self.fault_file(target).write_text(word)
+        body = self._respawn if kind == "respawn" else self._restart
+        t = threading.Thread(target=body, args=(process,), daemon=True)
+        t.start()
+        self._threads.append(t)
+
+    def _respawn(self, process: str) -> None:
+        while not self.stop.is_set():
+            p = self.procs[process]
+            while p.poll() is None and not self.stop.wait(0.1):
+                pass
+            if self.stop.wait(RESPAWN_DELAY_S):
+                return
+            with self._spawn_lock:
+                if self.stop.is_set():
+                    return
+                self.spawn(process)
+
+    def _restart(self, process: str) -> None:
+        p = self.procs[process]
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGINT)
+        try:
+            p.wait(5)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait(5)
+        if self.stop.wait(RESPAWN_DELAY_S):
+            return
+        with self._spawn_lock:
+            if not self.stop.is_set():
+                self.spawn(process)
+
+    def end(self) -> None:
+        with self._spawn_lock:
+            self.stop.set()
+        for t in self._threads:
+            t.join(7.0)
+        super().end()
 
 
 def run(robot: Robot, fault: str | None, seconds_before: float, post: float,

@@ -214,9 +214,8 @@ from __future__ import annotations
 
 import os
 import sys
-import threading
 
-from bench.handwritten import Design, NamespacedRobot, main
+from bench.handwritten import Design, LaunchedRobot, main
 
 for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(var, "1")
@@ -265,56 +264,13 @@ DESIGN = Design(
     again_s=20.0,
 )
 NODES, FAULTS = DESIGN.nodes, DESIGN.faults
-RESPAWN_DELAY_S = 1.0  # the launch file's respawn_delay
-
-
-class HospitalRobot(NamespacedRobot):
-    """The hand-written robot plus launch's ``respawn=True`` for a crash-looping process
-    (``respawn:<word>``: the word goes to the node's fault file, the process dies by itself and is
-    started again ``RESPAWN_DELAY_S`` after each exit)."""
-
-    def __init__(self, *args, **kwargs) -> None:
-        super().__init__(*args, **kwargs)
-        self._respawners: list[threading.Thread] = []
-        self._respawn_lock = threading.Lock()
-
-    def inject(self, fault: str) -> None:
-        how, target, process = self.design.faults[fault]
-        if not how.startswith("respawn:"):
-            super().inject(fault)
-            return
-        self.fault_file(target).write_text(how.split(":", 1)[1])
-        t = threading.Thread(target=self._respawn, args=(process,), daemon=True)
-        t.start()
-        self._respawners.append(t)
-
-    def _respawn(self, process: str) -> None:
-        while not self.stop.is_set():
-            p = self.procs[process]
-            while p.poll() is None and not self.stop.wait(0.1):
-                pass
-            if self.stop.wait(RESPAWN_DELAY_S):
-                return
-            with self._respawn_lock:
-                if self.stop.is_set():
-                    return
-                self.spawn(process)
-
-    def end(self) -> None:
-        with self._respawn_lock:
-            self.stop.set()
-        for t in self._respawners:
-            t.join(2.0)
-        super().end()
-
-
 if __name__ == "__main__":
     sys.exit(
         main(
             None,
             __doc__,
             "hospital",
-            HospitalRobot,
+            LaunchedRobot,
             DESIGN,
             120.0,
             "s from the start to the injection (120: the tablet's second session connected, the robot "
