@@ -23,6 +23,7 @@ from stream_viz.detect.baseline import (
     held,
     streak,
 )
+from stream_viz.detect.process import publishers_busy
 from stream_viz.detect.reconfigure import learnt_since, relearn_from
 from stream_viz.detect.startup import standing
 from stream_viz.model.ids import name_of
@@ -34,7 +35,9 @@ JUMP_SAID_S = 60.0  # a clock's jump back is said in the stale alerts this long 
 class MessageAge(Plugin):
     """Alerts on watched topics whose messages arrive with old or impossible header stamps.
 
-    * ``stale`` (warn; error once the data are ``error_ms`` older than usual): the age rises
+    * ``stale`` (warn; error once the data are ``error_ms`` older than usual; not while every
+      publisher's process is busy beyond its own CPU baseline, `publishers_busy`: the CPU is the
+      symptom, ``process_resources``'): the age rises
       above the topic's own baseline by ``max(k·σ, min_rise_ms, rise_ratio × baseline)`` for
       ``confirm`` samples with a new message and for ``hold_s`` (the mean over the window, which
       one late message holds up), or sooner, for ``fast_confirm`` such samples, when the youngest
@@ -60,7 +63,8 @@ class MessageAge(Plugin):
     A skew the topic shows within ``learn_s`` of its first stamped message, and keeps, is its
     normal (a device that stamps with its own clock, a recording's old stamps): no alert, and a
     plausible standing skew (stamps ahead) is checked for staleness against its own baseline, the
-    offset cancelling out. A topic whose stamps were on time and then skew is news.
+    offset cancelling out. A topic whose stamps were on time and then skew is news. Transforms
+    stamped ahead by publishers on this computer are postdated on purpose (`_postdated`), no skew.
     """
 
     name = "message_age"
@@ -113,6 +117,7 @@ class MessageAge(Plugin):
                 counted = ctx.state.setdefault("messages", {})
                 counted[topic] = counted.get(topic, 0) + 1
             ahead, implausible = age < -s["skew_ms"], age > s["implausible_s"] * 1000.0
+            ahead = ahead and not _postdated(ctx, topic, -s["skew_ms"])
             skew = "ahead" if ahead else "implausible" if implausible else None
             if standing(ctx.state, topic, ctx.t, skew, s["learn_s"]):
                 if skew == "ahead":
@@ -130,6 +135,8 @@ class MessageAge(Plugin):
         s = ctx.settings
         if ctx.state.get("messages", {}).get(topic, 0) < s["min_messages"]:
             return  # a USBL fix every 4 s is in four samples: its normal age is learnt from messages
+        if publishers_busy(ctx, topic):
+            return  # its publishers' processes busy (their CPU's symptom): their callbacks run late
         since = learnt_since(ctx, topic, "stamp_age_ms")
         seen = excess(ctx, topic, "stamp_age_ms", s["min_rise_ms"], alerting, since=since)
         if seen is not None:
@@ -166,6 +173,20 @@ def looped(back_s: float, stamping_s: float, share: float = 0.3) -> bool:
     ``share`` of that time: a recording that looped, a simulation reset. A live clock that went
     back less, mid-stream, jumped (a device's clock reset): its data now arrive older."""
     return back_s >= share * stamping_s
+
+
+def _postdated(ctx: PluginContext, topic: str, ahead_ms: float) -> bool:
+    """True when ``topic`` carries transforms and its stamps ahead of our clock (``publisher_ages``
+    below ``ahead_ms``; all its publishers without them) come from publishers on this computer,
+    whose clock is ours: a transform is stamped in the future on purpose (AMCL's and Nav2's
+    ``transform_tolerance``, robot_localization's ``transform_time_offset``), so that lookups
+    at the present time find it. Not a skew, nor a delay."""
+    if "transform" not in str(ctx.attr(topic, "type", "")).lower():
+        return False
+    ages = ctx.attr(topic, "publisher_ages") or {}
+    ahead = [p for p, ms in ages.items() if ms < ahead_ms] if ages else ctx.publishers(topic)
+    here = {ctx.attr(h, "label") for h in ctx.members("host") if ctx.attr(h, "agent") == "local"}
+    return bool(ahead) and all(ctx.attr(p, "host") in here for p in ahead)
 
 
 def _late_publishers(ctx: PluginContext, topic: str, floor: float) -> list[str]:

@@ -13,7 +13,7 @@ from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import (
     BASELINE_SETTINGS,
     cached_baseline,
-    exceeds,
+    excursions,
     forget_baseline,
     held,
     robust,
@@ -21,6 +21,7 @@ from stream_viz.detect.baseline import (
 )
 from stream_viz.detect.lifecycle import transitions as lifecycle_transitions
 from stream_viz.detect.process import SETTINGS as PROCESS_SETTINGS
+from stream_viz.detect.process import publishers_busy
 from stream_viz.detect.rhythm import SAME_MESSAGE_S, Rhythm, follow, newest_message, quiet_limit, restarted
 from stream_viz.model.ids import name_of
 from stream_viz.model.qos import qos_policy
@@ -79,7 +80,7 @@ class TopicRate(Plugin):
       such a quiet is healthy, and not learned (its length is the state's, not the rhythm's).
       Nor when every publisher has an input that went quiet up to ``input_grace_s`` before the
       topic did: the quiet is the input's (`_inherited`), not learned either; nor while every
-      publisher's process is busy beyond its own CPU baseline (`_busy`: its executor held by its
+      publisher's process is busy beyond its own CPU baseline (`publishers_busy`: its executor held by its
       own work; the CPU is ``process_resources``' symptom); nor while every publisher says OK of
       itself on /diagnostics after the topic's next message was due, and nothing worse since its
       last (`_vouched`: a driver reporting its device fine while its output stops means it;
@@ -367,7 +368,7 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     if not r.departed and not stalled and _healthy_quiet(ctx, topic, r, transitions):
         r.explained = True
         return None
-    if not r.departed and (_inherited(ctx, topic, r, rhythms, transitions) or _busy(ctx, topic)):
+    if not r.departed and (_inherited(ctx, topic, r, rhythms, transitions) or publishers_busy(ctx, topic)):
         # For good once this sample's process metrics cover only the quiet: a span that began
         # before it (a late sample) may still show a stopped executor's last work.
         r.explained = ctx.t - ctx.state.get("interval", math.inf) >= r.newest
@@ -644,29 +645,6 @@ def _executor_ratio(ctx: PluginContext, node: str, q: dict[str, Any]) -> float:
     return ctx.value(proc, EXECUTOR_CPU) / ref
 
 
-def _busy(ctx: PluginContext, topic: str) -> bool:
-    """True when the process of every publisher of ``topic`` is busy beyond its own baseline now
-    (CPU risen as ``process_resources`` judges a rise, with its default ``k`` and floor): a node
-    whose executor is held by its own work (a plan computed in a callback) pauses all its topics.
-    The CPU is that process's symptom (``process_resources``, which learns its bursts), not one
-    more silence per topic."""
-    pubs = ctx.publishers(topic)
-    procs = {ctx.process_of(p) for p in pubs}
-    if not pubs or None in procs:
-        return False
-    return all(_cpu_risen(ctx, proc) for proc in procs)
-
-
-def _cpu_risen(ctx: PluginContext, proc: str) -> bool:
-    now = ctx.value(proc, "cpu_percent")
-    _, past = ctx.past(proc, "cpu_percent", last=PROCESS_SETTINGS["window"])
-    past = past[np.isfinite(past)]
-    if now != now or len(past) < PROCESS_SETTINGS["min_samples"]:
-        return False
-    med, sigma, _ = robust(past)
-    return exceeds(now, med, sigma, PROCESS_SETTINGS["k"], PROCESS_SETTINGS["cpu_min_rise"])
-
-
 def latched(qos: Any) -> bool:
     """Return True when every publisher endpoint in the topic attribute ``qos`` (and at least one)
     is transient-local: a latched topic."""
@@ -822,7 +800,7 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
         return None
     if follows.get(topic, (None, -math.inf))[0] == start and ctx.t - follows[topic][1] <= s["input_grace_s"]:
         return None
-    if in_mode(modes, ratio, lasted, s["gap_margin"]):
+    if in_mode(modes, ratio, lasted, s["gap_margin"]) or _low_before(ctx, topic, now_rate, expect, lasted):
         return None  # a lower rate it has shown and left by itself (a link throttled, a mode)
     steady = per_sim is not None and per_sim[1] <= STEADY_PER_SIM * per_sim[0]
     if lasted < s["irregular_drop_s"] and not steady and _irregular(ctx, topic, med):
@@ -831,6 +809,29 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     usual = expect if per_sim is not None else med
     return ctx.alert(topic, "warn", f"rate {now_rate:.3g} Hz, down from {usual:.3g} Hz{sim}",
                      symptom="rate_drop", rate_hz=now_rate, baseline_hz=usual, sim_pace_ratio=pace)
+
+
+def _low_before(ctx: PluginContext, topic: str, now_rate: float, expect: float, lasted: float) -> bool:
+    """True when the topic's rate was below ``drop_ratio`` × ``expect``, and at most twice
+    ``now_rate``, for a spell earlier in its history that ended by itself (after the
+    collector's ``rate_window_s`` first filled, and since the rate was last learned anew), for
+    ``confirm`` s at least, and
+    this drop has lasted no longer than ``gap_margin`` × the longest such spell (`excursions`):
+    a mode it showed before its rate was learned at the higher one, which `learn_mode` cannot
+    know (a localiser at 1 Hz while the robot stands and at 10 Hz while it drives, its first
+    minutes spent driving)."""
+    s = ctx.settings
+    times, rates = ctx.past(topic, "rate_hz")
+    # Not while the collector's window first filled, nor before the rate was learned anew (a
+    # reconfiguration's rate is no spell of the old one).
+    since = max(times[0] + s["rate_window_s"] if len(times) else math.inf,
+                ctx.state["relearn"].get(topic, -math.inf))
+    keep = times >= since
+    if not keep.any():
+        return False
+    level = min(s["drop_ratio"] * expect, 2.0 * now_rate)  # as low as now, or half as low at most
+    _, longest = excursions(np.append(times[keep], ctx.t), -np.append(rates[keep], now_rate), -level)
+    return longest >= s["confirm"] and lasted <= s["gap_margin"] * longest
 
 
 def _input_stopped(ctx: PluginContext, topic: str, since: float, rhythms: dict[str, Rhythm]) -> bool:

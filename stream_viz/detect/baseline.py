@@ -182,3 +182,42 @@ def rise(ctx: Any, member: str, attr: str, floor: float, alerting: set,
     """Return ``(value, median)`` while ``member``'s ``attr`` stays risen above its own baseline:
     `excess` for ``confirm`` fresh samples in a row (`confirm`)."""
     return confirm(ctx, member, attr, excess(ctx, member, attr, floor, alerting), alerting, fresh)
+
+
+def excursions(times: np.ndarray, values: np.ndarray, level: float,
+               since: float = -np.inf) -> tuple[float, float]:
+    """Return how long the current excursion has lasted and the longest earlier one that ended.
+
+    An excursion is a run of samples at or above ``level`` (a CPU burst; a rate's low spell, as
+    ``-rate`` above ``-level``); one sample below it between two above (a dip) does not end it,
+    and unread (NaN) samples are left out.
+
+    Parameters
+    ----------
+    times, values : (n,) array
+        A series, the last sample being the present.
+    level : float
+        The value an excursion reaches.
+    since : float, optional
+        Earlier excursions that began before this (a start-up) are not counted, and the current
+        one is counted from it.
+
+    Returns
+    -------
+    lasted : float
+        From the first sample of the excursion the present is in (or ``since``) to the present; 0
+        when not in one.
+    longest : float
+        The longest earlier excursion, from its first sample to the first sample after it; 0 if none.
+    """
+    ok = np.isfinite(values)
+    t, high = times[ok], values[ok] >= level
+    if len(t) == 0 or not high[-1]:
+        return 0.0, 0.0
+    dip = ~high & np.r_[False, high[:-1]] & np.r_[high[1:], False]  # one low sample between highs
+    high = high | dip
+    edges = np.flatnonzero(np.diff(np.r_[False, high, False].astype(np.int8)))
+    starts, ends = edges[::2], edges[1::2]  # ends: the index after each run
+    lasted = float(t[-1] - max(t[starts[-1]], since))
+    done = [float(t[e] - t[b]) for b, e in zip(starts[:-1], ends[:-1], strict=True) if t[b] >= since]
+    return lasted, max(done, default=0.0)

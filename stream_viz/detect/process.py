@@ -20,9 +20,10 @@ The callers:
 
 * the ``process_resources`` plugin (`symptoms`): confirmed alerts. The baseline is learnt over
   ``warmup_s`` seconds and ``min_samples`` samples, cached and frozen while the process alerts;
-  a rise must hold ``confirm`` samples in a row, and a CPU rise must outlast ``burst_margin`` ×
-  the longest of the process's earlier CPU rises that ended within ``burst_max_s`` (its bursts:
-  the first is a rise, those like it are its rhythm, `_beyond_bursts`); growth is checked over the last
+  a rise must hold ``confirm`` samples in a row, and a CPU rise must have held ``cpu_hold_s`` and
+  outlast ``burst_margin`` × the longest of the process's earlier CPU rises in its history that
+  ended by themselves (its bursts: the first is a rise, those like it are its rhythm, `excursions`);
+  growth is checked over the last
   ``trend_s``/12, /6, /2 and ``trend_s`` (a fast leak shows in the short span, a slow one in the
   long) and must be steady: at least ``growth_steady`` of the steps rising, over at least
   ``growth_min_samples`` samples, so one big allocation is no leak.
@@ -30,7 +31,8 @@ The callers:
   the watchlist (the processes and their nodes) and the RCA's ranking (the processes; a hint,
   not an alert). It holds no state (it reads the history) and does not confirm, so it
   speaks a sample or more before the plugin. From the same keys (`evidence_rule`): the same
-  ``k``, floors, ``growth_mb_per_s``, ``growth_min_mb`` and ``window``; the baseline is the
+  ``k``, floors, ``growth_mb_per_s``, ``growth_min_mb``, ``burst_margin`` and ``window`` (a CPU
+  rise within the process's bursts, `excursions`, is no evidence either); the baseline is the
   median of the window's earlier samples; growth is checked over one span, the trend window's
   last half (``trend_s``/2), with no steadiness test, so it asks one sample more
   (``growth_min_samples`` + 1, read or not); the warm-up ``warmup_s`` is counted in samples, one
@@ -48,7 +50,7 @@ import networkx as nx
 import numpy as np
 
 from stream_viz.detect.api import PluginContext, reads_settings
-from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, exceeds, excess, robust, slope
+from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, exceeds, excess, excursions, robust, slope
 from stream_viz.detect.reconfigure import RECONFIGURE_SETTINGS, learnt_since, param_changes, reconfigured
 from stream_viz.model.history import History
 from stream_viz.model.queries import nodes_of_process
@@ -70,8 +72,7 @@ SETTINGS: dict[str, Any] = {
     "startup_s": 120.0,
     "cpu_hold_s": 3.0,
     "reconfigure_cpu_s": 4.0,
-    "burst_max_s": 10.0,
-    "burst_margin": 1.5,
+    "burst_margin": 2.0,
 }
 
 # The attributes a rise is looked for in: (θ attribute, the setting of its floor, symptom, unit).
@@ -107,10 +108,8 @@ def symptoms(ctx: PluginContext, procs: Iterable[str]) -> Iterator[tuple[str, li
     """
     alerting = ctx.state.setdefault("alerting", set())  # (process, attribute): baseline frozen
     windows = ctx.state.setdefault("rss", {})
-    runs = ctx.state.setdefault("cpu_runs", {})
     for gone in ctx.diff.removed_members:  # bound the state when processes come and go
         windows.pop(gone, None)
-        runs.pop(gone, None)
     changes = param_changes(ctx)
     for proc in procs:
         found = _symptoms(ctx, proc, alerting, bool(changes))
@@ -160,26 +159,45 @@ def _beside_executor(ctx: PluginContext, proc: str, seen: tuple[float, float, bo
 
 def _beyond_bursts(ctx: PluginContext, proc: str,
                    seen: tuple[float, float, bool] | None) -> tuple[float, float, bool] | None:
-    """`excess` of the process's CPU, risen only once it has lasted ``cpu_hold_s`` and outlasts
-    ``burst_margin`` × the longest of its earlier rises that ended within ``burst_max_s`` (its
-    bursts: a planner's plans, a map re-inflated), so bursts it has shown are its rhythm; a hog
-    lasts longer. ``cpu_hold_s`` covers the first burst, of which nothing is known yet: a few
-    seconds of work at a goal or a map update is how robots run."""
-    if seen is None:
-        return None
-    runs = ctx.state.setdefault("cpu_runs", {})
-    start, bursts = runs.get(proc, (None, []))
-    s = ctx.settings
-    if not seen[2]:
-        if start is not None and ctx.t - start <= s["burst_max_s"]:
-            bursts = [*bursts, ctx.t - start][-8:]
-        runs[proc] = (None, bursts)
+    """`excess` of the process's CPU, risen only once the rise has held ``cpu_hold_s`` and
+    outlasts ``burst_margin`` × the longest of the rises it showed and left by itself in its
+    history (`excursions`: a planner's plans, a map re-inflated, an executor busy now and then), so
+    bursts it has shown are its rhythm; a hog lasts longer. ``cpu_hold_s`` covers the first
+    burst, of which nothing is known yet: a few seconds of work at a goal or a map update is how
+    robots run."""
+    if seen is None or not seen[2]:
         return seen
-    start = ctx.t if start is None else start
-    runs[proc] = (start, bursts)
-    if ctx.t - start < s["cpu_hold_s"] or (bursts and ctx.t - start <= s["burst_margin"] * max(bursts)):
+    times, cpu = ctx.past(proc, "cpu_percent")
+    s = ctx.settings
+    level = seen[1] + s["cpu_min_rise"]
+    since = times[0] + s["warmup_s"] if len(times) else ctx.t
+    lasted, longest = excursions(np.append(times, ctx.t), np.append(cpu, seen[0]), level, since)
+    if lasted < s["cpu_hold_s"] or lasted <= s["burst_margin"] * longest:  # longest 0: none known
         return seen[0], seen[1], False
     return seen
+
+
+def publishers_busy(ctx: PluginContext, topic: str) -> bool:
+    """True when the process of every publisher of ``topic`` is busy beyond its own baseline now
+    (CPU risen as ``process_resources`` judges a rise, with its default ``k`` and floor, bursts
+    or not): a node whose executor is held by its own work (a plan computed in a callback, an
+    executor spinning) pauses its topics and delays its data. The CPU is that process's symptom
+    (``process_resources``, which learns its bursts), not one more per topic."""
+    pubs = ctx.publishers(topic)
+    procs = {ctx.process_of(p) for p in pubs}
+    if not pubs or None in procs:
+        return False
+    return all(_cpu_risen(ctx, proc) for proc in procs)
+
+
+def _cpu_risen(ctx: PluginContext, proc: str) -> bool:
+    now = ctx.value(proc, "cpu_percent")
+    _, past = ctx.past(proc, "cpu_percent", last=SETTINGS["window"])
+    past = past[np.isfinite(past)]
+    if now != now or len(past) < SETTINGS["min_samples"]:
+        return False
+    med, sigma, _ = robust(past)
+    return exceeds(now, med, sigma, SETTINGS["k"], SETTINGS["cpu_min_rise"])
 
 
 def _rose_lately(ctx: PluginContext, proc: str, value: float) -> bool:
@@ -287,6 +305,8 @@ class EvidenceRule:
         Samples compared (the present and its past).
     startup_s : float
         Growth since a process was first seen is its start-up until it was seen this long.
+    burst_margin : float
+        A CPU rise is evidence once it outlasts this × the process's longest earlier burst.
     """
 
     k: float
@@ -299,6 +319,7 @@ class EvidenceRule:
     warmup: int
     window: int
     startup_s: float
+    burst_margin: float
 
 
 def evidence_rule(settings: Mapping[str, Any] | None = None) -> EvidenceRule:
@@ -310,6 +331,7 @@ def evidence_rule(settings: Mapping[str, Any] | None = None) -> EvidenceRule:
         growth_mb_per_s=s["growth_mb_per_s"], growth_min_mb=s["growth_min_mb"],
         trend_s=s["trend_s"] / 2, growth_samples=s["growth_min_samples"] + 1,
         warmup=round(s["warmup_s"]), window=s["window"], startup_s=s["startup_s"],
+        burst_margin=s["burst_margin"],
     )
 
 
@@ -396,9 +418,24 @@ def anomalous_processes(G: nx.MultiDiGraph, history: History,
         if attrs.get("kind") != "process" or m not in history:
             continue
         times, values = history.series(m, rule.window)
-        if process_anomaly(times, values, times[-1], rule):
+        found = process_anomaly(times, values, times[-1], rule)
+        if found == ["cpu"] and _within_bursts(*history.series(m), rule):
+            continue  # rare: a rise found reads the whole history for the process's bursts
+        if found:
             out.add(m)
     return out
+
+
+def _within_bursts(times: np.ndarray, values: np.ndarray, rule: EvidenceRule) -> bool:
+    """True when the process's CPU rise lasts no longer than ``burst_margin`` × its longest
+    earlier burst in ``times``/``values`` (its whole history), measured from the median of its
+    last ``window`` samples before the present plus the floor: its rhythm, no evidence."""
+    cpu = values[:, _CPU]
+    med = float(np.nanmedian(cpu[-rule.window:-1])) if len(cpu) > 1 else np.nan
+    if not np.isfinite(med):
+        return False
+    lasted, longest = excursions(times, cpu, med + rule.cpu_min_rise, times[0] + rule.warmup)
+    return longest > 0 and lasted <= rule.burst_margin * longest
 
 
 def with_nodes(G: nx.MultiDiGraph, processes: set[str]) -> set[str]:

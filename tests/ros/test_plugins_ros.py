@@ -19,7 +19,9 @@ import pytest
 from stream_viz.collect.collector import Collector
 from stream_viz.detect.api import record_history
 from stream_viz.detect.plugin_set import PluginSet
+from stream_viz.detect.process import anomalous_processes
 from stream_viz.model.diff import GraphDiff
+from stream_viz.model.graph import add_member, new_graph
 from stream_viz.model.history import History
 from stream_viz.model.theta import SCHEMAS
 from stream_viz.testing import wait_for
@@ -308,6 +310,46 @@ def test_process_resources_cpu_bursts_are_its_rhythm_from_the_first(children, tm
     alerts = [a for a in run.alerts if a.plugin == "process_resources"]
     # None alerts: the first is over before a rise counts (cpu_hold_s), the next are its rhythm.
     assert alerts == [], (starts, alerts)
+    assert run.problems == []
+
+
+SPINNER = """
+import rclpy, threading, time
+from rclpy.node import Node
+rclpy.init()
+n = Node("spinner")
+def loop():  # busy for 11 s every 25 s from 8 s on, as an executor spinning on a ready entity
+    time.sleep(8.0)
+    while True:
+        end = time.monotonic() + 11.0
+        while time.monotonic() < end:
+            sum(i * i for i in range(1000))
+        time.sleep(14.0)
+threading.Thread(target=loop, daemon=True).start()
+rclpy.spin(n)
+"""
+
+
+def test_long_cpu_bursts_are_its_rhythm_for_the_plugin_and_the_evidence(children, tmp_path, run_of):
+    run = run_of(["process_resources"])
+    times, cpu = _process_alone(run, children, SPINNER, "spinner", 48.0, "cpu_percent")
+    busy = cpu >= 50.0
+    starts = times[1:][busy[1:] & ~busy[:-1]]
+    if len(starts) < 2 or busy[-1]:
+        pytest.xfail(f"the spinner's bursts did not get the CPU on this loaded machine ({busy.astype(int)})")
+    second = starts[-1]
+    alerts = [a.t for a in run.alerts if a.plugin == "process_resources"]
+    # The first burst is a rise (nothing is known of the process yet); the second, as long, is
+    # its rhythm: before, a burst longer than 10 s was never learned and each one alerted.
+    assert alerts and max(alerts) < second, (starts, alerts)
+    # The evidence the RCA reads, replayed sample by sample over the same history: the same.
+    proc = f"process:{run.G.nodes['node:/spinner']['pid']}"
+    G, h, flagged = new_graph(), History(maxlen=600), []
+    add_member(G, proc)
+    for t, theta in zip(*run.history.series(proc), strict=True):
+        h.add(proc, float(t), theta)
+        flagged += [float(t)] if anomalous_processes(G, h, FAST["process_resources"]) else []
+    assert flagged and max(flagged) < second, (starts, flagged)
     assert run.problems == []
 
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import numpy as np
+
+from stream_viz.detect.baseline import excursions
 from stream_viz.detect.plugin_set import PluginSet
 from stream_viz.detect.process import SETTINGS, EvidenceRule, evidence_rule, process_anomalies
 from stream_viz.model.graph import add_member, add_tree_edge, new_graph
@@ -13,7 +16,8 @@ def test_the_evidence_parameters_derive_from_the_plugin_settings():
     # The defaults give exactly the evidence's documented parameters.
     assert evidence_rule() == evidence_rule(SETTINGS) == EvidenceRule(
         k=5.0, cpu_min_rise=25.0, rss_min_rise_mb=100.0, growth_mb_per_s=1.0, growth_min_mb=20.0,
-        trend_s=30.0, growth_samples=5, warmup=10, window=120, startup_s=120.0)
+        trend_s=30.0, growth_samples=5, warmup=10, window=120, startup_s=120.0,
+        burst_margin=2.0)
     tuned = evidence_rule({"k": 7.0, "cpu_min_rise": 40.0, "trend_s": 120.0, "warmup_s": 20.0,
                            "growth_min_samples": 6, "window": 60})
     assert (tuned.k, tuned.cpu_min_rise, tuned.trend_s, tuned.warmup, tuned.growth_samples, tuned.window) == (
@@ -54,6 +58,30 @@ def test_tuning_the_plugin_tunes_the_evidence():
     # A floor above the rise silences both.
     evidence, alerts = _run(cpus, {"cpu_min_rise": 70.0})
     assert evidence == [[]] * len(cpus) and alerts == []
+
+
+def test_excursions_of_a_series():
+    t = np.arange(13.0)
+    v = np.array([0, 9, 9, 0, 0, 9, 0, 9, 9, 0, 0, 9, 9.0])  # 1-2 a rise, 5-8 one with a dip, 11-12 now
+    assert excursions(t, v, 5.0) == (1.0, 4.0)  # the 5-8 run lasted from 5 to 9
+    assert excursions(t, v, 5.0, since=3.0) == (1.0, 4.0)
+    assert excursions(t, v, 5.0, since=6.0) == (1.0, 0.0)  # the earlier ones began before `since`
+    assert excursions(t, v, 5.0, since=11.5) == (0.5, 0.0)  # the current one counted from `since`
+    assert excursions(t[:-2], v[:-2], 5.0) == (0.0, 0.0)  # not in a rise at the present
+    v[12] = np.nan  # an unread sample is left out: the present is the last one read
+    assert excursions(t, v, 5.0) == (0.0, 4.0)
+
+
+def test_bursts_longer_than_a_few_seconds_are_the_rhythm_of_the_evidence_and_the_plugin():
+    # An executor busy for 15 s every 60 s (a MultiThreadedExecutor spinning, a map re-inflated):
+    # the first burst is a rise for both (the plugin once it held 3 s, confirmed over 2 samples);
+    # the next two are its rhythm; a hog from 200 s on is a
+    # rise for the evidence once it outlasts 2 × 15 s, for the plugin a sample later.
+    cpus = [80.0 if t >= 20 and (t - 20) % 60 < 15 else 10.0 + t % 3 for t in range(200)] + [85.0] * 40
+    evidence, alerts = _run(cpus, {})
+    flagged = [t for t, e in enumerate(evidence) if e]
+    assert flagged == [*range(20, 35), *range(231, 240)]
+    assert [t for t, m in alerts if m == "node:/planner"] == [*range(24, 35), *range(232, 240)]
 
 
 def test_settings_of_a_plugin_switched_off():

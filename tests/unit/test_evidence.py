@@ -711,6 +711,21 @@ def test_message_age_stale_against_its_own_baseline():
     assert drive("message_age", once) == []
 
 
+def test_message_age_data_delayed_while_its_publisher_s_process_is_busy_is_the_cpu_s_symptom():
+    # The camera's process goes from 5 % to 90 % of a core at 15 s (its executor spinning, a hog)
+    # and its images arrive 300 ms after their stamps: the CPU is the symptom (process_resources,
+    # which knows the process's bursts), not stale data as well. Not busy, the same age is stale.
+    def frame(t, age, cpu):
+        f = _aged(age, t, young=age)
+        f[1].nodes["process:100"]["theta"] = make_theta("process", {"cpu_percent": cpu, "rss_mb": 50.0})
+        return f
+
+    healthy = [frame(t, 2.0 + (t % 3) * 0.5, 5.0 + t % 2) for t in range(15)]
+    assert drive("message_age", healthy + [frame(t, 300.0, 90.0) for t in range(15, 22)]) == []
+    stale = drive_alerts("message_age", healthy + [frame(t, 300.0, 5.0) for t in range(15, 22)])
+    assert stale and {a.data["symptom"] for a in stale} == {"stale"}
+
+
 def test_message_age_learns_a_slow_topic_s_normal_from_its_messages_not_its_samples():
     # A USBL fix every 4 s (each in four 1 s samples), stamped 0.2-0.6 s before it arrives: after
     # two fixes of 222 and 276 ms, three of ~490 ms are its spread, not stale data.
@@ -757,6 +772,31 @@ def test_message_age_skewed_or_implausible_clocks_are_said_so_not_called_latency
     alerts = drive_alerts("message_age", sim)
     assert alerts and all(a.data["symptom"] == "clock_skew" for a in alerts)
     assert "not from the wall clock" in alerts[0].message
+
+
+def test_transforms_postdated_on_this_computer_are_no_clock_skew():
+    # /tf from a robot state publisher (on time) and a localiser stamping map->odom 200 ms ahead
+    # (AMCL's transform_tolerance), which publishes faster once the robot moves: the mean goes
+    # 25 ms ahead. On this computer, whose clock both read, that is postdating, not a skew.
+    def tf(t, moving, where="vm"):
+        frame = _aged(-25.0 if moving else 2.0, t)
+        G = frame[1]
+        G.nodes["topic:/img"]["type"] = "geometry_msgs/msg/TransformStamped"
+        G.nodes["topic:/img"]["publisher_ages"] = {"node:/camera": 5.0, "node:/detector": -180.0}
+        add_member(G, "host:vm", agent="local")
+        add_member(G, "host:nuc", agent="remote")
+        G.nodes["node:/camera"]["host"], G.nodes["node:/detector"]["host"] = "vm", where
+        return frame
+
+    frames = [tf(t, t >= 12) for t in range(16)]
+    assert drive("message_age", frames) == []
+    # the one stamping ahead is on another computer: its clock may be skewed, as before
+    remote = [tf(t, t >= 12, where="nuc") for t in range(16)]
+    assert {a.data["symptom"] for a in drive_alerts("message_age", remote)} == {"clock_skew"}
+    # nor is any other type postdated: images stamped ahead from this computer are skewed
+    for _, G, _ in frames:
+        G.nodes["topic:/img"]["type"] = "sensor_msgs/msg/Image"
+    assert {a.data["symptom"] for a in drive_alerts("message_age", frames)} == {"clock_skew"}
 
 
 def test_a_skew_from_the_start_is_the_topics_normal_and_its_staleness_is_still_seen():

@@ -279,6 +279,22 @@ def test_topic_rate_a_lower_rate_the_topic_showed_and_left_by_itself_is_its_own_
     assert next(t for t, _, _ in drive("topic_rate", deep) if t >= 90) == 91.0
 
 
+def test_topic_rate_a_mode_shown_before_the_rate_was_learned_is_its_own_mode_too():
+    # A localiser at 1 Hz while the robot stands, 10 Hz while it drives: standing for its first
+    # 60 s, then driving long enough for 10 Hz to be its learned rate, then standing again at
+    # 150 s. 1 Hz is a rate it held and left by itself: no drop while it lasts up to twice that
+    # spell (57 s: from when the collector's window filled), by when 1 Hz is its learned rate
+    # again. Driving from the start, the same stop is a drop.
+    def frames(standing_first):
+        def rate(t):
+            return 1.0 if (t < 60 and standing_first) or t >= 150 else noisy(10.0)
+
+        return [(float(t), model(rate=rate(t), recent=rate(t), age=0.05), []) for t in range(280)]
+
+    assert drive("topic_rate", frames(True)) == []
+    assert min(t for t, _, _ in drive("topic_rate", frames(False))) == 151.0
+
+
 def test_topic_rate_modes_are_lower_rates_shown_and_left():
     from plugins.topic_rate import in_mode, learn_mode
 
@@ -1213,10 +1229,10 @@ def test_process_resources_growth_from_the_start_is_start_up_until_startup_s():
 
 def test_process_resources_cpu_bursts_it_has_shown_are_its_rhythm_a_hog_outlasts_them():
     # A planner busy for 2 s every 20 s: the first burst is over before it counts (cpu_hold_s),
-    # the next ones are its rhythm; then a hog from 100 s on is a rise once it outlasts 1.5 × 2 s.
+    # the next ones are its rhythm; then a hog from 100 s on is a rise once it outlasts 2 × 2 s.
     cpu = [90.0 if t >= 20 and t % 20 < 2 else noisy(5.0, 0.2) for t in range(100)] + [95.0] * 10
     alerts = drive("process_resources", [(float(t), model(cpu=c), []) for t, c in enumerate(cpu)])
-    assert [t for t, _, _ in alerts] == [105.0, 106.0, 107.0, 108.0, 109.0]  # 3 s, then 2 samples
+    assert [t for t, _, _ in alerts] == [106.0, 107.0, 108.0, 109.0]  # risen at 105 (5 s > 4 s), confirmed
     # Bursts of 6 s, longer than the hold: the first is a rise, the next ones its rhythm.
     cpu = [90.0 if t >= 20 and t % 20 < 6 else noisy(5.0, 0.2) for t in range(100)]
     alerts = drive("process_resources", [(float(t), model(cpu=c), []) for t, c in enumerate(cpu)])
