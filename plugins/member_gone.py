@@ -6,7 +6,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.exits import CleanExits, exited_0, forget_clean_exits, note_clean_exits
+from stream_viz.detect.exits import CleanExits, exited_0, forget_clean_exits, killed, note_clean_exits
 from stream_viz.records import Alert, Event
 
 
@@ -17,7 +17,9 @@ class MemberGone(Plugin):
       ``still_listed``: a crash or a kill; a node that deregisters and then its process ends,
       exit code 0 or not, left cleanly and raises nothing); a process without nodes raises
       nothing; so does a process that exited with code 0 (``exit_code`` in the event, where the
-      collector reads exit codes), its nodes listed or not;
+      collector reads exit codes), its nodes listed or not; data ``killed``: killed by a signal
+      another process sends (SIGKILL, SIGTERM, SIGINT, SIGHUP: `stream_viz.detect.exits.killed`),
+      which none of its inputs can have caused;
     * restart: the node runs in a new process. One restart is news only as a respawn (the node
       changed process between two samples, or its last process crashed): warn. A node that keeps
       reappearing is one symptom, ``restarted N times in M s`` over ``loop_window_s``: warn from
@@ -74,7 +76,8 @@ class MemberGone(Plugin):
                 if ok(m):
                     said.add(m)
                     yield ctx.alert(m, "error", f"process died: {e.text or 'exited'}", symptom="exit",
-                                    process=e.data.get("process", e.member), clean=False, **hold)
+                                    process=e.data.get("process", e.member), clean=False, killed=killed(e),
+                                    **hold)
         for m, restarts, respawn in _restarts(ctx, crashed, clean):
             sev = _restart_severity(s, len(restarts), respawn)
             if sev is not None and ok(m):

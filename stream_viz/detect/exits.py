@@ -7,10 +7,22 @@ Plugins keep them in their state as node → (pid, when), one entry per node.
 
 from __future__ import annotations
 
+import signal
+
 from stream_viz.detect.api import PluginContext
 from stream_viz.records import Event
 
 CleanExits = dict[str, tuple[int | None, float]]
+
+
+# Signals another process sends (a person, a supervisor, the OOM killer): what the robot's data
+# do to a node shows as an exception, an abort or a segfault, never as one of these.
+KILL_SIGNALS = frozenset({-signal.SIGKILL, -signal.SIGTERM, -signal.SIGINT, -signal.SIGHUP})
+
+
+def killed(e: Event) -> bool:
+    """True when ``e`` is an exit event of a process killed by a signal sent to it (`KILL_SIGNALS`)."""
+    return e.kind == "exit" and e.data.get("exit_code") in KILL_SIGNALS
 
 
 def exited_0(e: Event) -> bool:

@@ -50,7 +50,9 @@ class Symptoms:
     ``named`` the names alerts give of what to blame: ``(alert member, name)`` → (first time,
     strongest severity weight); ``logged`` when a member's own log lines (symptom ``log``) began
     to alert — a node that logs is running, which a starved one is not; ``exited`` when a node's
-    process was seen to die (an alert for its process with symptom ``exit``); ``latest`` the latest
+    process was seen to die (an alert for its process with symptom ``exit``), ``killed`` those whose
+    process was killed by a signal sent to it (data ``killed``: no input of theirs did that);
+    ``latest`` the latest
     alert time; ``count`` how many alerts they come from; ``began`` when a member's symptom
     began by its own alerts' word (data ``since``: a host saturated for a while before it alerts,
     a topic's last message, a log line's stamp) and ``began_by`` the latest it can have begun
@@ -77,6 +79,7 @@ class Symptoms:
     named: dict[tuple[str, str], tuple[float, float]] = field(default_factory=dict)
     logged: dict[str, float] = field(default_factory=dict)
     exited: dict[str, float] = field(default_factory=dict)
+    killed: set[str] = field(default_factory=set)
     began: dict[str, float] = field(default_factory=dict)
     began_by: dict[str, float] = field(default_factory=dict)
     vague: dict[str, float] = field(default_factory=dict)
@@ -144,6 +147,8 @@ def collect_symptoms(
                 logged[m] = min(logged.get(m, INF), t)
         elif data.get("symptom") == "exit":
             exited[m] = min(exited.get(m, INF), t)
+            if data.get("killed") is True:
+                s.killed.add(m)
         if data and data.get("executor_stopped") is True:
             s.executor_stopped.add(m)
         if data and isinstance(data.get("publishers"), list) and m.startswith("topic:"):
@@ -500,8 +505,10 @@ def _settle(
     sources |= set(views) | set(ev_passive)
     parents: dict[str, list[str]] = {}  # the candidates' walks upstream cross the same members
     for n, v in these.items():
-        v.upstream = _upstream(G, n, v, s, views, ev_passive, settings, sources,
-                               (stalled or {}).get(n, set()), parents)
+        # A node killed by a signal (a person, a supervisor, the OOM killer) was not killed by its
+        # inputs: nothing upstream excuses its death.
+        v.upstream = 0.0 if n in s.killed else _upstream(
+            G, n, v, s, views, ev_passive, settings, sources, (stalled or {}).get(n, set()), parents)
 
 
 def _imply_servers(

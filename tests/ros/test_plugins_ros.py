@@ -397,6 +397,7 @@ def test_member_gone_on_sigkill(children, tmp_path, run_of):
     assert found[0].t - t_kill < 5.0  # from the OS at once, not after the 20 s DDS lease
     if run.collector.exits.reason is None:  # the kernel's process events are readable here
         assert "was killed by SIGKILL" in found[0].message
+        assert found[0].data["killed"] is True  # the RCA excuses no kill by the node's inputs
     assert not any(a.member == "node:/listener" for a in run.alerts)
 
 

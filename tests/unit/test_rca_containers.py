@@ -322,3 +322,18 @@ def test_a_complaint_charged_to_a_server_never_excuses_it_round_its_siblings():
     by, order = rank(g, alerts)
     assert order[0] == PLANNER
     assert BT in by[PLANNER].evidence["symptoms"]
+
+
+def test_a_node_killed_by_a_signal_is_not_excused_by_its_inputs(G):
+    # /imu stops at 10; fuse, which reads it, dies at 12. A crash (an exception, an abort) may
+    # be what the stopped input did to it; a kill (SIGKILL: a person, a supervisor, the OOM
+    # killer) is not: nothing upstream excuses it, and it is a root cause of its own beside the imu.
+    def fuse_died(killed):
+        return [al(FUSE, "member_gone", 12, symptom="exit", process="process:9", killed=killed)]
+
+    crashed, _ = rank(G, silent(IMUT, 10) + fuse_died(False))
+    assert crashed[FUSE].evidence["upstream"] == S.severity["error"]
+    by, order = rank(G, silent(IMUT, 10) + fuse_died(True))
+    assert by[FUSE].evidence["upstream"] == 0.0
+    assert by[FUSE].evidence["hypothesis"] == S.severity["error"] > by[IMU].evidence["hypothesis"]
+    assert order == [IMU, FUSE] and by[FUSE].score > 4 * crashed[FUSE].score
