@@ -280,6 +280,14 @@ def test_process_resources_memory_growing_from_the_start_is_start_up(children, t
     assert run.problems == []
 
 
+def _bursts_of(run, children, code: str, node: str, seconds: float):
+    """`_process_alone` on ``code``; return when its CPU bursts (≥ 50 %) began, and whether it
+    is in one at the end."""
+    times, cpu = _process_alone(run, children, code, node, seconds, "cpu_percent")
+    busy = cpu >= 50.0
+    return times[1:][busy[1:] & ~busy[:-1]], bool(busy[-1])
+
+
 PLANNER = """
 import rclpy, time
 from rclpy.node import Node
@@ -302,9 +310,7 @@ rclpy.spin(n)
 
 def test_process_resources_cpu_bursts_are_its_rhythm_from_the_first(children, tmp_path, run_of):
     run = run_of(["process_resources"])
-    times, cpu = _process_alone(run, children, PLANNER, "planner", 34.0, "cpu_percent")
-    busy = cpu >= 50.0
-    starts = times[1:][busy[1:] & ~busy[:-1]]  # the bursts seen
+    starts, _ = _bursts_of(run, children, PLANNER, "planner", 34.0)
     if len(starts) < 3:
         pytest.xfail(f"the planner's bursts did not get the CPU on this loaded machine ({len(starts)} seen)")
     alerts = [a for a in run.alerts if a.plugin == "process_resources"]
@@ -332,11 +338,9 @@ rclpy.spin(n)
 
 def test_long_cpu_bursts_are_its_rhythm_for_the_plugin_and_the_evidence(children, tmp_path, run_of):
     run = run_of(["process_resources"])
-    times, cpu = _process_alone(run, children, SPINNER, "spinner", 48.0, "cpu_percent")
-    busy = cpu >= 50.0
-    starts = times[1:][busy[1:] & ~busy[:-1]]
-    if len(starts) < 2 or busy[-1]:
-        pytest.xfail(f"the spinner's bursts did not get the CPU on this loaded machine ({busy.astype(int)})")
+    starts, busy_now = _bursts_of(run, children, SPINNER, "spinner", 48.0)
+    if len(starts) < 2 or busy_now:
+        pytest.xfail(f"the spinner's bursts did not get the CPU on this loaded machine ({starts})")
     second = starts[-1]
     alerts = [a.t for a in run.alerts if a.plugin == "process_resources"]
     # The first burst is a rise (nothing is known of the process yet); the second, as long, is
@@ -374,9 +378,7 @@ rclpy.spin(n)
 
 def test_a_node_busy_in_its_own_callbacks_pauses_its_topics_without_silences(children, tmp_path, run_of):
     run = run_of(["topic_rate", "process_resources"])
-    times, cpu = _process_alone(run, children, BLOCKER, "blocker", 34.0, "cpu_percent")
-    busy = cpu >= 50.0
-    starts = times[1:][busy[1:] & ~busy[:-1]]
+    starts, _ = _bursts_of(run, children, BLOCKER, "blocker", 34.0)
     if len(starts) < 3:
         pytest.xfail(f"the blocker's bursts did not get the CPU on this loaded machine ({len(starts)} seen)")
     assert [a for a in run.alerts if a.plugin == "topic_rate"] == []
