@@ -131,8 +131,11 @@ def discovery_server(env: dict[str, str]) -> subprocess.Popen:
 
 
 def with_server(env_of: Callable[[int], dict[str, str]]) -> Callable[[int], dict[str, str]]:
-    """``env_of`` for the clients of the discovery server `discovery_server` starts."""
-    return lambda domain: dict(env_of(domain), ROS_DISCOVERY_SERVER=f"127.0.0.1:{DS_PORT}")
+    """``env_of`` for the clients of the discovery server `discovery_server` starts. UDP only:
+    past ~100 participants the shared-memory transport failed to lock its port files
+    ("open_and_lock_file failed") and those participants went undiscovered."""
+    return lambda domain: dict(env_of(domain), ROS_DISCOVERY_SERVER=f"127.0.0.1:{DS_PORT}",
+                               FASTDDS_BUILTIN_TRANSPORTS="UDPv4")
 
 
 def measure(n: int, seconds: float, period: float, settle: float,
