@@ -193,11 +193,12 @@ def _postdated(ctx: PluginContext, topic: str, ahead_ms: float) -> bool:
 def _late_publishers(ctx: PluginContext, topic: str, floor: float) -> list[str]:
     """The publishers of ``topic`` whose own messages are ``floor`` ms older than the youngest
     publisher's (``publisher_ages``), when some are and some are not: on ``/tf`` from three nodes,
-    the one whose stamps froze, whose symptom it is."""
+    the one whose stamps froze, whose symptom it is. A publisher stamping ahead (a postdated
+    transform) counts as on time: beside it, every publisher on time would look late."""
     ages = ctx.attr(topic, "publisher_ages") or {}
     if len(ages) < 2:
         return []
-    least = min(ages.values())
+    least = max(0.0, min(ages.values()))
     late = sorted(p for p, ms in ages.items() if ms - least >= floor)
     return late if len(late) < len(ages) else []
 

@@ -762,6 +762,19 @@ def test_message_age_names_the_publishers_whose_own_stamps_are_late():
     assert alerts and all("publishers" not in a.data for a in alerts)
 
 
+def test_message_age_a_postdated_publisher_makes_no_one_late():
+    # /tf from odometry (its stamps freeze), a robot state publisher on time and a localiser
+    # stamping 180 ms ahead: only odometry's messages are late, not the state publisher's 5 ms
+    def three(t, odom_ms):
+        frame = _aged(2.0 if t < 15 else 900.0, t)
+        frame[1].nodes["topic:/img"]["publisher_ages"] = {
+            "node:/odom": odom_ms, "node:/rsp": 5.0, "node:/loc": -180.0}
+        return frame
+    frames = [three(t, 2.0 + (t % 3) * 0.5) for t in range(15)] + [three(t, 2602.0) for t in range(15, 21)]
+    alerts = drive_alerts("message_age", frames)
+    assert alerts and alerts[0].data["publishers"] == ["node:/odom"], alerts
+
+
 def test_message_age_skewed_or_implausible_clocks_are_said_so_not_called_latency():
     on_time = [_aged(2.0, t) for t in range(12)]  # past learn_s (10 s): its stamps are on time
     ahead = on_time + [_aged(-250.0, t) for t in range(12, 16)]
