@@ -595,9 +595,14 @@ class VideoUplink(CNode):
         self.n = 0
         self.create_timer(1.0, self.adapt)
         Diag(self, "nvenc0", {"encoder": lambda: (OK, self.mode, {"kbps": MODES[self.mode][1]})})
-        if self.fault == "abort":  # a driver update broke the encoder: the pipeline aborts soon after start
-            self.create_timer(random.uniform(2.0, 3.0), self._abort)
+        self.aborting = None
+        self._check_driver()
+        self.create_timer(1.0, self._check_driver)  # the running pipeline meets the broken driver too
         self.log.info("uplink pipeline PLAYING: 720p@10fps, 2500 kbps")
+
+    def _check_driver(self) -> None:
+        if self.fault == "abort" and self.aborting is None:  # a broken encoder driver: aborts soon after
+            self.aborting = self.create_timer(random.uniform(2.0, 3.0), self._abort)
 
     def _abort(self) -> None:
         self.log.fatal("gst: nvv4l2h264enc0: NvEnc session lost (error -5): pipeline aborted")
