@@ -166,7 +166,14 @@ class Monitor:
         new = {k: v for k, v in limits.items() if self._limits.get(k) != v}
         for what, why in new.items():
             self.progress.say(f"collector: no {what}: {why}")
-        if new:
+        # A limit that turned out not to hold is taken back, so the database and report keep no
+        # false claim (a process that created its nodes late was named undiscovered).
+        gone = {k: v for k, v in getattr(self.collector, "retracted", dict)().items()
+                if k in self._limits and k not in limits}
+        for what, why in gone.items():
+            self.progress.say(f"collector: {what} after all: {why}")
+            del self._limits[what]
+        if new or gone:
             self._limits.update(new)
             self.store.set_meta("collector_limits", self._limits)
 

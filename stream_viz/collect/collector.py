@@ -36,7 +36,7 @@ from stream_viz.collect.readings import GraphReading, PidInfo, ProcessReading, T
 from stream_viz.collect.rosgraph import GidCache, QosCache, StructureCache, read_graph
 from stream_viz.collect.services import ServiceCalls, ServiceStats, party
 from stream_viz.collect.topics import DIAGNOSTICS, TopicMonitor, log_event
-from stream_viz.collect.undiscovered import UndiscoveredWatch, explain
+from stream_viz.collect.undiscovered import UndiscoveredWatch, explain, explain_late
 from stream_viz.errors import CollectError
 from stream_viz.model.diff import diff
 from stream_viz.model.graph import new_graph
@@ -411,6 +411,12 @@ class Collector:
             out[f"discovery of process {p.pid}"] = explain(p, self.domain_id, os.environ,
                                                            self.undiscovered.grace_s)
         return out
+
+    def retracted(self) -> dict[str, str]:
+        """The limits said before that turned out not to hold, and why (keys as in `limits`): a
+        process named undiscovered whose nodes were discovered later."""
+        return {f"discovery of process {pid}": explain_late(p, t)
+                for pid, (p, t) in self.undiscovered.late.items()}
 
     def close(self) -> None:
         """Stop observing: end the drain thread, destroy the node, shut our own Context. Idempotent."""

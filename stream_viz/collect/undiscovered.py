@@ -57,17 +57,20 @@ def discovered_low16(gids: Iterable[bytes], own_host: int | None) -> set[int]:
     return out
 
 
-def undiscovered(participants: Iterable[Participant], low16: set[int], now: float,
-                 grace_s: float) -> list[Participant]:
-    """Return the ``participants`` older than ``grace_s`` whose PID bits are not in ``low16``."""
-    return sorted((p for p in participants if p.inner & 0xFFFF not in low16 and now - p.started >= grace_s),
-                  key=lambda p: p.pid)
+def undiscovered(participants: Iterable[Participant], low16: set[int], now: float, grace_s: float,
+                 since: Mapping[int, float] | None = None) -> list[Participant]:
+    """Return the ``participants`` whose PID bits are not in ``low16`` and that have been in DDS
+    for ``grace_s``: since ``since[pid]`` (its participant first seen), else since it started."""
+    since = since or {}
+    return sorted((p for p in participants if p.inner & 0xFFFF not in low16
+                   and now - since.get(p.pid, p.started) >= grace_s), key=lambda p: p.pid)
 
 
 def explain(p: Participant, domain_id: int, ours: Mapping[str, str], grace_s: float) -> str:
     """Say why ``p`` may be unseen and what to do, from its discovery settings and ``ours``."""
     text = (f"process {p.pid} ({p.name}) has Fast DDS loaded with ROS_DOMAIN_ID={domain_id}, but no "
-            f"participant of it was discovered in {grace_s:.0f} s: its nodes are not in the model")
+            f"participant of it was discovered in {grace_s:.0f} s: its nodes are not in the model "
+            "(said again if they are discovered later)")
     theirs = dict(p.discovery)
     differ = sorted(k for k in RANGE_VARS if theirs.get(k, "") != ours.get(k, ""))
     if differ:
@@ -79,14 +82,24 @@ def explain(p: Participant, domain_id: int, ours: Mapping[str, str], grace_s: fl
     return text
 
 
+def explain_late(p: Participant, discovered_at: float) -> str:
+    """Say that ``p``, named undiscovered before, was discovered at ``discovered_at``."""
+    return (f"process {p.pid} ({p.name}) was discovered {discovered_at - p.started:.0f} s after it "
+            "started: its nodes are in the model")
+
+
 class UndiscoveredWatch:
     """Every ``every_s``, the local participants of ``domain_id`` that were never discovered.
 
     A process discovered once is not named again: its nodes leaving the graph while it runs (a
-    stopped process's lease ending) is a symptom the model shows, not a blind spot.
+    stopped process's lease ending) is a symptom the model shows, not a blind spot. One named and
+    discovered later (it loaded a model or waited for its hardware before creating its nodes) is
+    in ``late`` with the time it was discovered: what was said of it no longer holds.
 
     A process's environment is read once while it lives; its memory maps until Fast DDS shows in
-    them or it is older than ``grace_s`` (rclpy loads Fast DDS at ``init``, not on import).
+    them or it is older than ``grace_s`` (rclpy loads Fast DDS at ``init``, not on import). The
+    grace counts from when its participant first showed (a UDP socket, `_in_dds`): rmw creates it
+    with the first node, which a process may create long after ``init`` (loading a model).
     """
 
     def __init__(self, domain_id: int, every_s: float = 10.0, grace_s: float = 10.0) -> None:
@@ -96,6 +109,8 @@ class UndiscoveredWatch:
         self._due = 0.0
         self.found: list[Participant] = []
         self._ever: set[int] = set()  # pids discovered once: their leaving is the model's to show
+        self.late: dict[int, tuple[Participant, float]] = {}  # named, then discovered: when
+        self._in_dds_since: dict[int, float] = {}  # pid -> its participant first seen
 
     def update(self, read_gids: Callable[[], Iterable[bytes]], own_host: int | None,
                now: float | None = None) -> list[Participant]:
@@ -117,8 +132,12 @@ class UndiscoveredWatch:
         except Exception:  # the graph unreadable now (rclpy shutting down): say nothing new
             return self.found
         self._ever = {p.pid for p in found if p.inner & 0xFFFF in low16} | (self._ever & live)
-        self.found = [p for p in undiscovered(found, low16, now, self.grace_s)
-                      if p.pid not in self._ever and _in_dds(p.pid)]
+        self.late.update((p.pid, (p, now)) for p in self.found if p.pid in self._ever)
+        unseen = [p for p in found if p.pid not in self._ever and p.inner & 0xFFFF not in low16]
+        in_dds = {p.pid for p in unseen if _in_dds(p.pid)}
+        self._in_dds_since = {pid: self._in_dds_since.get(pid, now) for pid in in_dds}
+        self.found = undiscovered([p for p in unseen if p.pid in in_dds], low16, now, self.grace_s,
+                                  self._in_dds_since)
         return self.found
 
     def _read(self, pid: int, now: float) -> Participant | float | None:

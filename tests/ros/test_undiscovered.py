@@ -10,7 +10,7 @@ import pytest
 
 from stream_viz.collect.collector import Collector
 from stream_viz.collect.undiscovered import UndiscoveredWatch
-from stream_viz.testing import TALKER, ros_env, wait_for
+from stream_viz.testing import TALKER, claim_domain, ros_env, wait_for
 
 pytestmark = pytest.mark.ros
 
@@ -55,6 +55,15 @@ def test_the_monitor_says_it_and_keeps_it_in_its_database_and_report(ros_domain,
     code = TALKER.replace('"talker"', '"off_talker"').replace('"listener"', '"off_listener"')
     hidden = children.run([sys.executable, "-c", code], name="off", env=env)
     children.python(TALKER, name="seen")
+    # In DDS from the start but not on our domain at first (its first context elsewhere): named at
+    # the watch's look at 10 s; its node on our domain from 13 s, discovered by the look at 20 s,
+    # and taken back then. Fast DDS loaded by rclpy.init with no node yet is no participant: not named.
+    late = children.python(
+        "import os, rclpy, time\nfrom rclpy.context import Context\n"
+        f"rclpy.init(domain_id={claim_domain()}); kept = rclpy.create_node('elsewhere'); time.sleep(13)\n"
+        "ctx = Context(); rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))\n"
+        "rclpy.spin(rclpy.create_node('late_node', context=ctx))", name="late")
+    loading = children.python("import rclpy, time; rclpy.init(); time.sleep(60)", name="loading")
     mon = Monitor(load_config(None), db=tmp_path / "a.sqlite", report=tmp_path / "r.json", viewer="none",
                   domain_id=ros_domain, progress=Said())
     try:
@@ -65,8 +74,14 @@ def test_the_monitor_says_it_and_keeps_it_in_its_database_and_report(ros_domain,
     assert [t for t in said if t.startswith(f"collector: no {key}: ")] != []
     assert key in report["collector_limits"]
     assert key in json.loads((tmp_path / "r.json").read_text())["collector_limits"]
+    late_key = f"discovery of process {late.pid}"
+    assert [t for t in said if t.startswith(f"collector: no {late_key}: ")] != []
+    assert [t for t in said if t.startswith(f"collector: {late_key} after all: ")] != []
+    assert late_key not in report["collector_limits"]
+    assert [t for t in said if f"process {loading.pid}" in t] == []
     store = AlertStore(tmp_path / "a.sqlite", readonly=True)
     try:
         assert key in store.get_meta("collector_limits")
+        assert late_key not in store.get_meta("collector_limits")
     finally:
         store.close()

@@ -33,3 +33,10 @@ def test_explain_names_differing_discovery_settings_or_the_localhost_limit():
     same = Participant(9, 9, "cam", 0.0, tuple(local.items()))
     assert "start the monitor before the robot" in explain(same, 3, local, 10.0)
     assert "start the monitor" not in explain(Participant(9, 9, "cam", 0.0), 3, {}, 10.0)
+
+
+def test_undiscovered_counts_the_grace_from_when_its_participant_showed():
+    # Started at 0, its participant (first node) only at 95: too young to tell at 100.
+    found = [Participant(101, 101, "b", started=0.0)]
+    assert undiscovered(found, set(), now=100.0, grace_s=10.0, since={101: 95.0}) == []
+    assert [p.pid for p in undiscovered(found, set(), now=105.0, grace_s=10.0, since={101: 95.0})] == [101]
