@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Mapping
 from typing import Any, ClassVar
 
 import numpy as np
@@ -41,7 +41,9 @@ class TopicLatency(Plugin):
     Common mode: when at least ``common_mode_min`` topics and ``common_mode_ratio`` of the topics
     measured in a sample rise at once, the sample is a stall of the host or of the monitor (the
     receive stamps are ours), not a fault of those topics' publishers: it neither counts nor
-    breaks a streak, and the stall is counted in the plugin state (``common_mode``).
+    breaks a streak, and the stall is counted in the plugin state (``common_mode``). So is one
+    where that holds of one attribute among the topics that could show it, and the risen topics
+    come from more than one process: a stall of 40 ms cannot show on a 1 Hz topic.
     """
 
     name = "topic_latency"
@@ -71,6 +73,7 @@ class TopicLatency(Plugin):
         alerting = ctx.state.setdefault("alerting", set())
         since = ctx.since_last_call()
         seen = []  # (topic, attr, excess, fresh)
+        floors = {}  # (topic, attr) -> the least rise that counts
         drops = []
         for topic in ctx.watched():
             age = ctx.value(topic, "age_s")
@@ -87,8 +90,10 @@ class TopicLatency(Plugin):
                         or _endpoints_changed(ctx, topic, s["switch_samples"])):
                     continue
                 seen.append((topic, attr, ex, fresh))
+                floors[topic, attr] = floor
             drops += _drops(ctx, topic, rate, fresh, alerting)
-        stall = common_mode(seen, s["common_mode_min"], s["common_mode_ratio"])
+        stall = common_mode(seen, s["common_mode_min"], s["common_mode_ratio"], floors,
+                            lambda t: set(filter(None, map(ctx.process_of, ctx.publishers(t)))))
         if stall:
             ctx.state["common_mode"] = ctx.state.get("common_mode", 0) + 1
         for topic, attr, ex, fresh in seen:
@@ -210,12 +215,29 @@ def best_effort(qos: Any) -> bool:
 
 
 def common_mode(seen: list[tuple[str, str, tuple[float, float, bool] | None, bool]], least: int,
-                ratio: float) -> bool:
+                ratio: float, floors: Mapping[tuple[str, str], float] | None = None,
+                processes: Callable[[str], set[str]] | None = None) -> bool:
     """Return True if at least ``least`` topics and ``ratio`` of the topics measured afresh (with a
     baseline) exceed their baseline in one sample: a stall of all, not a fault of each.
 
     ``seen`` holds ``(topic, attr, excess, fresh)`` per topic and attribute (`excess` result).
+    With ``floors`` (the least rise that counts, per topic and attribute), it is also True when
+    that holds of one attribute among the topics that could show the smallest rise of it, and
+    the risen ones come from more than one process (``processes``: a topic's publishers'): a
+    stall of the computer for 50 ms (a participant joining, each process busy with its discovery)
+    raises the jitter of the fast topics only, as a 1 Hz topic's floor is 500 ms.
     """
     measured = {topic for topic, _, ex, fresh in seen if ex is not None and fresh}
     risen = {topic for topic, _, ex, fresh in seen if ex is not None and fresh and ex[2]}
-    return len(risen) >= least and len(risen) >= ratio * len(measured)
+    if len(risen) >= least and len(risen) >= ratio * len(measured):
+        return True
+    for attr in {a for _, a, _, _ in seen} if floors else ():
+        ups = [(t, ex) for t, a, ex, fresh in seen if a == attr and ex is not None and fresh and ex[2]]
+        if len(ups) < least or len(set().union(*(processes(t) for t, _ in ups)) if processes else ()) < 2:
+            continue
+        smallest = min(value - med for _, (value, med, _) in ups)
+        able = {t for t, a, ex, fresh in seen if a == attr and ex is not None and fresh
+                and (ex[2] or floors.get((t, a), math.inf) <= smallest)}
+        if len(ups) >= ratio * len(able):
+            return True
+    return False

@@ -1781,6 +1781,30 @@ def test_common_mode_counts_topics_measured_afresh():
     assert common_mode([], 1, 0.5) is False
 
 
+def test_common_mode_of_one_attribute_among_the_topics_that_could_show_it():
+    from plugins.topic_latency import common_mode
+
+    # Four fast topics' jitter up by 40-60 ms in one sample; six 1 Hz topics measured, whose
+    # jitter floor (500 ms) no 40 ms stall reaches; their latency flat.
+    up = [(f"/fast{i}", "jitter_ms", (1.0 + 40 + 5 * i, 1.0, True), True) for i in range(4)]
+    slow = [(f"/slow{i}", a, (3.0, 3.0, False), True) for i in range(6) for a in ("jitter_ms", "latency_ms")]
+    fast_lat = [(f"/fast{i}", "latency_ms", (2.0, 2.0, False), True) for i in range(4)]
+    seen = up + slow + fast_lat
+    floors = {(t, a): (500.0 if t.startswith("/slow") and a == "jitter_ms" else 20.0) for t, a, _, _ in seen}
+    apart = {f"/fast{i}": {f"process:{i}"} for i in range(4)}
+    assert common_mode(seen, 4, 0.5) is False  # 4 of 10 topics
+    assert common_mode(seen, 4, 0.5, floors, lambda t: apart.get(t, set())) is True  # 4 of the 4 able
+    # All four from one process: its own trouble (a container starved), not the computer's.
+    assert common_mode(seen, 4, 0.5, floors, lambda t: {"process:0"}) is False
+    # A fifth fast topic whose jitter stayed flat, and three more: 4 of 8 able is still half.
+    more = [(f"/fast{i}", "jitter_ms", (1.0, 1.0, False), True) for i in range(4, 8)]
+    floors.update({(t, "jitter_ms"): 20.0 for t, *_ in more})
+    assert common_mode(seen + more, 4, 0.5, floors, lambda t: apart.get(t, set())) is True
+    more.append(("/fast8", "jitter_ms", (1.0, 1.0, False), True))
+    floors["/fast8", "jitter_ms"] = 20.0
+    assert common_mode(seen + more, 4, 0.5, floors, lambda t: apart.get(t, set())) is False  # 4 of 9
+
+
 def topics_model(n, risen=(), jitter=1.0):
     """``n`` topics /t0…, each from its own node and process; the ``risen`` ones with 150 ms latency."""
     G = new_graph()
