@@ -227,17 +227,18 @@ def common_mode(seen: list[tuple[str, str, tuple[float, float, bool] | None, boo
     stall of the computer for 50 ms (a participant joining, each process busy with its discovery)
     raises the jitter of the fast topics only, as a 1 Hz topic's floor is 500 ms.
     """
-    measured = {topic for topic, _, ex, fresh in seen if ex is not None and fresh}
-    risen = {topic for topic, _, ex, fresh in seen if ex is not None and fresh and ex[2]}
-    if len(risen) >= least and len(risen) >= ratio * len(measured):
+    live = [(t, a, ex) for t, a, ex, fresh in seen if ex is not None and fresh]
+    risen = {t for t, _, ex in live if ex[2]}
+    if len(risen) >= least and len(risen) >= ratio * len({t for t, _, _ in live}):
         return True
-    for attr in {a for _, a, _, _ in seen} if floors else ():
-        ups = [(t, ex) for t, a, ex, fresh in seen if a == attr and ex is not None and fresh and ex[2]]
-        if len(ups) < least or len(set().union(*(processes(t) for t, _ in ups)) if processes else ()) < 2:
+    if floors is None or processes is None:
+        return False
+    for attr in {a for _, a, _ in live}:
+        ups = [(t, ex) for t, a, ex in live if a == attr and ex[2]]
+        if len(ups) < least or len(set().union(*(processes(t) for t, _ in ups))) < 2:
             continue
         smallest = min(value - med for _, (value, med, _) in ups)
-        able = {t for t, a, ex, fresh in seen if a == attr and ex is not None and fresh
-                and (ex[2] or floors.get((t, a), math.inf) <= smallest)}
+        able = [t for t, a, ex in live if a == attr and (ex[2] or floors.get((t, a), math.inf) <= smallest)]
         if len(ups) >= ratio * len(able):
             return True
     return False

@@ -132,6 +132,7 @@ class UndiscoveredWatch:
         except Exception:  # the graph unreadable now (rclpy shutting down): say nothing new
             return self.found
         self._ever = {p.pid for p in found if p.inner & 0xFFFF in low16} | (self._ever & live)
+        self.late = {pid: v for pid, v in self.late.items() if pid in live}  # a pid may be reused
         self.late.update((p.pid, (p, now)) for p in self.found if p.pid in self._ever)
         unseen = [p for p in found if p.pid not in self._ever and p.inner & 0xFFFF not in low16]
         in_dds = {p.pid for p in unseen if _in_dds(p.pid)}
