@@ -9,7 +9,7 @@ import threading
 import pytest
 
 from stream_viz.collect.collector import Collector
-from stream_viz.collect.undiscovered import UndiscoveredWatch
+from stream_viz.collect.undiscovered import UndiscoveredWatch, _in_dds
 from stream_viz.testing import TALKER, claim_domain, ros_env, wait_for
 
 pytestmark = pytest.mark.ros
@@ -46,24 +46,30 @@ def test_the_monitor_says_it_and_keeps_it_in_its_database_and_report(ros_domain,
     from stream_viz.progress import Progress
 
     said = []
+    go = tmp_path / "go"
 
     class Said(Progress):
         def say(self, text: str) -> None:
             said.append(text)
+            if text.startswith(f"collector: no discovery of process {late.pid}: "):
+                go.touch()  # named: now let it join our domain
 
     env = {**ros_env(ros_domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "OFF"}
     code = TALKER.replace('"talker"', '"off_talker"').replace('"listener"', '"off_listener"')
     hidden = children.run([sys.executable, "-c", code], name="off", env=env)
     children.python(TALKER, name="seen")
     # In DDS from the start but not on our domain at first (its first context elsewhere): named at
-    # the watch's look at 10 s; its node on our domain from 13 s, discovered by the look at 20 s,
+    # the watch's look at 10 s; it joins our domain only once named, is discovered by the next look
     # and taken back then. Fast DDS loaded by rclpy.init with no node yet is no participant: not named.
     late = children.python(
-        "import os, rclpy, time\nfrom rclpy.context import Context\n"
-        f"rclpy.init(domain_id={claim_domain()}); kept = rclpy.create_node('elsewhere'); time.sleep(13)\n"
+        "import os, pathlib, rclpy, sys, time\nfrom rclpy.context import Context\n"
+        f"rclpy.init(domain_id={claim_domain()}); kept = rclpy.create_node('elsewhere')\n"
+        "while not pathlib.Path(sys.argv[1]).exists(): time.sleep(0.1)\n"
         "ctx = Context(); rclpy.init(context=ctx, domain_id=int(os.environ['ROS_DOMAIN_ID']))\n"
-        "rclpy.spin(rclpy.create_node('late_node', context=ctx))", name="late")
+        "rclpy.spin(rclpy.create_node('late_node', context=ctx))", str(go), name="late")
     loading = children.python("import rclpy, time; rclpy.init(); time.sleep(60)", name="loading")
+    # Both in DDS before the watch's first look, so its looks at 10 and 20 s name and take back.
+    wait_for(lambda: _in_dds(hidden.pid) and _in_dds(late.pid), timeout=20)
     mon = Monitor(load_config(None), db=tmp_path / "a.sqlite", report=tmp_path / "r.json", viewer="none",
                   domain_id=ros_domain, progress=Said())
     try:
