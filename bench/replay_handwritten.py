@@ -9,6 +9,8 @@ Writes one row per run: the alerts, those before the injection, the first alert 
 the live runner counts them, an alert up to ``SLACK_S`` before it is its sample's),
 the top 3 and the truth, strict and process-level AC@1 and strict AC@3 (ties as expected values,
 as `bench.eval.metrics`); prints the means, the median first alert and the healthy run's alerts.
+``--healthy RUN.sqlite`` starts each replay from what that healthy run learned (``stream-viz
+--healthy``).
 """
 
 from __future__ import annotations
@@ -55,6 +57,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("runs", type=Path, help="the suite's runs.jsonl")
     ap.add_argument("samples", type=Path, help="its --samples folder (<run>.jsonl.gz)")
     ap.add_argument("--csv", type=Path, required=True)
+    ap.add_argument("--healthy", type=Path, metavar="RUN.sqlite",
+                    help="start every replay from this healthy run's database (stream-viz --healthy)")
     args = ap.parse_args(argv)
     newest = {}
     for line in args.runs.read_text().splitlines():
@@ -66,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     for name, run in newest.items():
         samples = args.samples / f"{name}.jsonl.gz"
         if samples.exists():
-            rows.append(score(run, replay_report(samples), code))
+            rows.append(score(run, replay_report(samples, healthy=args.healthy), code))
             print(rows[-1], flush=True)
     args.csv.parent.mkdir(parents=True, exist_ok=True)
     with args.csv.open("w", newline="") as f:

@@ -783,11 +783,13 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     low = low and not _lost_on_the_way(ctx, topic, rate, med)
     # A drop lasts longer than any healthy pause of the topic (its recent rate counts a pause).
     samples, lasted = streak(ctx.state, (topic, "drop"), low), held(ctx.state, (topic, "drop"), low, ctx.t)
-    modes = ctx.state.setdefault("modes", {}).setdefault(topic, [])
+    # Modes hold in later runs of the robot (`learned`): a link steps down again as it did then.
+    known = ctx.learned.setdefault("modes", {})
+    modes = known.get(topic, [])
     ratio = now_rate / expect if expect > 0 else 1.0
     run = _drop_run(ctx, topic, low, ratio, quieting)
     if run is not None:  # a drop that ended by itself, the topic back at its rate: one of its modes
-        modes[:] = learn_mode(modes, *run)
+        modes = known[topic] = learn_mode(modes, *run)
     if samples < s["confirm"] or lasted < r.longest:
         return None
     # Its rate follows what reaches it (a gait published slower as its commands stop); once so,

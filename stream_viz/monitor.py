@@ -23,7 +23,7 @@ from stream_viz.collect.samples_file import SamplesWriter, run_header
 from stream_viz.config import Config
 from stream_viz.detect.detector import Detector
 from stream_viz.detect.plugin_set import PluginSet
-from stream_viz.detect.store import AlertStore, default_db_path
+from stream_viz.detect.store import AlertStore, default_db_path, learned_of
 from stream_viz.detect.watchlist import Watchlist
 from stream_viz.errors import StoreError
 from stream_viz.model.history import History
@@ -52,6 +52,8 @@ class Monitor:
 
     A replay (``stream-viz replay``) passes its ``collector`` (the recorded samples), the run's
     ``started_at`` and a longer ``plugin_timeout_s``; ``samples`` writes every sample collected.
+    ``healthy``, the database of an earlier run of the same robot that the user calls healthy,
+    starts each plugin from what it learned there (``ctx.learned``); every run saves its own.
     """
 
     def __init__(
@@ -71,6 +73,7 @@ class Monitor:
         collector: Any = None,
         started_at: float | None = None,
         plugin_timeout_s: float | None = None,
+        healthy: Path | None = None,
     ) -> None:
         # Outputs are checked before anything starts: a typo must not cost a run.
         self.report_path = check_writable(report, "report") if report else None
@@ -78,6 +81,7 @@ class Monitor:
             check_writable(save, "recording")
         if samples:
             check_writable(samples, "samples file")
+        learned = learned_of(healthy) if healthy else {}
         self.config = config
         self.progress = progress or Progress()
         self.db_path = Path(db) if db else default_db_path()
@@ -92,6 +96,11 @@ class Monitor:
         self.plugins = PluginSet.from_config(config, **timeout)
         self._say_problems(self.plugins.load_problems)
         self.store.add_problems(self.plugins.load_problems, t=self.started_at)
+        if healthy:
+            primed = self.plugins.prime(learned)
+            self.store.set_meta("healthy_from", str(healthy))
+            self.progress.say(f"starting from what the healthy run {healthy} showed: "
+                              f"{', '.join(primed) or 'nothing any plugin learned'}")
         self.view = LiveView(viewer=viewer, save=save, part_s=60.0 * config.monitor.recording_part_minutes,
                              serve_at=serve_at, grouping=group_by,
                              condensed=condensed or config.monitor.condensed,
@@ -233,6 +242,10 @@ class Monitor:
                 write_report(self.report_path, report)
 
         def commit() -> None:
+            learned, problems = self.plugins.learned(ended_at)
+            self._say_problems(problems)
+            self.store.add_problems(problems, t=ended_at)
+            self.store.set_meta("learned", learned)
             self.store.set_meta("ended_at", ended_at)
             self.store.set_meta("watchlist", sorted(self.watchlist.external))
             if self.injected:

@@ -41,15 +41,18 @@ def rerank(db: Path) -> list:
     return tie_blocks((rc.member, round(rc.score, 6)) for rc in result.root_causes)
 
 
-def replay_report(samples: Path, config: str | None = None) -> dict:
+def replay_report(samples: Path, config: str | None = None, healthy: Path | None = None) -> dict:
     """The JSON report of ``stream-viz replay`` over the run recorded in ``samples`` (``config``:
-    the text of a settings file to replay with)."""
+    the text of a settings file to replay with; ``healthy``: the database of a healthy run to
+    start from, ``--healthy``)."""
     with tempfile.TemporaryDirectory() as d:
         report = Path(d) / "report.json"
         extra = []
         if config is not None:
             (Path(d) / "config.toml").write_text(config)
             extra = ["--config", str(Path(d) / "config.toml")]
+        if healthy is not None:
+            extra += ["--healthy", str(healthy)]
         subprocess.run([sys.executable, "-m", "stream_viz.cli", "replay", str(samples), "--viewer", "none",
                         "--report", str(report), "--db", str(Path(d) / "alerts.sqlite"), *extra],
                        check=True, capture_output=True, timeout=1800)

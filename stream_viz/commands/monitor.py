@@ -49,6 +49,13 @@ def add_outputs(p: argparse.ArgumentParser) -> None:
                         "above [monitor] condense_above members (300; the default), on, or off")
 
 
+def add_healthy(p: argparse.ArgumentParser) -> None:
+    """``--healthy``: start from what an earlier healthy run of the same robot showed."""
+    p.add_argument("--healthy", type=Path, metavar="RUN.sqlite",
+                   help="the database (--db) of an earlier run of this robot you know was healthy: "
+                        "what it showed as normal (a rate its links step down to) is not alerted on")
+
+
 def add_samples(p: argparse.ArgumentParser) -> None:
     """``--samples``: a live run also writes what it collected, for ``stream-viz replay``."""
     p.add_argument("--samples", type=Path, metavar="FILE.jsonl.gz",
@@ -64,6 +71,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=float, metavar="SECONDS", help="stop after this long (else SIGINT)")
     add_outputs(p)
     add_samples(p)
+    add_healthy(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     viewer = args.viewer or "none"
     mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=viewer,
                   serve_at=serve_at(args), group_by=args.group_by, samples=args.samples,
-                  condensed=args.condensed)
+                  condensed=args.condensed, healthy=args.healthy)
     mon.progress.say(f"alert database: {mon.db_path}")
     try:
         mon.run(args.duration, stop)

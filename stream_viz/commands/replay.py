@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from stream_viz.commands.monitor import add_outputs, install_stop_handlers, linger, serve_at
+from stream_viz.commands.monitor import add_healthy, add_outputs, install_stop_handlers, linger, serve_at
 
 if TYPE_CHECKING:
     from stream_viz.collect.replay import ReplayCollector
@@ -43,6 +43,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speed", type=_speed, default=0.0, metavar="X",
                    help="X times real time (1: as recorded); 0, the default: as fast as it goes")
     add_outputs(p)
+    add_healthy(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -58,7 +59,8 @@ def run(args: argparse.Namespace) -> int:
         mon = Monitor(config, db=args.db, save=args.save, report=args.report, viewer=viewer,
                       serve_at=serve_at(args), group_by=args.group_by, collector=source,
                       condensed=args.condensed,
-                      started_at=source.header.get("started_at"), plugin_timeout_s=PLUGIN_TIMEOUT_S)
+                      started_at=source.header.get("started_at"), plugin_timeout_s=PLUGIN_TIMEOUT_S,
+                      healthy=args.healthy)
     except BaseException:
         source.close()
         raise

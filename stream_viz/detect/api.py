@@ -56,6 +56,10 @@ class PluginContext:
         The plugin's validated settings.
     state : dict
         Private to the plugin; persists between calls.
+    learned : dict
+        Private to the plugin, JSON values only: what it learned of this robot's healthy
+        behaviour (a rate mode) that holds in later runs. Saved in the run's database at its end;
+        a run started with ``--healthy RUN.sqlite`` begins with that run's.
     expected_rates : dict
         Topic id to the rate (Hz) the configuration expects.
     plugin : str
@@ -72,6 +76,7 @@ class PluginContext:
     diff: GraphDiff = field(default_factory=GraphDiff)
     settings: dict[str, Any] = field(default_factory=dict)
     state: dict[str, Any] = field(default_factory=dict)
+    learned: dict[str, Any] = field(default_factory=dict)
     expected_rates: dict[str, float] = field(default_factory=dict)
     plugin: str = ""
     kinds: tuple[str, ...] = ()

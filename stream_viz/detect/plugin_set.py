@@ -9,6 +9,8 @@ calls in a row.
 
 from __future__ import annotations
 
+import copy
+import json
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,6 +39,7 @@ class LoadedPlugin:
     settings: dict[str, Any]
     runner: Runner
     state: dict[str, Any] = field(default_factory=dict)
+    learned: dict[str, Any] = field(default_factory=dict)  # carried across runs (`learned`)
     failures: int = 0
     disabled: bool = False
 
@@ -184,9 +187,9 @@ class PluginSet:
         for lp in self.plugins:
             if lp.disabled:
                 continue
-            ctx = PluginContext(t, graph, watch, history, events, diff, lp.settings, lp.state, rates,
-                                plugin=lp.name, kinds=tuple(lp.plugin.kinds), by_kind=by_kind,
-                                of_kind=of_kind)
+            ctx = PluginContext(t, graph, watch, history, events, diff, lp.settings, lp.state,
+                                learned=lp.learned, expected_rates=rates, plugin=lp.name,
+                                kinds=tuple(lp.plugin.kinds), by_kind=by_kind, of_kind=of_kind)
             items, more, problem = lp.runner.call(ctx)
             if problem is not None:
                 problems += self._failed(lp, problem)
@@ -196,6 +199,32 @@ class PluginSet:
             problems += bad
             alerts += good
         return alerts, problems
+
+    def learned(self, t: float | None = None) -> tuple[dict[str, dict[str, Any]], list[PluginProblem]]:
+        """Return what each plugin learned to carry to later runs (``ctx.learned``, the non-empty
+        ones), and a problem for each whose values are not JSON (left out, the others kept)."""
+        out: dict[str, dict[str, Any]] = {}
+        problems: list[PluginProblem] = []
+        for lp in self.plugins:
+            if not lp.learned:
+                continue
+            try:
+                out[lp.name] = json.loads(json.dumps(lp.learned))
+            except (TypeError, ValueError) as exc:
+                problems.append(PluginProblem(lp.name, lp.where, "garbage",
+                                              f"what it learned is not JSON, not kept: {exc}", t=t))
+        return out, problems
+
+    def prime(self, learned: Mapping[str, Any]) -> list[str]:
+        """Start each plugin from what it learned in an earlier run (`learned`); return the names
+        of those primed. A plugin's entry that is not a mapping is left out."""
+        primed = []
+        for lp in self.plugins:
+            mine = learned.get(lp.name)
+            if isinstance(mine, Mapping) and mine:
+                lp.learned = copy.deepcopy(dict(mine))
+                primed.append(lp.name)
+        return primed
 
     def _failed(self, lp: LoadedPlugin, problem: PluginProblem) -> list[PluginProblem]:
         """Count a failed call; disable the plugin after ``max_failures`` in a row."""

@@ -63,6 +63,29 @@ def default_db_path() -> Path:
     return Path(name)
 
 
+def learned_of(path: str | Path) -> dict[str, Any]:
+    """Return what the plugins learned in the run kept in database ``path`` (plugin name to its
+    ``ctx.learned``), for a later run to start from (``--healthy``).
+
+    Raises
+    ------
+    StoreError
+        ``path`` is no readable alert database, or its run did not end (killed: nothing learned
+        was written) or was kept by a stream-viz that did not save what it learned.
+    """
+    store = AlertStore(path, readonly=True)
+    try:
+        learned = store.get_meta("learned")
+        ended = store.get_meta("ended_at")
+    finally:
+        store.close()
+    if not isinstance(learned, dict):
+        why = "its run did not end (killed?)" if ended is None else "it was kept by an older stream-viz"
+        raise StoreError(f"{path}: holds nothing learned to start from: {why}; give --healthy the "
+                         "database of a run that ended")
+    return learned
+
+
 @dataclass(frozen=True)
 class EpisodeRow:
     """An episode as stored."""

@@ -406,3 +406,51 @@ def test_the_documented_helper_example_works(tmp_path):
     # 13 samples of 4 threads (past the 10 s warm-up), then 40: confirmed on the second sample.
     assert seen == [(14.0, "node:/a", "40 threads, normally 4"), (15.0, "node:/a", "40 threads, normally 4")]
     ps.close()
+
+
+LEARNING = '''
+from stream_viz.detect.api import Plugin
+
+class Learning(Plugin):
+    name = "learning"
+    kinds = ("node",)
+
+    def check(self, ctx):
+        seen = ctx.learned.setdefault("seen", [])
+        if ctx.t not in seen:
+            seen.append(ctx.t)
+        if len(seen) > 2:
+            yield ctx.alert("node:/a", "info", f"seen {seen}")
+'''
+
+UNJSON = '''
+from stream_viz.detect.api import Plugin
+
+class Unjson(Plugin):
+    name = "unjson"
+    kinds = ("node",)
+
+    def check(self, ctx):
+        ctx.learned["when"] = {1.0, 2.0}
+        return []
+'''
+
+
+def test_what_a_plugin_learned_is_carried_to_a_later_run_and_only_as_json(tmp_path):
+    folder = tmp_path / "p"
+    _write(folder, "learning", LEARNING)
+    _write(folder, "unjson", UNJSON)
+    first = PluginSet.load([folder], entry_points=False, cwd_plugins=False)
+    _run(first, t=1.0)
+    _run(first, t=2.0)
+    learned, problems = first.learned(t=2.0)
+    first.close()
+    assert learned == {"learning": {"seen": [1.0, 2.0]}}
+    assert [(p.plugin, p.kind) for p in problems] == [("unjson", "garbage")]
+    later = PluginSet.load([folder], entry_points=False, cwd_plugins=False)
+    assert later.prime({**learned, "unjson": "not a mapping", "gone": {"x": 1}}) == ["learning"]
+    alerts, _ = _run(later, t=3.0)
+    assert [a.message for a in alerts] == ["seen [1.0, 2.0, 3.0]"]
+    learned["learning"]["seen"].append(99.0)  # primed with a copy: the source is not shared
+    assert later.learned()[0] == {"learning": {"seen": [1.0, 2.0, 3.0]}}
+    later.close()

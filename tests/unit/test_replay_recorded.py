@@ -10,6 +10,7 @@ rover (`bench/sim/`, commit 4419abe, ``python -m bench.sim.run --samples``: its 
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -23,13 +24,14 @@ from stream_viz.rca.engine import analyze
 DATA = Path(__file__).resolve().parents[1] / "data"
 
 
-def replayed(name: str | Path, tmp_path: Path) -> dict:
-    """The report of replaying ``tests/data/<name>`` (or the file ``name``) as `stream-viz replay` does."""
+def replayed(name: str | Path, tmp_path: Path, healthy: Path | None = None) -> dict:
+    """The report of replaying ``tests/data/<name>`` (or the file ``name``) as `stream-viz replay`
+    does (its database ``tmp_path/a.sqlite``), started from the database ``healthy`` if given."""
     from stream_viz.monitor import Monitor
 
     source = ReplayCollector(DATA / name if isinstance(name, str) else name)
     mon = Monitor(replay_config(None, source.header), db=tmp_path / "a.sqlite", collector=source,
-                  started_at=source.header["started_at"], plugin_timeout_s=PLUGIN_TIMEOUT_S)
+                  started_at=source.header["started_at"], plugin_timeout_s=PLUGIN_TIMEOUT_S, healthy=healthy)
     while not source.done:
         mon.step()
     end = source.notes["end"]
@@ -161,3 +163,29 @@ def test_the_couriers_stall_as_its_console_joined_is_no_jitter_rise(tmp_path):
     report = replayed(RESULTS / "courier-blind-fb161ae" / "samples" / "qos_safety_monitor.jsonl.gz", tmp_path)
     assert [a for a in report["alerts"] if a["plugin"] == "topic_latency"] == []
     assert report["root_causes"][0]["member"] == "node:/dlv/safety_monitor", report["root_causes"][:3]
+
+
+def test_a_rate_step_a_healthy_run_showed_is_no_drop_in_a_later_run(tmp_path):
+    # Live on fb161ae (blind courier): the video uplink steps 10 -> 5 or 2 fps while the modem's
+    # link is weak, by design; its first step in a run is a rate drop, nothing observed tells it
+    # from a degrading sensor (in crash_fleet_bridge: 85 s in). Started from the database of the
+    # suite's healthy run (--healthy), where it stepped down and back, that step is a mode of it,
+    # and the fault after it still ranks first.
+    courier = RESULTS / "courier-blind-fb161ae" / "samples"
+    for d in "hpa":
+        (tmp_path / d).mkdir()
+    replayed(courier / "healthy.jsonl.gz", tmp_path / "h")
+    uplink = "topic:/dlv/uplink/video"
+
+    runs = (RESULTS / "courier-blind-fb161ae" / "runs.jsonl").read_text().splitlines()
+    at = next(r["injected_at"] for r in map(json.loads, runs) if r["fault"] == "crash_fleet_bridge")
+
+    def early(report):
+        return [a for a in report["alerts"] if a["t"] < at - 1.0]
+
+    alone = replayed(courier / "crash_fleet_bridge.jsonl.gz", tmp_path / "a")
+    assert any(a["member"] == uplink and a["plugin"] == "topic_rate" for a in early(alone)), early(alone)
+    primed = replayed(courier / "crash_fleet_bridge.jsonl.gz", tmp_path / "p",
+                      healthy=tmp_path / "h" / "a.sqlite")
+    assert early(primed) == []
+    assert primed["root_causes"][0]["member"] == "node:/dlv/fleet_bridge", primed["root_causes"][:3]
