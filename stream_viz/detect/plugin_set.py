@@ -215,6 +215,11 @@ class PluginSet:
                                               f"what it learned is not JSON, not kept: {exc}", t=t))
         return out, problems
 
+    def learned_by(self, name: str) -> Mapping[str, Any]:
+        """What plugin ``name`` learned so far (`learned`; empty when it is not loaded): the
+        process rule's evidence reads the bursts ``process_resources`` carries."""
+        return next((lp.learned for lp in self.plugins if lp.name == name), {})
+
     def prime(self, learned: Mapping[str, Any]) -> list[str]:
         """Start each plugin from what it learned in an earlier run (`learned`); return the names
         of those primed. A plugin's entry that is not a mapping is left out."""

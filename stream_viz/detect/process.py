@@ -22,8 +22,9 @@ The callers:
   ``warmup_s`` seconds and ``min_samples`` samples, cached and frozen while the process alerts;
   a rise must hold ``confirm`` samples in a row, and a CPU rise must have held ``cpu_hold_s`` and
   outlast ``burst_margin`` × the longest of the process's earlier CPU rises in its history that
-  ended by themselves (its bursts: the first is a rise, those like it are its rhythm, `excursions`);
-  growth is checked over the last
+  ended by themselves (its bursts: the first is a rise, those like it are its rhythm, `excursions`;
+  and the longest a process with the same nodes showed in the healthy run this one started from,
+  ``--healthy``); growth is checked over the last
   ``trend_s``/12, /6, /2 and ``trend_s`` (a fast leak shows in the short span, a slow one in the
   long) and must be steady: at least ``growth_steady`` of the steps rising, over at least
   ``growth_min_samples`` samples, so one big allocation is no leak.
@@ -172,9 +173,28 @@ def _beyond_bursts(ctx: PluginContext, proc: str,
     level = seen[1] + s["cpu_min_rise"]
     since = times[0] + s["warmup_s"] if len(times) else ctx.t
     lasted, longest = excursions(np.append(times, ctx.t), np.append(cpu, seen[0]), level, since)
+    longest = _carried_bursts(ctx, proc, longest)
     if lasted < s["cpu_hold_s"] or lasted <= s["burst_margin"] * longest:  # longest 0: none known
         return seen[0], seen[1], False
     return seen
+
+
+def burst_key(nodes: Iterable[str]) -> str:
+    """A process's name across runs, for its carried bursts: the nodes it hosts (its PID is not
+    the same in the next run); empty for a process with none (not carried)."""
+    return " ".join(sorted(nodes))
+
+
+def _carried_bursts(ctx: PluginContext, proc: str, longest: float) -> float:
+    """The longest burst the process showed, in this run (``longest``) or in the healthy run
+    this one started from (``ctx.learned``, by `burst_key`); this run's is kept for the next."""
+    key = burst_key(ctx.nodes_of(proc, by_pid=True))
+    if not key:
+        return longest
+    known = ctx.learned.setdefault("bursts", {})
+    if longest > known.get(key, 0.0):
+        known[key] = longest
+    return max(longest, known.get(key, 0.0))
 
 
 def publishers_busy(ctx: PluginContext, topic: str) -> bool:
@@ -399,7 +419,8 @@ def _starting(times: np.ndarray, values: np.ndarray, rule: EvidenceRule) -> bool
 
 
 def anomalous_processes(G: nx.MultiDiGraph, history: History,
-                        settings: Mapping[str, Any] | None = None) -> set[str]:
+                        settings: Mapping[str, Any] | None = None,
+                        bursts: Mapping[str, float] | None = None) -> set[str]:
     """Return the processes whose metrics are anomalous vs their own past.
 
     Parameters
@@ -411,6 +432,9 @@ def anomalous_processes(G: nx.MultiDiGraph, history: History,
     settings : mapping, optional
         The ``process_resources`` settings (`SETTINGS` by default), read by `evidence_rule`;
         ``window`` bounds the samples compared per process, whatever the history length.
+    bursts : mapping, optional
+        `burst_key` to the longest CPU burst (s) a process with those nodes showed in the
+        healthy run this one started from (the plugin's ``learned["bursts"]``).
     """
     rule = evidence_rule(settings)
     out: set[str] = set()
@@ -419,22 +443,29 @@ def anomalous_processes(G: nx.MultiDiGraph, history: History,
             continue
         times, values = history.series(m, rule.window)
         found = process_anomaly(times, values, times[-1], rule)
-        if found == ["cpu"] and _within_bursts(*history.series(m), rule):
+        if found == ["cpu"] and _within_bursts(*history.series(m), rule, _carried(G, m, bursts)):
             continue  # rare: a rise found reads the whole history for the process's bursts
         if found:
             out.add(m)
     return out
 
 
-def _within_bursts(times: np.ndarray, values: np.ndarray, rule: EvidenceRule) -> bool:
+def _carried(G: nx.MultiDiGraph, process: str, bursts: Mapping[str, float] | None) -> float:
+    """The longest burst a process with ``process``'s nodes showed in the carried ``bursts``."""
+    return bursts.get(burst_key(nodes_of_process(G, process, by_pid=True)), 0.0) if bursts else 0.0
+
+
+def _within_bursts(times: np.ndarray, values: np.ndarray, rule: EvidenceRule, carried: float = 0.0) -> bool:
     """True when the process's CPU rise lasts no longer than ``burst_margin`` × its longest
     earlier burst in ``times``/``values`` (its whole history), measured from the median of its
-    last ``window`` samples before the present plus the floor: its rhythm, no evidence."""
+    last ``window`` samples before the present plus the floor, or the ``carried`` one of a
+    healthy run: its rhythm, no evidence."""
     cpu = values[:, _CPU]
     med = float(np.nanmedian(cpu[-rule.window:-1])) if len(cpu) > 1 else np.nan
     if not np.isfinite(med):
         return False
     lasted, longest = excursions(times, cpu, med + rule.cpu_min_rise, times[0] + rule.warmup)
+    longest = max(longest, carried)
     return longest > 0 and lasted <= rule.burst_margin * longest
 
 
@@ -443,7 +474,7 @@ def with_nodes(G: nx.MultiDiGraph, processes: set[str]) -> set[str]:
     return processes.union(*(nodes_of_process(G, p) for p in processes))
 
 
-def process_anomalies(G: nx.MultiDiGraph, history: History,
-                      settings: Mapping[str, Any] | None = None) -> set[str]:
+def process_anomalies(G: nx.MultiDiGraph, history: History, settings: Mapping[str, Any] | None = None,
+                      bursts: Mapping[str, float] | None = None) -> set[str]:
     """Return `anomalous_processes` and the nodes they host."""
-    return with_nodes(G, anomalous_processes(G, history, settings))
+    return with_nodes(G, anomalous_processes(G, history, settings, bursts))

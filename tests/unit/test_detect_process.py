@@ -32,19 +32,25 @@ def _graph():
     return G
 
 
-def _run(cpus, settings):
-    """Feed ``cpus`` (one a second) to the evidence and the plugin with the same settings."""
+def _run(cpus, settings, learned=None):
+    """Feed ``cpus`` (one a second) to the evidence and the plugin with the same settings, the
+    run started from ``learned`` (a run's ``PluginSet.learned()``, replaced by this run's)."""
     G, h = _graph(), History()
     ps = PluginSet.load(enable=["process_resources"], cwd_plugins=False,
                         settings={"process_resources": settings}, isolate=False)
+    ps.prime(learned or {})
     evidence, alerts = [], []
     for t, cpu in enumerate(cpus):
         G.nodes["process:2"]["theta"] = make_theta("process", {"cpu_percent": cpu, "rss_mb": 50.0})
         h.add("process:2", float(t), G.nodes["process:2"]["theta"])
-        evidence.append(sorted(process_anomalies(G, h, ps.settings_of("process_resources"))))
+        bursts = ps.learned_by("process_resources").get("bursts")
+        evidence.append(sorted(process_anomalies(G, h, ps.settings_of("process_resources"), bursts)))
         fired, problems = ps.run(float(t), G, G.nodes, h)
         assert problems == []
         alerts += [(a.t, a.member) for a in fired]
+    if learned is not None:
+        learned.clear()
+        learned.update(ps.learned()[0])
     return evidence, alerts
 
 
@@ -82,6 +88,19 @@ def test_bursts_longer_than_a_few_seconds_are_the_rhythm_of_the_evidence_and_the
     flagged = [t for t, e in enumerate(evidence) if e]
     assert flagged == [*range(20, 35), *range(231, 240)]
     assert [t for t, m in alerts if m == "node:/planner"] == [*range(24, 35), *range(232, 240)]
+
+
+def test_bursts_of_a_healthy_run_are_the_rhythm_of_the_next_for_the_evidence_and_the_plugin():
+    # The same executor's 15 s bursts in a run started from one that showed them: its first
+    # burst is its rhythm too; a hog is a rise for the evidence once it outlasts 2 × 15 s.
+    cpus = [80.0 if t >= 20 and (t - 20) % 60 < 15 else 10.0 + t % 3 for t in range(140)]
+    learned = {}
+    _run(cpus, {}, learned)
+    assert learned == {"process_resources": {"bursts": {"node:/planner": 15.0}}}
+    evidence, alerts = _run(cpus, {}, dict(learned))
+    assert [t for t, e in enumerate(evidence) if e] == [] and alerts == []
+    evidence, alerts = _run([10.0 + t % 3 for t in range(40)] + [85.0] * 40, {}, dict(learned))
+    assert [t for t, e in enumerate(evidence) if e][:1] == [71]
 
 
 def test_settings_of_a_plugin_switched_off():

@@ -41,10 +41,13 @@ def model(rate=10.0, latency=2.0, jitter=1.0, drops=0.0, cpu=5.0, rss=80.0, aliv
     return G
 
 
-def drive(plugin, frames, *, settings=None, expected=None, watch=None, full=False):
+def drive(plugin, frames, *, settings=None, expected=None, watch=None, full=False, learned=None):
     """Run one built-in plugin over ``frames`` = [(t, G, events)]; return alerts as (t, member, severity)
-    (``full``: the alerts themselves)."""
+    (``full``: the alerts themselves). ``learned``: a run's ``PluginSet.learned()`` to start from,
+    replaced by this run's at the end."""
     ps = PluginSet.load(enable=[plugin], cwd_plugins=False, settings={plugin: settings or {}}, isolate=False)
+    if learned is not None:
+        ps.prime(learned)
     hist = History()
     prev = new_graph()
     out = []
@@ -55,6 +58,9 @@ def drive(plugin, frames, *, settings=None, expected=None, watch=None, full=Fals
         assert problems == [], problems
         out += alerts if full else [(a.t, a.member, a.severity) for a in alerts]
         prev = G
+    if learned is not None:
+        learned.clear()
+        learned.update(ps.learned()[0])
     return out
 
 
@@ -1237,6 +1243,38 @@ def test_process_resources_cpu_bursts_it_has_shown_are_its_rhythm_a_hog_outlasts
     cpu = [90.0 if t >= 20 and t % 20 < 6 else noisy(5.0, 0.2) for t in range(100)]
     alerts = drive("process_resources", [(float(t), model(cpu=c), []) for t, c in enumerate(cpu)])
     assert [t for t, _, _ in alerts] == [24.0, 25.0]
+
+
+def test_process_resources_bursts_a_healthy_run_showed_are_its_rhythm_in_the_next():
+    # Bursts of 6 s every 20 s: in a run of its own the first is a rise; in a run started from
+    # that one (by the nodes of the process, not its PID) none is, and a hog outlasting 2 × 6 s is.
+    cpu = [90.0 if t >= 20 and t % 20 < 6 else noisy(5.0, 0.2) for t in range(100)]
+    frames = [(float(t), model(cpu=c), []) for t, c in enumerate(cpu)]
+    learned = {}
+    assert [t for t, _, _ in drive("process_resources", frames, learned=learned)] == [24.0, 25.0]
+    assert learned == {"process_resources": {"bursts": {"node:/camera": 6.0}}}
+    assert drive("process_resources", frames, learned=dict(learned)) == []
+    hog = [noisy(5.0, 0.2) for _ in range(40)] + [95.0] * 20
+    hog_frames = [(float(t), model(cpu=c), []) for t, c in enumerate(hog)]
+    alerts = drive("process_resources", hog_frames, learned=learned)
+    assert [t for t, _, _ in alerts][:1] == [54.0]  # risen at 53 (13 s > 2 × 6 s), confirmed
+
+
+def test_topic_rate_a_mode_a_healthy_run_showed_is_no_drop_in_the_next():
+    # 10 Hz stepping to 4 Hz for 10 s and back, twice: in a run of its own the first step is a
+    # drop; in a run started from that one, neither is, and a drop to 1 Hz (deeper than half the
+    # mode's 0.4) is.
+    rates = [noisy(10.0, 0.02) if t < 30 or 40 <= t < 60 or t >= 70 else 4.0 for t in range(90)]
+    frames = [(float(t), model(rate=r, recent=r), []) for t, r in enumerate(rates)]
+    learned = {}
+    first = drive("topic_rate", frames, learned=learned)
+    assert first and {t for t, _, _ in first} < set(range(30, 40)), first
+    assert [seconds for _, seconds in learned["topic_rate"]["modes"]["topic:/img"]] == [10.0, 10.0]
+    assert drive("topic_rate", frames, learned=dict(learned)) == []
+    deeper = [noisy(10.0, 0.02) if t < 30 else 1.0 for t in range(40)]
+    alerts = drive("topic_rate", [(float(t), model(rate=r, recent=r), []) for t, r in enumerate(deeper)],
+                   learned=learned)
+    assert alerts and alerts[0][0] <= 33.0, alerts
 
 
 def test_process_resources_slow_leak():
