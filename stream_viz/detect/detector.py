@@ -77,7 +77,7 @@ class Detector:
         self._samples += 1
         # [plugins.process_resources] tunes this evidence and the plugin alike (detect/process.py).
         rule = self.plugins.settings_of("process_resources")
-        bursts = self.plugins.learned_by("process_resources").get("bursts")  # carried from a healthy run
+        bursts = self.plugins.primed_by("process_resources").get("bursts")  # carried from a healthy run
         found = anomalous_processes(sample.graph, history, rule, bursts) if self._samples > 1 else set()
         # The monitor is an ancestor of what it starts (the demo): its own footprint is no symptom.
         procs = found - {self.own_process}

@@ -40,6 +40,7 @@ class LoadedPlugin:
     runner: Runner
     state: dict[str, Any] = field(default_factory=dict)
     learned: dict[str, Any] = field(default_factory=dict)  # carried across runs (`learned`)
+    primed: dict[str, Any] = field(default_factory=dict)  # what it started from (`prime`)
     failures: int = 0
     disabled: bool = False
 
@@ -215,10 +216,10 @@ class PluginSet:
                                               f"what it learned is not JSON, not kept: {exc}", t=t))
         return out, problems
 
-    def learned_by(self, name: str) -> Mapping[str, Any]:
-        """What plugin ``name`` learned so far (`learned`; empty when it is not loaded): the
-        process rule's evidence reads the bursts ``process_resources`` carries."""
-        return next((lp.learned for lp in self.plugins if lp.name == name), {})
+    def primed_by(self, name: str) -> Mapping[str, Any]:
+        """What plugin ``name`` started from (`prime`; empty when it is not loaded or was not
+        primed): the process rule's evidence reads the bursts ``process_resources`` carried."""
+        return next((lp.primed for lp in self.plugins if lp.name == name), {})
 
     def prime(self, learned: Mapping[str, Any]) -> list[str]:
         """Start each plugin from what it learned in an earlier run (`learned`); return the names
@@ -227,7 +228,7 @@ class PluginSet:
         for lp in self.plugins:
             mine = learned.get(lp.name)
             if isinstance(mine, Mapping) and mine:
-                lp.learned = copy.deepcopy(dict(mine))
+                lp.learned, lp.primed = copy.deepcopy(dict(mine)), copy.deepcopy(dict(mine))
                 primed.append(lp.name)
         return primed
 

@@ -109,8 +109,10 @@ def symptoms(ctx: PluginContext, procs: Iterable[str]) -> Iterator[tuple[str, li
     """
     alerting = ctx.state.setdefault("alerting", set())  # (process, attribute): baseline frozen
     windows = ctx.state.setdefault("rss", {})
+    rising = ctx.state.setdefault("cpu_rising", {})
     for gone in ctx.diff.removed_members:  # bound the state when processes come and go
         windows.pop(gone, None)
+        rising.pop(gone, None)  # a process that ended in a rise: no burst of its rhythm
     changes = param_changes(ctx)
     for proc in procs:
         found = _symptoms(ctx, proc, alerting, bool(changes))
@@ -162,18 +164,24 @@ def _beyond_bursts(ctx: PluginContext, proc: str,
                    seen: tuple[float, float, bool] | None) -> tuple[float, float, bool] | None:
     """`excess` of the process's CPU, risen only once the rise has held ``cpu_hold_s`` and
     outlasts ``burst_margin`` × the longest of the rises it showed and left by itself in its
-    history (`excursions`: a planner's plans, a map re-inflated, an executor busy now and then), so
-    bursts it has shown are its rhythm; a hog lasts longer. ``cpu_hold_s`` covers the first
-    burst, of which nothing is known yet: a few seconds of work at a goal or a map update is how
-    robots run."""
+    history (`excursions`: a planner's plans, a map re-inflated, an executor busy now and then),
+    or in the healthy run this one started from (`_primed_burst`), so bursts it has shown are
+    its rhythm; a hog lasts longer. ``cpu_hold_s`` covers the first burst, of which nothing is
+    known yet: a few seconds of work at a goal or a map update is how robots run. Each rise that
+    ends is kept for a later run (`_keep_burst`)."""
+    rising = ctx.state["cpu_rising"]
     if seen is None or not seen[2]:
+        began = rising.pop(proc, None)
+        if began is not None:
+            _keep_burst(ctx, proc, ctx.t - began)
         return seen
+    rising.setdefault(proc, ctx.t)
     times, cpu = ctx.past(proc, "cpu_percent")
     s = ctx.settings
     level = seen[1] + s["cpu_min_rise"]
     since = times[0] + s["warmup_s"] if len(times) else ctx.t
     lasted, longest = excursions(np.append(times, ctx.t), np.append(cpu, seen[0]), level, since)
-    longest = _carried_bursts(ctx, proc, longest)
+    longest = max(longest, _primed_burst(ctx, proc))
     if lasted < s["cpu_hold_s"] or lasted <= s["burst_margin"] * longest:  # longest 0: none known
         return seen[0], seen[1], False
     return seen
@@ -185,16 +193,20 @@ def burst_key(nodes: Iterable[str]) -> str:
     return " ".join(sorted(nodes))
 
 
-def _carried_bursts(ctx: PluginContext, proc: str, longest: float) -> float:
-    """The longest burst the process showed, in this run (``longest``) or in the healthy run
-    this one started from (``ctx.learned``, by `burst_key`); this run's is kept for the next."""
+def _primed_burst(ctx: PluginContext, proc: str) -> float:
+    """The longest CPU burst a process with ``proc``'s nodes showed in the healthy run this one
+    started from (``ctx.learned["bursts"]`` as it was primed; 0 if none)."""
+    primed = ctx.state.setdefault("primed_bursts", dict(ctx.learned.get("bursts", {})))
+    return primed.get(burst_key(ctx.nodes_of(proc, by_pid=True)), 0.0) if primed else 0.0
+
+
+def _keep_burst(ctx: PluginContext, proc: str, seconds: float) -> None:
+    """Keep a CPU rise of ``seconds`` that ended by itself as the process's longest burst for a
+    later run (``ctx.learned``), by `burst_key`; a process with no node is not carried."""
     key = burst_key(ctx.nodes_of(proc, by_pid=True))
-    if not key:
-        return longest
-    known = ctx.learned.setdefault("bursts", {})
-    if longest > known.get(key, 0.0):
-        known[key] = longest
-    return max(longest, known.get(key, 0.0))
+    if key:
+        known = ctx.learned.setdefault("bursts", {})
+        known[key] = max(seconds, known.get(key, 0.0))
 
 
 def publishers_busy(ctx: PluginContext, topic: str) -> bool:

@@ -43,7 +43,7 @@ def _run(cpus, settings, learned=None):
     for t, cpu in enumerate(cpus):
         G.nodes["process:2"]["theta"] = make_theta("process", {"cpu_percent": cpu, "rss_mb": 50.0})
         h.add("process:2", float(t), G.nodes["process:2"]["theta"])
-        bursts = ps.learned_by("process_resources").get("bursts")
+        bursts = ps.primed_by("process_resources").get("bursts")
         evidence.append(sorted(process_anomalies(G, h, ps.settings_of("process_resources"), bursts)))
         fired, problems = ps.run(float(t), G, G.nodes, h)
         assert problems == []
@@ -101,6 +101,11 @@ def test_bursts_of_a_healthy_run_are_the_rhythm_of_the_next_for_the_evidence_and
     assert [t for t, e in enumerate(evidence) if e] == [] and alerts == []
     evidence, alerts = _run([10.0 + t % 3 for t in range(40)] + [85.0] * 40, {}, dict(learned))
     assert [t for t, e in enumerate(evidence) if e][:1] == [71]
+    # The last burst of a run, no rise after it, is kept too.
+    last = [10.0 + t % 3 for t in range(40)] + [80.0] * 28 + [10.0] * 5
+    learned = {}
+    _run(last, {}, learned)
+    assert learned == {"process_resources": {"bursts": {"node:/planner": 28.0}}}
 
 
 def test_settings_of_a_plugin_switched_off():
