@@ -96,6 +96,7 @@ class Monitor:
         self.plugins = PluginSet.from_config(config, **timeout)
         self._say_problems(self.plugins.load_problems)
         self.store.add_problems(self.plugins.load_problems, t=self.started_at)
+        self.healthy_from = str(healthy) if healthy else None
         if healthy:
             primed = self.plugins.prime(learned)
             self.store.set_meta("healthy_from", str(healthy))
@@ -237,7 +238,7 @@ class Monitor:
         def write() -> None:
             report.update(build_report(self.seen, self.store.alerts(), self.engine.result().to_report(),
                                        self.started_at, ended_at, self.injected, self.store.problems(),
-                                       self._limits))
+                                       self._limits, self.healthy_from))
             if self.report_path:
                 write_report(self.report_path, report)
 

@@ -28,6 +28,7 @@ def build_report(
     injected: Mapping[str, Any] | None = None,
     problems: Iterable[Mapping[str, Any]] = (),
     limits: Mapping[str, str] | None = None,
+    healthy_from: str | None = None,
 ) -> dict[str, Any]:
     """Return the report dict for the model ``G``, the alerts and the RCA's ``to_report()`` output.
 
@@ -50,6 +51,9 @@ def build_report(
     limits : mapping, optional
         What the collector could not do or see, and why (`Collector.limits`: a fallback, a
         local process never discovered); absent from the report when empty.
+    healthy_from : str, optional
+        The database of the healthy run this one started from (``--healthy``): what it showed
+        as normal was not alerted on here.
     """
     members = []
     for m, attrs in sorted(G.nodes(data=True)):
@@ -90,6 +94,8 @@ def build_report(
         report["injected"] = dict(injected)
     if limits:
         report["collector_limits"] = dict(limits)
+    if healthy_from:
+        report["healthy_from"] = healthy_from
     return report
 
 

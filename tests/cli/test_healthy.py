@@ -3,13 +3,14 @@ real databases; the effect on a recorded robot is `tests/unit/test_replay_record
 
 from __future__ import annotations
 
+import json
 import os
 
 import pytest
 
 from stream_viz.detect.store import AlertStore
 from stream_viz.testing import TALKER
-from tests.cli.test_cli import run_cli
+from tests.cli.test_cli import check_report, run_cli
 
 
 def test_a_monitor_saves_what_it_learned_and_the_next_starts_from_it(children, tmp_path):
@@ -18,9 +19,12 @@ def test_a_monitor_saves_what_it_learned_and_the_next_starts_from_it(children, t
     out = run_cli(["monitor", "--duration", "6", "--viewer", "none", "--db", str(first)], children.env)
     assert out.returncode == 0, out.stderr
     out = run_cli(["monitor", "--duration", "4", "--viewer", "none", "--db", str(second),
-                   "--healthy", str(first)], children.env)
+                   "--healthy", str(first), "--report", str(tmp_path / "r.json")], children.env)
     assert out.returncode == 0, out.stderr
     assert f"starting from what the healthy run {first} showed" in out.stderr
+    report = json.loads((tmp_path / "r.json").read_text())
+    check_report(report)
+    assert report["healthy_from"] == str(first)
     for path in (first, second):
         store = AlertStore(path, readonly=True)
         try:
