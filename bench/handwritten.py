@@ -190,15 +190,16 @@ class LaunchedRobot(NamespacedRobot):
 
 
 def run(robot: Robot, fault: str | None, seconds_before: float, post: float,
-        samples: Path | None = None) -> dict:
+        samples: Path | None = None, healthy: Path | None = None) -> dict:
     """One run of ``robot`` (not started yet) under the monitor, ``fault`` injected
-    ``seconds_before`` s after the start; every sample written to ``samples`` when given."""
+    ``seconds_before`` s after the start; every sample written to ``samples`` when given; the
+    monitor started from the healthy run's database ``healthy`` when given (``--healthy``)."""
     from stream_viz.config import load_config
     from stream_viz.monitor import Monitor
 
     d = robot.design
     mon = Monitor(load_config(None), db=robot.logs / "alerts.sqlite", viewer="none",
-                  domain_id=int(os.environ["ROS_DOMAIN_ID"]), samples=samples)
+                  domain_id=int(os.environ["ROS_DOMAIN_ID"]), samples=samples, healthy=healthy)
     injected_at = None
     try:
         robot.start()
@@ -258,7 +259,8 @@ def _expand(G, pids: dict[int, str], processes: dict[str, tuple[str, ...]]) -> d
 
 def main(argv: list[str] | None, doc: str, name: str, make: type[Robot], design: Design,
          warmup: float, warmup_help: str) -> int:
-    """The runner's command line (``--healthy --warmup --post --faults --out --samples``)."""
+    """The runner's command line (``--healthy --warmup --post --faults --out --samples
+    --from-healthy``)."""
     ap = argparse.ArgumentParser(description=doc.splitlines()[0])
     ap.add_argument("--healthy", type=float, default=600.0, help="s of the healthy run (0: none)")
     ap.add_argument("--warmup", type=float, default=warmup, help=warmup_help)
@@ -266,6 +268,8 @@ def main(argv: list[str] | None, doc: str, name: str, make: type[Robot], design:
     ap.add_argument("--faults", default=",".join(design.faults), help="comma list (none: no fault runs)")
     ap.add_argument("--out", type=Path, default=Path(f"bench/out/{name}"))
     ap.add_argument("--samples", type=Path, help="keep each run's samples here (<run>.jsonl.gz)")
+    ap.add_argument("--from-healthy", type=Path, metavar="RUN.sqlite",
+                    help="start every run's monitor from this healthy run's database (stream-viz --healthy)")
     args = ap.parse_args(argv)
     code = code_version()  # the code this process loads now, not the checkout when a run ends
     own_domain()
@@ -282,8 +286,10 @@ def main(argv: list[str] | None, doc: str, name: str, make: type[Robot], design:
         (tmp / "faults").mkdir()
         print(f"  logs {tmp}", flush=True)
         rec = run(make(design, tmp / "faults", tmp), fault, args.healthy if fault is None else args.warmup,
-                  args.post, keep)
+                  args.post, keep, args.from_healthy)
         rec["code"] = code
+        if args.from_healthy:
+            rec["healthy_from"] = str(args.from_healthy)
         runs.append(rec)
         with open(args.out / "runs.jsonl", "a") as f:
             f.write(json.dumps(rec) + "\n")
