@@ -110,8 +110,8 @@ def symptoms(ctx: PluginContext, procs: Iterable[str]) -> Iterator[tuple[str, li
     alerting = ctx.state.setdefault("alerting", set())  # (process, attribute): baseline frozen
     windows = ctx.state.setdefault("rss", {})
     rising = ctx.state.setdefault("cpu_rising", {})
-    # What the run started from, before this run's own rises are kept beside it (`_keep_burst`).
-    ctx.state.setdefault("primed_bursts", dict(ctx.learned.get("bursts", {})))
+    if "primed_bursts" not in ctx.state:  # what the run started from, before its own rises are kept
+        ctx.state["primed_bursts"] = dict(ctx.learned.get("bursts", {}))
     for gone in ctx.diff.removed_members:  # bound the state when processes come and go
         windows.pop(gone, None)
         rising.pop(gone, None)  # a process that ended in a rise: no burst of its rhythm
@@ -198,8 +198,7 @@ def burst_key(nodes: Iterable[str]) -> str:
 def _primed_burst(ctx: PluginContext, proc: str) -> float:
     """The longest CPU burst a process with ``proc``'s nodes showed in the healthy run this one
     started from (``ctx.learned["bursts"]`` as it was primed; 0 if none)."""
-    primed = ctx.state["primed_bursts"]
-    return primed.get(burst_key(ctx.nodes_of(proc, by_pid=True)), 0.0) if primed else 0.0
+    return _carried(ctx.graph, proc, ctx.state["primed_bursts"])
 
 
 def _keep_burst(ctx: PluginContext, proc: str, seconds: float) -> None:
