@@ -38,6 +38,9 @@ class TopicLatency(Plugin):
     the topic's endpoints changed in number within them (`_endpoints_changed`: a recorder
     joining).
 
+    Carried from a healthy run (``--healthy``): a rise like one it showed, that ended by itself,
+    is its normal (`_shown_before`) while no more than ``carried_margin`` × as high and as long.
+
     Common mode: when at least ``common_mode_min`` topics and ``common_mode_ratio`` of the topics
     measured in a sample rise at once, the sample is a stall of the host or of the monitor (the
     receive stamps are ours), not a fault of those topics' publishers: it neither counts nor
@@ -66,6 +69,7 @@ class TopicLatency(Plugin):
         "latency_hold_s": 4.0,
         "jitter_hold_s": 4.0,
         "switch_samples": 8,
+        "carried_margin": 2.0,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -96,16 +100,46 @@ class TopicLatency(Plugin):
                             lambda t: set(filter(None, map(ctx.process_of, ctx.publishers(t)))))
         if stall:
             ctx.state["common_mode"] = ctx.state.get("common_mode", 0) + 1
+        if "primed_rises" not in ctx.state:  # what the run started from, before its own rises are kept
+            ctx.state["primed_rises"] = dict(ctx.learned.get("rises", {}))
         for topic, attr, ex, fresh in seen:
             counts = fresh and not stall
             risen = confirm(ctx, topic, attr, ex, alerting, counts)
-            lasted = held(ctx.state, (topic, attr), ex is not None and ex[2], ctx.t, counts)
+            up = ex is not None and ex[2]
+            lasted = held(ctx.state, (topic, attr), up, ctx.t, counts)
+            if counts:
+                _keep_rise(ctx, topic, attr, ex[0] if up else None)
             what = attr.removesuffix("_ms")
-            if risen is not None and lasted >= s[f"{what}_hold_s"]:
+            if risen is not None and lasted >= s[f"{what}_hold_s"] \
+                    and not _shown_before(ctx, topic, attr, risen[0], lasted):
                 value, med = risen
                 yield ctx.alert(topic, "warn", f"{what} {value:.1f} ms, normally {med:.1f} ms",
                                 symptom=f"{what}_rise", value_ms=value, baseline_ms=med)
         yield from drops
+
+
+def _keep_rise(ctx: PluginContext, topic: str, attr: str, value: float | None) -> None:
+    """Follow the rise of ``topic``'s ``attr`` under way (``value`` this sample, None: not risen);
+    one that ends widens the topic's envelope for a later run (``ctx.learned["rises"]``: its
+    highest value and its longest rise that ended by itself, ms and s)."""
+    rises = ctx.state.setdefault("rises", {})  # (topic, attr) -> [its start, its peak]
+    if value is not None:
+        rise = rises.setdefault((topic, attr), [ctx.t, value])
+        rise[1] = max(rise[1], value)
+    elif (topic, attr) in rises:
+        start, peak = rises.pop((topic, attr))
+        known = ctx.learned.setdefault("rises", {})
+        was = known.get(f"{topic} {attr}", [0.0, 0.0])
+        known[f"{topic} {attr}"] = [max(was[0], peak), max(was[1], ctx.t - start)]
+
+
+def _shown_before(ctx: PluginContext, topic: str, attr: str, value: float, lasted: float) -> bool:
+    """True when the healthy run this one started from showed a rise of ``topic``'s ``attr`` that
+    ended by itself, ``carried_margin`` × as high and as long as this one so far: its normal
+    (a host's hiccup on a fast sensor, a controller's commands while it plans)."""
+    carried = ctx.state["primed_rises"].get(f"{topic} {attr}")
+    margin = ctx.settings["carried_margin"]
+    return carried is not None and value <= margin * carried[0] and lasted <= margin * carried[1]
 
 
 def _interleaved(ctx: PluginContext, topic: str) -> bool:

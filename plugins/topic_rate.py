@@ -65,7 +65,8 @@ class TopicRate(Plugin):
       bursty topic's quiets: `stream_viz.detect.rhythm`; ``complained_min_s`` for the floor when a
       publisher complained as it went quiet, `_complained`: its word confirms what the floor
       guards against, the monitor's own sampling), or ``gap_margin`` × the longest healthy gap
-      or quiet the topic has shown, or, for a topic whose arrivals are irregular, the longest
+      or quiet the topic has shown (in this run, or in the healthy run it started from,
+      ``--healthy``: `Rhythm.carried`), or, for a topic whose arrivals are irregular, the longest
       quiet random arrivals at its rate show in ``irregular_horizon_s`` (`_by_chance`). Judged
       only once the topic's rhythm is settled: it published for ``warmup_s`` without such a
       quiet, or showed ``min_gaps`` healthy gaps; a topic that left the graph, or had no
@@ -92,8 +93,8 @@ class TopicRate(Plugin):
       (``episode_hold_s``), counted (``flaps``);
     * drop (warn): ``rate < drop_ratio × baseline`` and ``≥ drop_k`` σ below it for ``confirm``
       samples, the baseline being the median of the topic's own rate after ``warmup_s`` (frozen
-      while alerting); only on a continuous topic (settled, no healthy gap: a bursty topic's rate
-      baseline says nothing), lasting longer than its longest healthy quiet, and for an
+      while alerting); only on a continuous topic (settled, no healthy gap, here or carried: a bursty
+      topic's rate baseline says nothing), lasting longer than its longest healthy quiet, and for an
       irregular topic (see silence) ``irregular_drop_s``: its rate follows what reaches its
       publisher (a lossy stream halves for seconds as the host's load changes); the rate compared
       is the recent one (``rate_recent_hz``, the last few intervals) where measured, so a slowed
@@ -152,6 +153,8 @@ class TopicRate(Plugin):
         alerting = ctx.state.setdefault("alerting", set())
         ctx.state["interval"] = ctx.since_last_call()  # what this sample's process metrics cover
         rhythms: dict[str, Rhythm] = ctx.state.setdefault("rhythms", {})
+        if "primed_gaps" not in ctx.state:  # what the run started from, before its own gaps are kept
+            ctx.state["primed_gaps"] = dict(ctx.learned.get("gaps", {}))
         _self_reports(ctx)
         for topic, r in rhythms.items():  # before any is followed: a quiet complained of is not learned
             if r.newest is not None and not r.doubted and _complained(ctx, topic, r):
@@ -168,7 +171,7 @@ class TopicRate(Plugin):
             _note_back(ctx, back, topic)
             rate = ctx.value(topic, "rate_hz")
             if not math.isnan(rate):
-                _follow(ctx, rhythms.setdefault(topic, Rhythm()), topic, rate, None)
+                _follow(ctx, _rhythm(ctx, rhythms, topic), topic, rate, None)
         if ctx.diff.removed_members:
             _forget(ctx, rhythms)
         slowed = _simulation_slowed(ctx) if CLOCK in ctx.graph else None
@@ -183,7 +186,7 @@ class TopicRate(Plugin):
             if math.isnan(rate):
                 continue  # not measured
             base = cached_baseline(ctx, topic, "rate_hz", frozen=topic in alerting, since=relearn.get(topic))
-            r = rhythms.setdefault(topic, Rhythm())
+            r = _rhythm(ctx, rhythms, topic)
             followed.append((topic, r, rate, base, _follow(ctx, r, topic, rate, base)))
         followed = _reconfigured(ctx, followed, rhythms)
         for topic, r, rate, base, quiet in followed:
@@ -329,15 +332,30 @@ def _base_limit(s: dict[str, Any], ref_hz: float, complained: bool = False) -> f
     return max(s["silence_periods"] / ref_hz, floor) if ref_hz > 0 else s["silence_min_s"]
 
 
+def _rhythm(ctx: PluginContext, rhythms: dict[str, Rhythm], topic: str) -> Rhythm:
+    """The topic's rhythm; a new one carries the longest healthy gap the healthy run this one
+    started from showed (``ctx.learned["gaps"]`` as it was primed)."""
+    r = rhythms.get(topic)
+    if r is None:
+        r = rhythms[topic] = Rhythm(carried=ctx.state["primed_gaps"].get(topic, 0.0))
+    return r
+
+
 def _follow(ctx: PluginContext, r: Rhythm, topic: str, rate: float, base: Baseline) -> float | None:
-    """Account this sample in the topic's rhythm; return its quiet (s), None before any message."""
+    """Account this sample in the topic's rhythm; return its quiet (s), None before any message.
+    A healthy gap it learns is kept as the topic's longest for a later run (``ctx.learned``)."""
     s = ctx.settings
     limit = _base_limit(s, _ref_hz(r, base))
     newest = newest_message(ctx.t, rate, ctx.value(topic, "age_s"))
     gap = ctx.value(topic, "gap_s")
-    return follow(r, ctx.t, newest, rate, window_s=s["rate_window_s"], notable=limit,
-                  settle_s=max(s["warmup_s"], limit), margin=s["gap_margin"], min_gaps=s["min_gaps"],
-                  gap=0.0 if math.isnan(gap) else gap)
+    gaps = r.gaps
+    quiet = follow(r, ctx.t, newest, rate, window_s=s["rate_window_s"], notable=limit,
+                   settle_s=max(s["warmup_s"], limit), margin=s["gap_margin"], min_gaps=s["min_gaps"],
+                   gap=0.0 if math.isnan(gap) else gap)
+    if r.gaps is not gaps:  # `follow` replaces the list as it learns a gap
+        known = ctx.learned.setdefault("gaps", {})
+        known[topic] = max(r.gaps[-1], known.get(topic, 0.0))
+    return quiet
 
 
 def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, base: Baseline,
@@ -385,6 +403,8 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
         flaps[:] = [f for f in flaps if ctx.t - f <= s["flap_window_s"]] + [ctx.t]
     flaps = len(ctx.state["flaps"][topic])
     usual = f"was {ref:.3g} Hz" if not r.gaps else f"its longest healthy gap {max(r.gaps):.1f} s"
+    if r.carried:
+        usual += f"; {r.carried:.1f} s in the healthy run it started from"
     again = f"; silent {flaps} times in {s['flap_window_s']:.0f} s" if flaps > 1 else ""
     # Its executor stopped: every node it runs stops with it (the RCA ties them, `siblings.stalls`).
     stalled = stalled or _stalled(ctx, topic, r, rhythms)
@@ -759,7 +779,8 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     nor stopping for a healthy cause (its recent rate falls as it stops: a goal ended), nor
     following an input that went quiet as it fell (`_input_stopped`)."""
     s = ctx.settings
-    if base is None or base[0] < s["min_baseline_hz"] or not r.settled or r.gaps:
+    # A topic with healthy gaps, in this run or the healthy one it started from, is bursty.
+    if base is None or base[0] < s["min_baseline_hz"] or not r.settled or r.gaps or r.carried:
         return None
     stopping = quiet is not None and quiet >= STOPPING_PERIODS / base[0]
     if stopping and _healthy_quiet(ctx, topic, r, transitions):

@@ -104,6 +104,7 @@ class Rhythm:
     departed: bool = False
     explained: bool = False
     doubted: bool = False
+    carried: float = 0.0
 
 
 def newest_message(t: float, rate: float, age: float) -> float | None:
@@ -181,7 +182,7 @@ def _message(r: Rhythm, newest: float, notable: float, margin: float, seen: floa
         r.run_start = newest
     else:
         # A continuous topic's limit is its base one: what its own hiccups added is no rhythm.
-        limit = quiet_limit(r, notable, margin) if r.gaps else notable
+        limit = quiet_limit(r, notable, margin) if r.gaps or r.carried else notable
         missed = r.settled and seen < limit <= r.peak
         # Nor is a settled continuous topic's hiccup that would at once lift its limit above the
         # base, more than ``margin`` × its longest quiet yet: a flaky sensor's first dropout just
@@ -210,5 +211,5 @@ def _settles(r: Rhythm, settle_s: float, margin: float, min_gaps: int) -> bool:
 
 def quiet_limit(r: Rhythm, base_s: float, margin: float) -> float:
     """Return how long ``r``'s topic may be quiet while healthy: ``base_s``, or ``margin`` × its
-    longest healthy gap or quiet when longer."""
-    return max(base_s, margin * max([r.longest, *r.gaps]))
+    longest healthy gap or quiet, or the gap it carried from an earlier run, when longer."""
+    return max(base_s, margin * max([r.longest, r.carried, *r.gaps]))

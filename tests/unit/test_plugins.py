@@ -396,6 +396,26 @@ def test_topic_rate_bursty_topic_is_quiet_when_healthy_and_silent_when_hung_past
     assert round(alerts[0].data["limit_s"], 2) == 13.2 and "longest healthy gap 6.6 s" in alerts[0].message
 
 
+def test_topic_rate_gaps_a_healthy_run_showed_are_its_rhythm_in_the_next():
+    # A healthy run whose first gap is 18 s (before its rhythm settled: learned), then 6 s ones.
+    healthy = bursts([0, 20, *range(28, 120, 8)])
+    learned = {}
+    assert drive("topic_rate", sampled(healthy, HALF), learned=learned) == []
+    # From its last message before (1.9) to the newest at the sample after (an upper bound).
+    assert learned["topic_rate"]["gaps"] == {"topic:/img": pytest.approx(18.6)}
+    # A run with 6 s gaps, then a pause of 20 s: past twice its own gaps (13.2 s) a silence on
+    # its own; started from the healthy run, within twice its 18.6 s.
+    paused = bursts([*range(0, 49, 8), 70, 78, 86])
+    alone = drive("topic_rate", sampled(paused, HALF[:95]), full=True)
+    assert [(a.t, a.data["symptom"]) for a in alone][:1] == [(63.5, "silence")]
+    assert drive("topic_rate", sampled(paused, HALF[:95]), learned=dict(learned)) == []
+    # Hung past twice the carried gap: silent, said so; and never judged by its rate.
+    alerts = drive("topic_rate", sampled(bursts(range(0, 49, 8)), HALF), learned=dict(learned), full=True)
+    assert [(a.t, a.data["symptom"]) for a in alerts][:1] == [(87.5, "silence")]  # 49.9 + 37.2
+    assert alerts[0].data["limit_s"] == pytest.approx(37.2)
+    assert "18.6 s in the healthy run it started from" in alerts[0].message
+
+
 def test_topic_rate_a_loops_pause_ended_by_its_stamps_going_back_is_learned():
     # a recording played in loops: 10 Hz for 28 s, a 2 s pause, again (its stamps go back each time)
     msgs = bursts(range(0, 120, 30), on=28.0)
@@ -1899,6 +1919,23 @@ def test_graph_anomalies_grace_starts_again_while_the_system_is_being_discovered
     frames = [(float(t), grown(100 + t), []) for t in range(8)]
     assert drive("graph_anomalies", frames, settings=never) == [
         (t, "node:/detector", "warn") for t in (5.0, 6.0, 7.0)]
+
+
+def test_topic_latency_rises_a_healthy_run_showed_are_its_normal_in_the_next():
+    # Jitter up to 90 ms for 5 s, twice, ending by itself: alone, the first is a rise once it held
+    # 4 s (the second is within what the topic often shows by then, `usual_quantile`); started
+    # from that run, neither is, and one more than twice as high, or as long, is a rise.
+    def frames(level, seconds, n=60):
+        up = lambda t: (30 <= t < 30 + seconds) or (45 <= t < 45 + seconds)  # noqa: E731
+        return [(float(t), model(jitter=level if up(t) else noisy(1.0, 0.3)), []) for t in range(n)]
+
+    learned = {}
+    assert [t for t, _, _ in drive("topic_latency", frames(90.0, 5), learned=learned)] == [34.0]
+    assert learned["topic_latency"]["rises"] == {"topic:/img jitter_ms": [90.0, 5.0]}
+    assert drive("topic_latency", frames(90.0, 5), learned=dict(learned)) == []
+    assert [t for t, _, _ in drive("topic_latency", frames(200.0, 5), learned=dict(learned))][:1] == [34.0]
+    longer = drive("topic_latency", frames(90.0, 14), learned=dict(learned))
+    assert [t for t, _, _ in longer][:1] == [41.0]  # risen at 30: 11 s > 2 × 5 s
 
 
 def test_topic_latency_rise_of_a_slow_topic_must_be_a_tenth_of_its_period():
