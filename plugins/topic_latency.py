@@ -44,7 +44,8 @@ class TopicLatency(Plugin):
     Common mode: when at least ``common_mode_min`` topics and ``common_mode_ratio`` of the topics
     measured in a sample rise at once, the sample is a stall of the host or of the monitor (the
     receive stamps are ours), not a fault of those topics' publishers: it neither counts nor
-    breaks a streak, and the stall is counted in the plugin state (``common_mode``). So is one
+    breaks a streak, raises no alert (a rise held up through it alerts at the next sample that
+    counts, if it still holds), and the stall is counted in the plugin state (``common_mode``). So is one
     where that holds of one attribute among the topics that could show it, and the risen topics
     come from more than one process: a stall of 40 ms cannot show on a 1 Hz topic.
     """
@@ -110,7 +111,8 @@ class TopicLatency(Plugin):
             if counts:
                 _keep_rise(ctx, topic, attr, ex[0] if up else None)
             what = attr.removesuffix("_ms")
-            if risen is not None and lasted >= s[f"{what}_hold_s"] \
+            # A stall of the host holds a rise up but says nothing of the topic: no alert from it.
+            if risen is not None and not stall and lasted >= s[f"{what}_hold_s"] \
                     and not _shown_before(ctx, topic, attr, risen[0], lasted):
                 value, med = risen
                 yield ctx.alert(topic, "warn", f"{what} {value:.1f} ms, normally {med:.1f} ms",

@@ -1921,6 +1921,17 @@ def test_graph_anomalies_grace_starts_again_while_the_system_is_being_discovered
         (t, "node:/detector", "warn") for t in (5.0, 6.0, 7.0)]
 
 
+def test_topic_latency_a_stall_raises_no_alert_of_a_rise_it_holds_up():
+    # /t0 rises alone for 3 samples (30-32), then the host stalls (33-35: 5 of 6 topics): held up
+    # for 4 s by then, but by stall samples only. Back at 36, no alert; risen still at 36, one.
+    healthy = [(float(t), topics_model(6), []) for t in range(30)]
+    rise = [(float(t), topics_model(6, risen={0}), []) for t in range(30, 33)]
+    stall = [(float(t), topics_model(6, risen={0, 1, 2, 3, 4}), []) for t in range(33, 36)]
+    assert drive("topic_latency", healthy + rise + stall + [(36.0, topics_model(6), [])]) == []
+    on = [(36.0, topics_model(6, risen={0}), [])]
+    assert drive("topic_latency", healthy + rise + stall + on) == [(36.0, "topic:/t0", "warn")]
+
+
 def test_topic_latency_rises_a_healthy_run_showed_are_its_normal_in_the_next():
     # Jitter up to 90 ms for 5 s, twice, ending by itself: alone, the first is a rise once it held
     # 4 s (the second is within what the topic often shows by then, `usual_quantile`); started
