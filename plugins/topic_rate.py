@@ -343,18 +343,19 @@ def _rhythm(ctx: PluginContext, rhythms: dict[str, Rhythm], topic: str) -> Rhyth
 
 def _follow(ctx: PluginContext, r: Rhythm, topic: str, rate: float, base: Baseline) -> float | None:
     """Account this sample in the topic's rhythm; return its quiet (s), None before any message.
-    A healthy gap it learns is kept as the topic's longest for a later run (``ctx.learned``)."""
+    A notable quiet that ends is kept as the topic's longest for a later run (``ctx.learned``,
+    `Rhythm.ended`)."""
     s = ctx.settings
     limit = _base_limit(s, _ref_hz(r, base))
     newest = newest_message(ctx.t, rate, ctx.value(topic, "age_s"))
     gap = ctx.value(topic, "gap_s")
-    gaps = r.gaps
+    ended = r.ended
     quiet = follow(r, ctx.t, newest, rate, window_s=s["rate_window_s"], notable=limit,
                    settle_s=max(s["warmup_s"], limit), margin=s["gap_margin"], min_gaps=s["min_gaps"],
                    gap=0.0 if math.isnan(gap) else gap)
-    if r.gaps is not gaps:  # `follow` replaces the list as it learns a gap
+    if r.ended > ended:
         known = ctx.learned.setdefault("gaps", {})
-        known[topic] = max(r.gaps[-1], known.get(topic, 0.0))
+        known[topic] = max(r.ended, known.get(topic, 0.0))
     return quiet
 
 

@@ -89,6 +89,15 @@ class Rhythm:
         A publisher complained during the current quiet (``topic_rate``: a WARN or worse, a
         status of its own worse than OK): whatever it was, it is not learned (a sensor dropping
         out with a WARN each time, learned, would make its longer dropouts its rhythm).
+    carried : float
+        The longest quiet that ended in an earlier run of the robot (s; 0 none): a run the user
+        started from (``--healthy``, its `ended`). It counts in `quiet_limit` like the run's own
+        gaps; the topic still settles on what this run shows.
+    ended : float
+        The longest notable quiet that ended with a message in this run, learned or not (a
+        silence alerted on, a dropout its publisher complained of; not one a change of state
+        explained): what a later run started from this one carries, the user having judged
+        this run healthy, its alerts included.
     """
 
     newest: float | None = None
@@ -105,6 +114,7 @@ class Rhythm:
     explained: bool = False
     doubted: bool = False
     carried: float = 0.0
+    ended: float = 0.0
 
 
 def newest_message(t: float, rate: float, age: float) -> float | None:
@@ -193,6 +203,7 @@ def _message(r: Rhythm, newest: float, notable: float, margin: float, seen: floa
         if learn:
             r.longest = max(r.longest, r.peak)
         if r.peak >= notable:
+            r.ended = max(r.ended, newest - r.newest)  # learned or not: the run's to carry
             if learn:
                 r.gaps = [*r.gaps, newest - r.newest][-GAP_MEMORY:]
                 start = r.newest if r.run_start is None else r.run_start

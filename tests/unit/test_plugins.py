@@ -406,9 +406,13 @@ def test_topic_rate_gaps_a_healthy_run_showed_are_its_rhythm_in_the_next():
     # A run with 6 s gaps, then a pause of 20 s: past twice its own gaps (13.2 s) a silence on
     # its own; started from the healthy run, within twice its 18.6 s.
     paused = bursts([*range(0, 49, 8), 70, 78, 86])
-    alone = drive("topic_rate", sampled(paused, HALF[:95]), full=True)
+    judged = {}
+    alone = drive("topic_rate", sampled(paused, HALF[:95]), full=True, learned=judged)
     assert [(a.t, a.data["symptom"]) for a in alone][:1] == [(63.5, "silence")]
     assert drive("topic_rate", sampled(paused, HALF[:95]), learned=dict(learned)) == []
+    # A run the user judged healthy, its alert included, teaches that pause as well.
+    assert judged["topic_rate"]["gaps"] == {"topic:/img": pytest.approx(20.6)}  # 49.9 -> 70.5
+    assert drive("topic_rate", sampled(paused, HALF[:95]), learned=judged) == []
     # Hung past twice the carried gap: silent, said so; and never judged by its rate.
     alerts = drive("topic_rate", sampled(bursts(range(0, 49, 8)), HALF), learned=dict(learned), full=True)
     assert [(a.t, a.data["symptom"]) for a in alerts][:1] == [(87.5, "silence")]  # 49.9 + 37.2
