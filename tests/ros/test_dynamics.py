@@ -21,6 +21,7 @@ import time
 import pytest
 
 from stream_viz.config import load_config
+from stream_viz.detect.store import AlertStore
 from stream_viz.model.queries import process_of_node
 from stream_viz.model.theta import SCHEMAS
 from stream_viz.monitor import Monitor
@@ -137,12 +138,13 @@ rclpy.spin(n)
 """
 
 
-def _monitor(children, tmp_path) -> Monitor:
+def _monitor(children, tmp_path, db: str = "alerts.sqlite", healthy=None) -> Monitor:
     cfg = tmp_path / "stream-viz.toml"
     cfg.write_text(CONFIG)
     # A shared test machine can stall a thread for seconds: no plugin is cut off for it here.
-    return Monitor(load_config(cfg), db=tmp_path / "alerts.sqlite", viewer="none", plugin_timeout_s=10.0,
-                   domain_id=int(children.env["ROS_DOMAIN_ID"]), progress=Progress(open(os.devnull, "w")))
+    return Monitor(load_config(cfg), db=tmp_path / db, viewer="none", plugin_timeout_s=10.0,
+                   domain_id=int(children.env["ROS_DOMAIN_ID"]), progress=Progress(open(os.devnull, "w")),
+                   healthy=healthy)
 
 
 def _observe(mon: Monitor, seconds: float) -> None:
@@ -597,3 +599,50 @@ def test_a_stalled_executor_silences_its_nodes_together_and_the_rca_ties_them(ch
     finally:
         flag.unlink(missing_ok=True)
         mon.close()
+
+
+# 10 Hz for 1 s, then nothing for 2.5 s, again and again: /detections' gaps 2.5 s.
+SHORT_BURSTS = BURSTS.replace("% 7.0 < 2.0", "% 3.5 < 1.0")
+
+
+def _paused_once(children, tmp_path, bursts, db: str, healthy=None) -> list:
+    """A monitor (its database ``db``, started from ``healthy``) until /detections' rhythm is
+    settled, then /detector paused for 10 s and resumed: the silences it raised."""
+    mon = _monitor(children, tmp_path, db, healthy)
+    try:
+        rhythms = _plugin(mon, "topic_rate").state.setdefault("rhythms", {})
+
+        def settled():
+            mon.step()
+            return "topic:/detections" in rhythms and len(rhythms["topic:/detections"].gaps) >= 3
+
+        wait_for(settled, timeout=30, period=1.0)
+        paused = time.monotonic()
+        os.killpg(bursts.pid, signal.SIGSTOP)
+        try:
+            _observe(mon, 10.0)  # past twice its gaps
+        finally:
+            os.killpg(bursts.pid, signal.SIGCONT)
+        r = rhythms["topic:/detections"]
+        # Its messages back (at its next burst, up to 2.5 s later): the pause ended.
+        wait_for(lambda: (mon.step(), r.ended >= 10.0)[1], timeout=8, period=1.0)
+        assert r.ended <= time.monotonic() - paused + 3.5, (r.ended, r.gaps)
+        return [a for a in mon.store.alerts() if a.data.get("symptom") == "silence"]
+    finally:
+        mon.close()
+
+
+def test_a_quiet_alerted_in_a_run_judged_healthy_is_no_silence_in_the_next(children, tmp_path):
+    # The bursty detector, paused once for longer than twice its gaps: a silence. The user judges
+    # that run healthy (the pause was the robot's own) and starts the next from its database: the
+    # same pause is no silence there, though that run's own gaps are as short.
+    bursts = children.python(SHORT_BURSTS, name="bursts")
+    first = _paused_once(children, tmp_path, bursts, "first.sqlite")
+    assert [a.member for a in first][:1] == ["topic:/detections"], first
+    second = _paused_once(children, tmp_path, bursts, "second.sqlite", tmp_path / "first.sqlite")
+    assert second == [], second
+    store = AlertStore(tmp_path / "first.sqlite", readonly=True)
+    try:
+        assert store.get_meta("learned")["topic_rate"]["gaps"]["topic:/detections"] >= 10.0
+    finally:
+        store.close()
