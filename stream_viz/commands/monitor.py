@@ -91,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
         mon.run(args.duration, stop)
     finally:
         mon.close(keep_view=viewer == "serve")
+    say_healthy(mon)
     if args.save:
         say_recording(mon)
     if args.report:
@@ -119,6 +120,12 @@ def linger(mon: Monitor, viewer: str) -> None:
             done.wait()
     finally:
         mon.view.close()
+
+
+def say_healthy(mon: Monitor) -> None:
+    """Tell how a later run starts from this one: its database holds what the run learned."""
+    mon.progress.say(f"if this run was the robot's normal, its alerts included, start the next "
+                     f"from it: --healthy {mon.db_path}")
 
 
 def say_recording(mon: Monitor) -> None:

@@ -13,7 +13,14 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from stream_viz.commands.monitor import add_healthy, add_outputs, install_stop_handlers, linger, serve_at
+from stream_viz.commands.monitor import (
+    add_healthy,
+    add_outputs,
+    install_stop_handlers,
+    linger,
+    say_healthy,
+    serve_at,
+)
 
 if TYPE_CHECKING:
     from stream_viz.collect.replay import ReplayCollector
@@ -82,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
         mon.progress.say(f"{args.file} ends mid-way (its run was killed?): replayed its {mon.samples} "
                          "complete samples")
     print_diagnosis(report, mon)
+    say_healthy(mon)
     if args.report:
         mon.progress.say(f"report: {args.report}")
     linger(mon, viewer)

@@ -18,6 +18,7 @@ def test_a_monitor_saves_what_it_learned_and_the_next_starts_from_it(children, t
     first, second = tmp_path / "first.sqlite", tmp_path / "second.sqlite"
     out = run_cli(["monitor", "--duration", "6", "--viewer", "none", "--db", str(first)], children.env)
     assert out.returncode == 0, out.stderr
+    assert f"start the next from it: --healthy {first}" in out.stderr  # the user is told how
     out = run_cli(["monitor", "--duration", "4", "--viewer", "none", "--db", str(second),
                    "--healthy", str(first), "--report", str(tmp_path / "r.json")], children.env)
     assert out.returncode == 0, out.stderr
