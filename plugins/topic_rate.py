@@ -333,8 +333,8 @@ def _base_limit(s: dict[str, Any], ref_hz: float, complained: bool = False) -> f
 
 
 def _rhythm(ctx: PluginContext, rhythms: dict[str, Rhythm], topic: str) -> Rhythm:
-    """The topic's rhythm; a new one carries the longest healthy gap the healthy run this one
-    started from showed (``ctx.learned["gaps"]`` as it was primed)."""
+    """The topic's rhythm; a new one carries the longest quiet that ended in the healthy run this
+    one started from (``ctx.learned["gaps"]`` as it was primed)."""
     r = rhythms.get(topic)
     if r is None:
         r = rhythms[topic] = Rhythm(carried=ctx.state["primed_gaps"].get(topic, 0.0))

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from stream_viz.detect.rhythm import GAP_MEMORY, Rhythm, follow, newest_message, quiet_limit
 
 NAN = math.nan
@@ -69,6 +71,20 @@ def test_a_symptom_quiet_is_not_learned_and_a_settled_topic_stays_judged():
     r, _ = run([(20.0, 19.95, 6.0), (21.0, 19.95, 3.0), (22.0, 19.95, 3.0), (23.0, 22.95, 3.0)], r)
     assert r.gaps == [3.0] and r.runs == [1.0]
     assert quiet_limit(r, 1.5, 2.0) == 6.0
+
+
+def test_a_quiet_that_ended_is_kept_for_a_later_run_alerted_or_not_and_a_carried_one_counts():
+    r, _ = run([(float(t), t - 0.05, 10.0) for t in range(12)])
+    r, _ = run([(12.0, 11.95, 10.0), (13.0, 11.95, 6.0), (14.0, 11.95, 3.0)], r)  # quiet 2.05 s
+    r.departed = True  # the plugin alerted on it
+    r, _ = run([(15.0, 14.95, 3.0)], r)
+    assert r.gaps == [] and r.ended == pytest.approx(3.0)  # not learned, kept for a later run
+    r.explained = True  # a change of state: its quiet neither learned nor kept
+    r, _ = run([(16.0, 14.95, 3.0), (17.0, 14.95, 3.0), (18.0, 14.95, 0.0), (19.0, 18.95, 3.0)], r)
+    assert r.gaps == [] and r.ended == pytest.approx(3.0)
+    # Carried from an earlier run: twice it is the limit, when above the base.
+    assert quiet_limit(Rhythm(carried=10.0), 1.5, 2.0) == 20.0
+    assert quiet_limit(Rhythm(carried=0.5), 1.5, 2.0) == 1.5
 
 
 def test_a_run_much_longer_than_any_before_settles_a_topic_with_few_gaps():
