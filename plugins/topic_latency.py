@@ -9,7 +9,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, held
+from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, held, held_since
 from stream_viz.model.qos import qos_policy
 from stream_viz.records import Alert
 
@@ -101,15 +101,14 @@ class TopicLatency(Plugin):
                             lambda t: set(filter(None, map(ctx.process_of, ctx.publishers(t)))))
         if stall:
             ctx.state["common_mode"] = ctx.state.get("common_mode", 0) + 1
-        if "primed_rises" not in ctx.state:  # what the run started from, before its own rises are kept
-            ctx.state["primed_rises"] = dict(ctx.learned.get("rises", {}))
         for topic, attr, ex, fresh in seen:
             counts = fresh and not stall
             risen = confirm(ctx, topic, attr, ex, alerting, counts)
             up = ex is not None and ex[2]
+            began = held_since(ctx.state, (topic, attr))  # before held() may end the rise
             lasted = held(ctx.state, (topic, attr), up, ctx.t, counts)
             if counts:
-                _keep_rise(ctx, topic, attr, ex[0] if up else None)
+                _keep_rise(ctx, topic, attr, ex[0] if up else None, began)
             what = attr.removesuffix("_ms")
             # A stall of the host holds a rise up but says nothing of the topic: no alert from it.
             if risen is not None and not stall and lasted >= s[f"{what}_hold_s"] \
@@ -120,26 +119,27 @@ class TopicLatency(Plugin):
         yield from drops
 
 
-def _keep_rise(ctx: PluginContext, topic: str, attr: str, value: float | None) -> None:
-    """Follow the rise of ``topic``'s ``attr`` under way (``value`` this sample, None: not risen);
-    one that ends widens the topic's envelope for a later run (``ctx.learned["rises"]``: its
-    highest value and its longest rise that ended by itself, ms and s)."""
-    rises = ctx.state.setdefault("rises", {})  # (topic, attr) -> [its start, its peak]
+def _keep_rise(ctx: PluginContext, topic: str, attr: str, value: float | None,
+               began: float | None) -> None:
+    """Follow the peak of ``topic``'s ``attr``'s rise under way (``value`` this sample, None: not
+    risen; ``began``: when the rise began, as `held` kept it); one that ends widens the topic's
+    envelope for a later run (``ctx.learned["rises"]``: its highest value and its longest rise
+    that ended by itself, ms and s)."""
+    peaks = ctx.state.setdefault("peaks", {})  # (topic, attr) -> its rise's highest value
     if value is not None:
-        rise = rises.setdefault((topic, attr), [ctx.t, value])
-        rise[1] = max(rise[1], value)
-    elif (topic, attr) in rises:
-        start, peak = rises.pop((topic, attr))
+        peaks[topic, attr] = max(peaks.get((topic, attr), value), value)
+    elif (topic, attr) in peaks:
+        peak = peaks.pop((topic, attr))
         known = ctx.learned.setdefault("rises", {})
         was = known.get(f"{topic} {attr}", [0.0, 0.0])
-        known[f"{topic} {attr}"] = [max(was[0], peak), max(was[1], ctx.t - start)]
+        known[f"{topic} {attr}"] = [max(was[0], peak), max(was[1], ctx.t - (began or ctx.t))]
 
 
 def _shown_before(ctx: PluginContext, topic: str, attr: str, value: float, lasted: float) -> bool:
     """True when the healthy run this one started from showed a rise of ``topic``'s ``attr`` that
     ended by itself, ``carried_margin`` × as high and as long as this one so far: its normal
     (a host's hiccup on a fast sensor, a controller's commands while it plans)."""
-    carried = ctx.state["primed_rises"].get(f"{topic} {attr}")
+    carried = ctx.primed.get("rises", {}).get(f"{topic} {attr}")
     margin = ctx.settings["carried_margin"]
     return carried is not None and value <= margin * carried[0] and lasted <= margin * carried[1]
 

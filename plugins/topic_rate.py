@@ -15,7 +15,9 @@ from stream_viz.detect.baseline import (
     cached_baseline,
     excursions,
     forget_baseline,
+    forget_run,
     held,
+    held_since,
     robust,
     streak,
 )
@@ -153,8 +155,6 @@ class TopicRate(Plugin):
         alerting = ctx.state.setdefault("alerting", set())
         ctx.state["interval"] = ctx.since_last_call()  # what this sample's process metrics cover
         rhythms: dict[str, Rhythm] = ctx.state.setdefault("rhythms", {})
-        if "primed_gaps" not in ctx.state:  # what the run started from, before its own gaps are kept
-            ctx.state["primed_gaps"] = dict(ctx.learned.get("gaps", {}))
         _self_reports(ctx)
         for topic, r in rhythms.items():  # before any is followed: a quiet complained of is not learned
             if r.newest is not None and not r.doubted and _complained(ctx, topic, r):
@@ -278,7 +278,7 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
                 continue
             if quiet is not None and quiet * base[0] >= STOPPING_PERIODS and _complained(ctx, topic, r):
                 continue  # quiet now, its publisher saying something went wrong: no new rate
-            began = ctx.state.get("_held", {}).get((topic, "drop"))
+            began = held_since(ctx.state, (topic, "drop"))
             if began is not None and began < at - grace:
                 continue  # a drop under way before the change is not the change's
             # A new rate shows within a few of its intervals (the window's rate: once the window
@@ -292,8 +292,7 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
                 rhythms[topic], relearn[topic], causes[topic] = fresh, at, at
                 deferred.pop(topic, None)
                 forget_baseline(ctx, topic, "rate_hz")
-                for table in ("_streaks", "_held"):
-                    ctx.state.setdefault(table, {}).pop((topic, "drop"), None)
+                forget_run(ctx.state, (topic, "drop"))
                 out[k] = (topic, fresh, rate, None, _follow(ctx, fresh, topic, rate, None))
                 moved = True
         if not moved:
@@ -334,10 +333,10 @@ def _base_limit(s: dict[str, Any], ref_hz: float, complained: bool = False) -> f
 
 def _rhythm(ctx: PluginContext, rhythms: dict[str, Rhythm], topic: str) -> Rhythm:
     """The topic's rhythm; a new one carries the longest quiet that ended in the healthy run this
-    one started from (``ctx.learned["gaps"]`` as it was primed)."""
+    one started from (``ctx.primed["gaps"]``)."""
     r = rhythms.get(topic)
     if r is None:
-        r = rhythms[topic] = Rhythm(carried=ctx.state["primed_gaps"].get(topic, 0.0))
+        r = rhythms[topic] = Rhythm(carried=ctx.primed.get("gaps", {}).get(topic, 0.0))
     return r
 
 
@@ -818,7 +817,8 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
     # this drop stays the input's for input_grace_s after the input resumed: the recent rate
     # still counts the slow intervals when the input's first messages are back.
     follows = ctx.state.setdefault("drop_follows", {})  # topic -> (its drop's start, last explained)
-    start = ctx.state["_held"].get((topic, "drop"), ctx.t - lasted)
+    start = held_since(ctx.state, (topic, "drop"))
+    start = ctx.t - lasted if start is None else start
     if _input_stopped(ctx, topic, start, rhythms):
         follows[topic] = (start, ctx.t)
         return None

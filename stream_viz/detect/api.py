@@ -11,8 +11,9 @@ questions (`PluginContext.nodes_of`, `PluginContext.publishers`, ...), and makes
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Hashable, Iterable, Iterator
+from collections.abc import Callable, Hashable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any, ClassVar, TypeVar
 
 import networkx as nx
@@ -60,6 +61,9 @@ class PluginContext:
         Private to the plugin, JSON values only: what it learned of this robot's healthy
         behaviour (a rate mode) that holds in later runs. Saved in the run's database at its end;
         a run started with ``--healthy RUN.sqlite`` begins with that run's.
+    primed : Mapping
+        What ``learned`` was when the run started (read-only; empty when it started from
+        nothing): what the healthy run showed, apart from what this run adds.
     expected_rates : dict
         Topic id to the rate (Hz) the configuration expects.
     plugin : str
@@ -77,6 +81,7 @@ class PluginContext:
     settings: dict[str, Any] = field(default_factory=dict)
     state: dict[str, Any] = field(default_factory=dict)
     learned: dict[str, Any] = field(default_factory=dict)
+    primed: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
     expected_rates: dict[str, float] = field(default_factory=dict)
     plugin: str = ""
     kinds: tuple[str, ...] = ()

@@ -130,6 +130,18 @@ def held(state: dict[str, Any], key: Any, condition: bool, t: float, fresh: bool
     return t - since[key] if key in since else 0.0
 
 
+def held_since(state: dict[str, Any], key: Any) -> float | None:
+    """Return when the run `held` follows for ``key`` began (None: not holding). Read before
+    the `held` call that may end it, this is the start of a run that just ended."""
+    return state.get("_held", {}).get(key)
+
+
+def forget_run(state: dict[str, Any], key: Any) -> None:
+    """End the `streak` and the `held` run of ``key`` (its normal changed: counted anew)."""
+    for table in ("_streaks", "_held"):
+        state.get(table, {}).pop(key, None)
+
+
 @reads_settings("k", *BASELINE_SETTINGS)
 def excess(ctx: Any, member: str, attr: str, floor: float, alerting: set,
            since: float | None = None) -> tuple[float, float, bool] | None:

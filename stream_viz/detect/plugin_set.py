@@ -14,6 +14,7 @@ import json
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import networkx as nx
@@ -40,7 +41,8 @@ class LoadedPlugin:
     runner: Runner
     state: dict[str, Any] = field(default_factory=dict)
     learned: dict[str, Any] = field(default_factory=dict)  # carried across runs (`learned`)
-    primed: dict[str, Any] = field(default_factory=dict)  # what it started from (`prime`)
+    # What it started from (`prime`), read-only: ``ctx.primed``.
+    primed: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
     failures: int = 0
     disabled: bool = False
 
@@ -189,7 +191,7 @@ class PluginSet:
             if lp.disabled:
                 continue
             ctx = PluginContext(t, graph, watch, history, events, diff, lp.settings, lp.state,
-                                learned=lp.learned, expected_rates=rates, plugin=lp.name,
+                                learned=lp.learned, primed=lp.primed, expected_rates=rates, plugin=lp.name,
                                 kinds=tuple(lp.plugin.kinds), by_kind=by_kind, of_kind=of_kind)
             items, more, problem = lp.runner.call(ctx)
             if problem is not None:
@@ -228,7 +230,8 @@ class PluginSet:
         for lp in self.plugins:
             mine = learned.get(lp.name)
             if isinstance(mine, Mapping) and mine:
-                lp.learned, lp.primed = copy.deepcopy(dict(mine)), copy.deepcopy(dict(mine))
+                lp.learned = copy.deepcopy(dict(mine))
+                lp.primed = MappingProxyType(copy.deepcopy(dict(mine)))
                 primed.append(lp.name)
         return primed
 

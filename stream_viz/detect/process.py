@@ -110,8 +110,6 @@ def symptoms(ctx: PluginContext, procs: Iterable[str]) -> Iterator[tuple[str, li
     alerting = ctx.state.setdefault("alerting", set())  # (process, attribute): baseline frozen
     windows = ctx.state.setdefault("rss", {})
     rising = ctx.state.setdefault("cpu_rising", {})
-    if "primed_bursts" not in ctx.state:  # what the run started from, before its own rises are kept
-        ctx.state["primed_bursts"] = dict(ctx.learned.get("bursts", {}))
     for gone in ctx.diff.removed_members:  # bound the state when processes come and go
         windows.pop(gone, None)
         rising.pop(gone, None)  # a process that ended in a rise: no burst of its rhythm
@@ -197,8 +195,8 @@ def burst_key(nodes: Iterable[str]) -> str:
 
 def _primed_burst(ctx: PluginContext, proc: str) -> float:
     """The longest CPU burst a process with ``proc``'s nodes showed in the healthy run this one
-    started from (``ctx.learned["bursts"]`` as it was primed; 0 if none)."""
-    return _carried(ctx.graph, proc, ctx.state["primed_bursts"])
+    started from (``ctx.primed["bursts"]``; 0 if none)."""
+    return _carried(ctx.graph, proc, ctx.primed.get("bursts", {}))
 
 
 def _keep_burst(ctx: PluginContext, proc: str, seconds: float) -> None:

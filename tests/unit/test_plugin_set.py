@@ -419,8 +419,8 @@ class Learning(Plugin):
         seen = ctx.learned.setdefault("seen", [])
         if ctx.t not in seen:
             seen.append(ctx.t)
-        if len(seen) > 2:
-            yield ctx.alert("node:/a", "info", f"seen {seen}")
+        if len(seen) > 2:  # what this run adds is not what it started from
+            yield ctx.alert("node:/a", "info", f"seen {seen}, started from {ctx.primed.get('seen')}")
 '''
 
 UNJSON = '''
@@ -450,7 +450,9 @@ def test_what_a_plugin_learned_is_carried_to_a_later_run_and_only_as_json(tmp_pa
     later = PluginSet.load([folder], entry_points=False, cwd_plugins=False)
     assert later.prime({**learned, "unjson": "not a mapping", "gone": {"x": 1}}) == ["learning"]
     alerts, _ = _run(later, t=3.0)
-    assert [a.message for a in alerts] == ["seen [1.0, 2.0, 3.0]"]
+    assert [a.message for a in alerts] == ["seen [1.0, 2.0, 3.0], started from [1.0, 2.0]"]
+    with pytest.raises(TypeError):  # read-only for the plugin
+        later.plugins[0].primed["seen"] = []
     learned["learning"]["seen"].append(99.0)  # primed with a copy: the source is not shared
     assert later.learned()[0] == {"learning": {"seen": [1.0, 2.0, 3.0]}}
     later.close()
