@@ -206,7 +206,8 @@ class GraphStructure:
     """What the per-node queries found: the nodes with their services and clients, each topic's
     types and its publishing and subscribing nodes (``ends``: topic -> (publishers, subscribers),
     sorted; ``keys``: topic -> its endpoint set), what a node publishes that is not a topic of the
-    model (service events, goal status and feedback), and the nodes skipped. Read-only once read."""
+    model (service events, goal status and feedback), the nodes skipped, and the ghosts left out
+    (`read_structure`). Read-only once read."""
 
     nodes: dict[str, NodeReading] = field(default_factory=dict)
     topics: dict[str, list[str]] = field(default_factory=dict)
@@ -216,6 +217,7 @@ class GraphStructure:
     goal_status: dict[str, list[str]] = field(default_factory=dict)
     goal_feedback: dict[str, str] = field(default_factory=dict)
     skipped: dict[str, str] = field(default_factory=dict)
+    ghosts: list[str] = field(default_factory=list)
 
 
 class StructureCache:
@@ -228,6 +230,7 @@ class StructureCache:
         self._last: GraphStructure | None = None
         self._key: tuple[str, bool, bool] | None = None
         self._at = -float("inf")
+        self._had: set[str] = set()  # nodes seen with an endpoint: one listed without any is a ghost
 
     def invalidate(self) -> None:
         """Read the structure again on the next call."""
@@ -239,7 +242,7 @@ class StructureCache:
         changed = self.signal is None or self.signal.changed()
         last = self._last
         if changed or last is None or last.skipped or key != self._key or now - self._at >= self.every_s:
-            self._last, self._key, self._at = read_structure(node, *key), key, now
+            self._last, self._key, self._at = read_structure(node, *key, had=self._had), key, now
             self.reads += 1
         else:
             self.reuses += 1
@@ -247,9 +250,16 @@ class StructureCache:
 
 
 def read_structure(node: Node, own: str, include_hidden: bool = False,
-                   include_internal: bool = False) -> GraphStructure:
+                   include_internal: bool = False, had: set[str] | None = None) -> GraphStructure:
     """Return the graph's structure: one listing of the nodes, then each node's publishers,
-    subscriptions, services and clients (`read_graph` has the parameters)."""
+    subscriptions, services and clients (`read_graph` has the other parameters).
+
+    ``had`` holds the nodes seen with an endpoint in earlier reads (added to here). A node listed
+    again without any is left out, in ``ghosts``: its participant ended, and a discovery-info
+    sample that came after the participant's removal left its name in the graph cache, where it
+    stays (the endpoints went with the participant). A node's name is discovered before its
+    endpoints, so one never seen with any is kept.
+    """
     r = GraphStructure()
     for name, ns in node.get_node_names_and_namespaces():
         fqn = node_fqn(ns, name)
@@ -273,6 +283,13 @@ def read_structure(node: Node, own: str, include_hidden: bool = False,
             r.skipped[fqn] = "node vanished during the graph read"
             del r.nodes[fqn]
             continue
+        if had is not None:
+            if servers or clients or pubs or subs:
+                had.add(fqn)
+            elif fqn in had:
+                r.ghosts.append(fqn)
+                del r.nodes[fqn]
+                continue
         nr.action_servers = {a: t for a, t in _actions(servers).items() if _keep(a, include_hidden)}
         nr.action_clients = {a: t for a, t in _actions(clients).items() if _keep(a, include_hidden)}
         for src, dst in ((servers, nr.services), (clients, nr.clients)):
