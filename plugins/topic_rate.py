@@ -414,11 +414,18 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
         again += "; its publisher complained as it went quiet"
     if ended := _this_quiet(ctx, topic, r).get("ended"):
         again += f"; {ended} lost a thread as it stopped"
-    # When it began: after its last message, by the next one due (the RCA orders causes by it).
-    began = {} if r.newest is None else {"since": r.newest, "since_within": 1.0 / ref if ref > 0 else quiet}
+    idle = stalled or _idle(ctx, topic, r)
+    if idle and not stalled:
+        again += "; its executor's thread idle"
+    # When it began: after its last message, by the next one due (the RCA orders causes by it); a
+    # topic with gaps has no next message due: anywhere in its quiet.
+    bursty = bool(r.gaps or r.carried) and not stalled
+    within = quiet if bursty or not ref > 0 else 1.0 / ref
+    began = {} if r.newest is None else {"since": r.newest, "since_within": within}
     return ctx.alert(topic, "error", f"silent for {quiet:.1f} s ({usual}){again}", symptom="silence",
                      silent_s=quiet, baseline_hz=ref, limit_s=limit, flaps=flaps,
-                     episode_hold_s=s["flap_window_s"], executor_stopped=stalled, **began)
+                     episode_hold_s=s["flap_window_s"], executor_stopped=stalled, executor_idle=idle,
+                     **began)
 
 
 def _by_chance(ctx: PluginContext, topic: str, ref_hz: float) -> float:
@@ -607,6 +614,15 @@ def _stalled(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhyth
     q = _this_quiet(ctx, topic, r)
     return any(_fed(ctx, topic, node, r.newest, rhythms) >= 0.5
                and _executor_ratio(ctx, node, q) < ctx.settings["stalled_cpu_ratio"]
+               for node in ctx.publishers(topic))
+
+
+def _idle(ctx: PluginContext, topic: str, r: Rhythm) -> bool:
+    """True when a publisher's single-threaded executor has stopped (`_executor_ratio` under
+    ``stalled_cpu_ratio``), inputs or not: a callback of any node it runs may have blocked it
+    (the RCA makes its other nodes candidates: `stream_viz.rca.symptoms`)."""
+    q = _this_quiet(ctx, topic, r)
+    return any(_executor_ratio(ctx, node, q) < ctx.settings["stalled_cpu_ratio"]
                for node in ctx.publishers(topic))
 
 

@@ -33,6 +33,7 @@ from stream_viz.records import Alert
 
 INF = float("inf")
 IMPLIED_SERVER = 0.5  # a server suspected only because a client of it stands unexplained
+IMPLIED_FELLOW = 0.5  # a node suspected only because the executor it shares with a silent one stopped
 UNEXPLAINED = 0.5  # a client whose inputs explain less than this makes its servers suspects
 FOLLOWS = 0.1  # an output whose beat is within this fraction of its input's follows it one to one
 
@@ -62,7 +63,9 @@ class Symptoms:
     symptom (data ``publishers``: stale stamps of one of ``/tf``'s publishers, one stopped), with
     the first time each was named;
     ``executor_stopped`` the members an alert said stopped with their publisher's executor (data
-    ``executor_stopped``: its thread idle while its input arrives); ``silence`` a silent member's
+    ``executor_stopped``: its thread idle while its input arrives); ``executor_idle`` those an
+    alert said went silent with their publisher's single-threaded executor idle, inputs or not
+    (data ``executor_idle``); ``silence`` a silent member's
     newest message and its beat (data ``since``, ``since_within``: its next was due at their sum),
     of its newest silence.
     """
@@ -85,6 +88,7 @@ class Symptoms:
     vague: dict[str, float] = field(default_factory=dict)
     culprits: dict[str, dict[str, float]] = field(default_factory=dict)
     executor_stopped: set[str] = field(default_factory=set)
+    executor_idle: set[str] = field(default_factory=set)
     silence: dict[str, tuple[float, float]] = field(default_factory=dict)
     latest: float = -INF
     count: int = 0
@@ -151,6 +155,8 @@ def collect_symptoms(
                 s.killed.add(m)
         if data and data.get("executor_stopped") is True:
             s.executor_stopped.add(m)
+        if data and data.get("executor_idle") is True:
+            s.executor_idle.add(m)
         if data and isinstance(data.get("publishers"), list) and m.startswith("topic:"):
             named_at = s.culprits.setdefault(m, {})
             for p in data["publishers"]:
@@ -202,7 +208,8 @@ class NodeView:
     ``indistinguishable``: the process it shares with other candidates, and those of them whose
     own changes are the same as its own. ``logged``: when its own log lines began to alert;
     ``exited``: when its process was seen to die; ``executor_stopped``: an output of its stopped
-    with its executor (`Symptoms`). ``began``/``began_by``/``vague``: the earliest
+    with its executor, ``executor_idle``: one went silent with its executor idle (`Symptoms`).
+    ``began``/``began_by``/``vague``: the earliest
     and latest its symptoms can have begun by their alerts' word, and the first time of those that
     do not say (`Symptoms`): what `began_after` compares. ``awaited``: the clients calling it
     that complained while its symptoms were on (`_await`). ``due``/``beat``/``last``: of its
@@ -240,6 +247,7 @@ class NodeView:
     began_by: float = INF
     vague: float = INF
     executor_stopped: bool = False
+    executor_idle: bool = False
     awaited: list[str] = field(default_factory=list)
     due: float = INF
     beat: float = 0.0
@@ -331,6 +339,7 @@ def node_views(
     stalled = siblings.stalls(G, views, settings.tolerance)
     _settle(G, views, views, s, ev_passive, settings, stalled)
     _imply_servers(G, s, views, ev_passive, settings)
+    _imply_fellows(G, s, views, ev_passive, settings)
     _await(G, views, settings)
     for n, verdict in siblings.judge(G, views, settings.tolerance, stalled).items():
         v = views[n]
@@ -411,6 +420,7 @@ def _alert_views(
             for n in nodes if len(nodes) == 1 else ():
                 _charge(_view(views, n), m, a * charge, s.onset[m], s.episodes[m], "output", _starts_of(s, m))
                 views[n].executor_stopped |= m in s.executor_stopped
+                views[n].executor_idle |= m in s.executor_idle
                 _beat(views[n], s, m)
     for (m, name), (t, w) in s.named.items():
         spans = [(max(a, t), b) for a, b in s.episodes[m] if b >= t]
@@ -535,6 +545,34 @@ def _imply_servers(
                     (v.began, v.began_by, v.vague))
     views.update(implied)
     _settle(G, implied, views, s, ev_passive, settings)
+
+
+def _imply_fellows(
+    G: nx.MultiDiGraph, s: Symptoms, views: dict[str, NodeView], ev_passive: dict[str, Evidence],
+    settings: RcaSettings,
+) -> None:
+    """Make the other nodes of a stopped executor candidates (weakly: `IMPLIED_FELLOW`).
+
+    An output gone silent while its publisher's single-threaded executor is idle (``executor_idle``)
+    says a callback blocked that thread, and it may be any node's the thread runs: one whose
+    callbacks publish nothing, or only on demand (a tracker saving its gallery), shows nothing of
+    its own. Its fellows without a symptom become candidates, below the node whose outputs
+    stopped; what else stopped with the executor does not excuse them.
+    """
+    implied: dict[str, NodeView] = {}
+    fellows: dict[str, set[str]] = {}
+    for n, v in list(views.items()):
+        p = None if v.implied or not v.executor_idle else process_of_node(G, n)
+        if p is None:
+            continue
+        group = set(nodes_of_process(G, p))
+        for f in group - views.keys():
+            fv = implied.setdefault(f, NodeView(f, implied=True))
+            _charge(fv, n, v.own_anomaly * settings.charge * IMPLIED_FELLOW, v.own_onset, v.spans, "fellow",
+                    (v.began, v.began_by, v.vague))
+            fellows[f] = fellows.get(f, set()) | (group - {f})
+    views.update(implied)
+    _settle(G, implied, views, s, ev_passive, settings, fellows)
 
 
 def _await(G: nx.MultiDiGraph, views: Mapping[str, NodeView], settings: RcaSettings) -> None:

@@ -394,6 +394,9 @@ def test_topic_rate_bursty_topic_is_quiet_when_healthy_and_silent_when_hung_past
     alerts = drive("topic_rate", sampled(hung, HALF), full=True)
     assert [(a.t, a.severity, a.data["symptom"]) for a in alerts][:1] == [(63.5, "error", "silence")]
     assert round(alerts[0].data["limit_s"], 2) == 13.2 and "longest healthy gap 6.6 s" in alerts[0].message
+    # No next message was due: it went silent anywhere after its last one, up to now.
+    assert alerts[0].data["since"] == pytest.approx(49.9)
+    assert alerts[0].data["since_within"] == pytest.approx(alerts[0].data["silent_s"])
 
 
 def test_topic_rate_gaps_a_healthy_run_showed_are_its_rhythm_in_the_next():
@@ -708,6 +711,10 @@ def test_topic_rate_a_stalled_executor_silences_its_nodes_together_not_one_after
     frames = [(t, one_thread_model(img, det, t, stopped), []) for t in HALF[:40]]
     assert {(m, s) for _, m, s in drive("topic_rate", frames)} == {("topic:/img", "error"),
                                                                    ("topic:/det", "error")}
+    # The camera's timer has no input: its silence says the thread went idle (a callback of any
+    # node it runs may have blocked it; the RCA makes them candidates).
+    got = [a for a in drive("topic_rate", frames, full=True) if a.member == "topic:/img"]
+    assert got[0].data["executor_idle"] is True and "its executor's thread idle" in got[0].message
     # A late sample (20.5 missed) measures the thread over 19.5-21.5, half of it still working:
     # not yet a stop, and not the input's quiet for good either; the next sample shows the stop.
     late = lambda t: noisy(3.0, 0.3) if t < 20 else 1.5 if t < 22 else 0.0  # noqa: E731
@@ -718,6 +725,7 @@ def test_topic_rate_a_stalled_executor_silences_its_nodes_together_not_one_after
     going = lambda t: noisy(3.0, 0.3)  # noqa: E731
     frames = [(t, one_thread_model(img, det, t, going), []) for t in HALF[:40]]
     assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img"}
+    assert all(a.data["executor_idle"] is False for a in drive("topic_rate", frames, full=True))
     # Threads of a multi-threaded process say nothing of one executor: as in two processes.
     frames = [(t, one_thread_model(img, det, t, stopped, running=3), []) for t in HALF[:40]]
     assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img"}

@@ -8,6 +8,7 @@ import pytest
 
 from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.rca import RcaSettings, analyze
+from stream_viz.rca.symptoms import IMPLIED_FELLOW
 from stream_viz.records import Alert
 
 CAM, LIDAR, IMU, DET, FUSE = "node:/cam", "node:/lidar", "node:/imu", "node:/det", "node:/fuse"
@@ -337,3 +338,19 @@ def test_a_node_killed_by_a_signal_is_not_excused_by_its_inputs(G):
     assert by[FUSE].evidence["upstream"] == 0.0
     assert by[FUSE].evidence["hypothesis"] == S.severity["error"] > by[IMU].evidence["hypothesis"]
     assert order == [IMU, FUSE] and by[FUSE].score > 4 * crashed[FUSE].score
+
+
+def test_a_silent_output_whose_executor_went_idle_makes_its_quiet_fellows_candidates(G):
+    # cam's output stops with the container's one executor idle: a callback of lidar or imu (one
+    # that publishes nothing, or only on demand) may have blocked it. Their outputs show nothing.
+    by, order = rank(G, [al(IMAGE, "topic_rate", 10 + 5 * k, executor_idle=True) for k in range(3)])
+    assert order[0] == CAM
+    assert sorted(order[1:]) == [IMU, LIDAR]
+    implied = OUT * S.charge * IMPLIED_FELLOW  # a fellow's share of cam's own change
+    for fellow in (IMU, LIDAR):
+        assert by[fellow].evidence["charged"] == pytest.approx(implied)
+        assert by[fellow].evidence["upstream"] == 0.0  # nothing that stopped with them excuses them
+    assert by[CAM].evidence["upstream"] == 0.0  # a suspicion excuses nobody
+    # Its executor still running (a sensor gone quiet on its own): no suspect beside it.
+    _, order = rank(G, silent(IMAGE, 10))
+    assert order == [CAM]

@@ -222,3 +222,17 @@ def test_what_a_healthy_concierge_showed_is_no_symptom_in_a_later_run(tmp_path):
         causes = primed["root_causes"]
         assert target in {c["member"] for c in causes if c["score"] == causes[0]["score"]}, causes[:3]
 
+
+
+def test_a_hang_in_a_callback_that_publishes_nothing_leaves_its_node_a_candidate(tmp_path):
+    # Live on a899882 (blind concierge): the person tracker's gallery timer (it publishes nothing)
+    # hangs, and the head container's one executor stops. Its camera's frames are the only output
+    # seen to stop; the tracker publishes only while a guest is in view. The camera ranks first,
+    # the tracker is a candidate beside it, in the same process.
+    samples = RESULTS / "concierge-blind-a899882" / "samples"
+    report = replayed(samples / "hang_person_tracker.jsonl.gz", tmp_path)
+    causes = [c["member"] for c in report["root_causes"]]
+    assert causes[0] == "node:/cg/head_camera", causes
+    assert "node:/cg/person_tracker" in causes[:3], causes
+    silent = [a for a in report["alerts"] if a["member"] == "topic:/cg/head_camera/image_raw"]
+    assert "its executor's thread idle" in silent[0]["message"]
