@@ -263,6 +263,8 @@ def _evidence(v: NodeView, tr: Trajectory | None = None, **extra: Any) -> dict[s
         out["awaited_by"] = list(v.awaited)
     if v.blocked is not None:  # in a stall: how likely its callback blocked the executor
         out["blocked"] = round(v.blocked, 3)
+    if v.implied:  # no symptom of its own: why it is a suspect at all
+        out["implied"] = "executor" if "fellow" in v.own_kinds else "server"
     if tr is not None:
         out.update(
             coverage=round(tr.coverage, 4),

@@ -93,7 +93,8 @@ def report_markdown(
         if len(root_causes) > top:
             lines += ["", f"… and {len(root_causes) - top} more."]
         lines += (_alike_notes(root_causes[:top]) + _awaited_notes(root_causes[:top])
-                  + _blocked_notes(root_causes[:top]) + _host_notes(root_causes[:top]))
+                  + _blocked_notes(root_causes[:top]) + _implied_notes(root_causes[:top])
+                  + _host_notes(root_causes[:top]))
     if len(incidents) > 1:
         lines += ["", "## Incidents (times UTC)", "",
                   "| incident | symptomatic members | from | to | top root cause |", "|---|---|---|---|---|"]
@@ -156,6 +157,21 @@ def _blocked_notes(root_causes: Sequence[Mapping[str, Any]]) -> list[str]:
         if not ev.get("indistinguishable_from"):
             out.append(f"`{rc['member']}` is the likeliest of `{p}`'s stalled nodes to have blocked its "
                        f"executor ({float(ev['blocked']):.0%}): its next message was due as they stopped.")
+    return ["", *out] if out else []
+
+
+def _implied_notes(root_causes: Sequence[Mapping[str, Any]]) -> list[str]:
+    """One line per candidate with no symptom of its own: what made it a suspect."""
+    out = []
+    for rc in root_causes:
+        ev = rc.get("evidence") or {}
+        by = ", ".join(f"`{m}`" for m in ev.get("symptoms") or [])
+        if ev.get("implied") == "executor":
+            out.append(f"`{rc['member']}` shows nothing of its own; the executor it shares with {by} "
+                       "stopped, and a callback of any node it runs may have blocked it.")
+        elif ev.get("implied") == "server":
+            out.append(f"`{rc['member']}` shows nothing of its own; it serves {by}, whose symptoms "
+                       "their inputs do not explain: it may be what they wait for.")
     return ["", *out] if out else []
 
 

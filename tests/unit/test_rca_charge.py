@@ -166,6 +166,7 @@ def test_an_unnamed_server_of_an_unexplained_client_is_a_weaker_candidate():
     by, order = causes_of(service_graph(), alerts)
     assert order == [BT, PLANNER]
     assert by[PLANNER].evidence["charged"] == pytest.approx(ERR * S.charge * IMPLIED_SERVER)
+    assert by[PLANNER].evidence["implied"] == "server" and "implied" not in by[BT].evidence
     assert by[BT].evidence["upstream"] == 0.0  # a suspicion excuses nobody
     # A client explained by its input (the goals stopped) makes no suspect of its server.
     _, order = causes_of(service_graph(), [al(GOAL, "topic_rate", 9), *alerts])

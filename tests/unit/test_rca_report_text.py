@@ -69,3 +69,26 @@ def test_the_likeliest_blocker_of_a_stalled_executor_says_so():
         "its next message was due as they stopped."]
     tied = [{**rc, "evidence": {**rc["evidence"], "indistinguishable_from": [B]}} for rc in causes[:1]]
     assert "blocked" not in report_markdown(tied).split("|---|")[-1]
+
+
+def test_a_suspect_without_a_symptom_of_its_own_says_why():
+    # A's output stops with process 7's one executor idle: B, its quiet fellow, is a suspect.
+    g = new_graph()
+    for m in (A, B, OUT, "process:7"):
+        add_member(g, m)
+    add_tree_edge(g, "process:7", A)
+    add_tree_edge(g, "process:7", B)
+    add_flow_edge(g, A, OUT, "pub")
+    idle = {"executor_idle": True}
+    alerts = [Alert(OUT, "topic_rate", 60.0 + k, "error", "silent", idle) for k in range(3)]
+    rep = analyze(g, alerts, RcaSettings(), None).to_report()
+    assert [(rc["member"], rc["evidence"].get("implied")) for rc in rep["root_causes"]] == [(A, None),
+                                                                                            (B, "executor")]
+    assert report_markdown(rep["root_causes"]).splitlines()[-2:] == [
+        "", f"`{B}` shows nothing of its own; the executor it shares with `{A}` stopped, and a callback "
+        "of any node it runs may have blocked it."]
+    ev = {"symptoms": [A], "implied": "server"}
+    server = [{"member": C, "score": 0.1, "trajectory": [C], "evidence": ev}]
+    assert report_markdown(server).splitlines()[-1] == (
+        f"`{C}` shows nothing of its own; it serves `{A}`, whose symptoms their inputs do not explain: "
+        "it may be what they wait for.")
