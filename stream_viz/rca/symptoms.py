@@ -25,7 +25,7 @@ from stream_viz.model.queries import (
 )
 from stream_viz.model.traffic import idle, measured
 from stream_viz.rca import siblings
-from stream_viz.rca.causal import causes_in, is_node, outputs, publishers
+from stream_viz.rca.causal import causes_in, effects, is_node, outputs, publishers
 from stream_viz.rca.charge import NAME_KEYS, charged_nodes, names_in, pointed_nodes, publisher_shares
 from stream_viz.rca.episodes import Episode, Evidence, as_evidence, merge, overlaps
 from stream_viz.rca.settings import RcaSettings
@@ -711,15 +711,18 @@ def _sibling_inputs(
     Composed nodes share data in memory: nav2's controller reads the costmap its sibling node
     keeps, MoveIt's move_group its private node's state. What that sibling subscribes to is, in
     effect, ``n``'s input though no edge of the graph says so. A sibling with symptoms of its own
-    is left out: they may be ``n``'s effects, and `siblings.judge` weighs them.
+    is left out: they may be ``n``'s effects, and `siblings.judge` weighs them; so is what the
+    clients of ``n`` publish (two steps downstream of it): ``n``'s answers made it (nav2's
+    controller reads the path the navigator publishes from its sibling planner's answer).
     """
     if home is None:
         return []
+    made = {e2 for e in effects(G, n) for e2 in effects(G, e)}
     out: list[tuple[str, float]] = []
     for q in nodes_of_process(G, home):
         if q == n or q in seen or (q in views and views[q].own):
             continue
-        out += [(c, SILENT_DECAY) for c in causes_in(G, q, parents) if c not in seen]
+        out += [(c, SILENT_DECAY) for c in causes_in(G, q, parents) if c not in seen and c not in made]
     return out
 
 

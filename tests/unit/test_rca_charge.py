@@ -193,3 +193,22 @@ def test_a_node_only_named_by_its_readers_errors_ranks_first():
     by, order = causes_of(g, alerts)
     assert order[0] == LOC, order
     assert by[LOC].trajectory[-1] == LOC and by[LOC].evidence["cooccurrence"] is not None
+
+
+def test_what_a_servers_client_publishes_never_excuses_the_server_round_its_sibling():
+    # nav2: the controller, composed with the planner, follows what the navigator publishes from
+    # the planner's answer. The planner stops answering: the navigator's output stops first (its
+    # last message before the complaint), and through the sibling it would excuse the planner.
+    G = service_graph()
+    ctrl = "node:/controller"
+    add_member(G, ctrl)
+    add_member(G, "process:3")
+    add_tree_edge(G, "process:3", PLANNER)
+    add_tree_edge(G, "process:3", ctrl)
+    add_flow_edge(G, CMD, ctrl, "sub")
+    data = {"server": "/planner", "client": "/bt", "service": "/planner/compute_path"}
+    alerts = [al(CMD, "topic_rate", 12, since=6.0, since_within=3.0), al(BT, "rosout", 10, symptom="log"),
+              al(BT, "services", 10, **data)]
+    by, order = causes_of(G, alerts)
+    assert order[:2] == [PLANNER, BT]
+    assert by[PLANNER].evidence["upstream"] == 0.0
