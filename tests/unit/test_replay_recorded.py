@@ -236,3 +236,13 @@ def test_a_hang_in_a_callback_that_publishes_nothing_leaves_its_node_a_candidate
     assert "node:/cg/person_tracker" in causes[:3], causes
     silent = [a for a in report["alerts"] if a["member"] == "topic:/cg/head_camera/image_raw"]
     assert "its executor's thread idle" in silent[0]["message"]
+
+
+def test_a_slow_server_is_not_excused_by_what_its_client_publishes_from_its_answers(tmp_path):
+    # Live on 6a2448b (the AMR): the planner stops answering; the behaviour tree, which publishes
+    # the path from its answers, complains 4.5 s later. The path's silence began before, and the
+    # planner's sibling controller reads it: it excused the planner, which ranked second.
+    run = RESULTS / "short-6a2448b" / "amr_slow_service_amr1.planner_server_0"
+    report = replayed(run / "samples.jsonl.gz", tmp_path)
+    assert [c["member"] for c in report["root_causes"][:2]] == ["node:/amr1/planner_server",
+                                                                "node:/amr1/bt_navigator"]
