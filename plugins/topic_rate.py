@@ -523,7 +523,7 @@ def _starved_together(ctx: PluginContext, topic: str, r: Rhythm, node: str, name
     proc = ctx.process_of(node)
     if proc is None or any(ctx.process_of(p) != proc for p in ctx.publishers(name)):
         return False
-    return _executor_ratio(ctx, node, _this_quiet(ctx, topic, r)) < ctx.settings["stalled_cpu_ratio"]
+    return _executor_stopped(ctx, node, _this_quiet(ctx, topic, r))
 
 
 def _withheld(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm]) -> bool:
@@ -613,7 +613,7 @@ def _stalled(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhyth
     limit, without waiting for twice its longest healthy gap."""
     q = _this_quiet(ctx, topic, r)
     return any(_fed(ctx, topic, node, r.newest, rhythms) >= 0.5
-               and _executor_ratio(ctx, node, q) < ctx.settings["stalled_cpu_ratio"]
+               and _executor_stopped(ctx, node, q)
                for node in ctx.publishers(topic))
 
 
@@ -622,8 +622,13 @@ def _idle(ctx: PluginContext, topic: str, r: Rhythm) -> bool:
     ``stalled_cpu_ratio``), inputs or not: a callback of any node it runs may have blocked it
     (the RCA makes its other nodes candidates: `stream_viz.rca.symptoms`)."""
     q = _this_quiet(ctx, topic, r)
-    return any(_executor_ratio(ctx, node, q) < ctx.settings["stalled_cpu_ratio"]
-               for node in ctx.publishers(topic))
+    return any(_executor_stopped(ctx, node, q) for node in ctx.publishers(topic))
+
+
+def _executor_stopped(ctx: PluginContext, node: str, q: dict[str, Any]) -> bool:
+    """True when the single-threaded executor running ``node`` uses under ``stalled_cpu_ratio`` of
+    its usual CPU (`_executor_ratio`; False when that is not known)."""
+    return _executor_ratio(ctx, node, q) < ctx.settings["stalled_cpu_ratio"]
 
 
 def _this_quiet(ctx: PluginContext, topic: str, r: Rhythm) -> dict[str, Any]:

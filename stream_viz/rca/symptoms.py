@@ -717,13 +717,13 @@ def _sibling_inputs(
     """
     if home is None:
         return []
+    silent = [q for q in nodes_of_process(G, home)
+              if q != n and q not in seen and not (q in views and views[q].own)]
+    if not silent:
+        return []
     made = {e2 for e in effects(G, n) for e2 in effects(G, e)}
-    out: list[tuple[str, float]] = []
-    for q in nodes_of_process(G, home):
-        if q == n or q in seen or (q in views and views[q].own):
-            continue
-        out += [(c, SILENT_DECAY) for c in causes_in(G, q, parents) if c not in seen and c not in made]
-    return out
+    return [(c, SILENT_DECAY) for q in silent for c in causes_in(G, q, parents)
+            if c not in seen and c not in made]
 
 
 def _among(G: nx.MultiDiGraph, p: str, fellows: Collection[str],
