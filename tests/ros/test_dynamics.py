@@ -393,14 +393,19 @@ def test_a_detector_with_nothing_in_view_is_no_silence_and_its_hang_is(children,
         names = {"node:/a_detector", "node:/b_detector", "node:/c_detector"}
         wait_for(lambda: (mon.step(), names <= set(mon.seen))[1], timeout=20, period=1.0)
         _observe(mon, 48.0)  # two windows out of view
+        # A topic's rhythm settles at its third gap (`min_gaps`): 22 s apart, and the detectors'
+        # start on a loaded machine decides whether 48 s held two or three.
+        rhythms = _plugin(mon, "topic_rate").state["rhythms"]
+        topics = ("topic:/a_detector/detections", "topic:/b_detector/detections",
+                  "topic:/c_detector/detections")
+        settled = lambda: (_observe(mon, 1.0), all(rhythms[t].settled for t in topics))[1]  # noqa: E731
+        wait_for(settled, timeout=30, period=0.0)
         _no_alerts(mon, "detectors with nothing in view")
         # Only the main thread runs callbacks in a single-threaded process, more do in a multi-threaded one.
         index, G = SCHEMAS["process"].index("running_threads"), mon.seen
         running = {n: G.nodes[process_of_node(G, f"node:/{n}_detector")]["theta"][index] for n in "abc"}
         assert running["a"] == running["c"] == 1 and running["b"] >= 2, running
-        rhythms = _plugin(mon, "topic_rate").state["rhythms"]
-        for topic in ("topic:/a_detector/detections", "topic:/b_detector/detections",
-                      "topic:/c_detector/detections"):
+        for topic in topics:
             # the 8 s quiets out of view learned as their own rhythm (a shorter hiccup of a loaded
             # machine may be learned beside them; none longer)
             gaps = rhythms[topic].gaps
