@@ -132,7 +132,7 @@ def _keep_rise(ctx: PluginContext, topic: str, attr: str, value: float | None,
         peak = peaks.pop((topic, attr))
         known = ctx.learned.setdefault("rises", {})
         was = known.get(f"{topic} {attr}", [0.0, 0.0])
-        known[f"{topic} {attr}"] = [max(was[0], peak), max(was[1], ctx.t - (began or ctx.t))]
+        known[f"{topic} {attr}"] = [max(was[0], peak), max(was[1], 0.0 if began is None else ctx.t - began)]
 
 
 def _shown_before(ctx: PluginContext, topic: str, attr: str, value: float, lasted: float) -> bool:

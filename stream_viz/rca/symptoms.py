@@ -10,7 +10,7 @@ evidence with a since/until; a cause excuses an effect only while its episode la
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 
 import networkx as nx
@@ -521,6 +521,30 @@ def _settle(
             G, n, v, s, views, ev_passive, settings, sources, (stalled or {}).get(n, set()), parents)
 
 
+def _imply(
+    G: nx.MultiDiGraph, s: Symptoms, views: dict[str, NodeView], ev_passive: dict[str, Evidence],
+    settings: RcaSettings, suspects: Callable[[str, NodeView], Iterable[tuple[str, set[str]]]],
+    weight: float, kind: str,
+) -> None:
+    """Make the members ``suspects(n, v)`` names for a view candidates, weakly (× ``weight``).
+
+    ``suspects`` yields (suspect, its fellows in a stall of one executor, who do not excuse it);
+    a suspect that already has a view (its own evidence, or an alert named it) is left as it is.
+    """
+    implied: dict[str, NodeView] = {}
+    fellows: dict[str, set[str]] = {}
+    for n, v in list(views.items()):
+        for f, stalled_with in suspects(n, v):
+            if f in views:
+                continue
+            fv = implied.setdefault(f, NodeView(f, implied=True))
+            _charge(fv, n, v.own_anomaly * settings.charge * weight, v.own_onset, v.spans, kind,
+                    (v.began, v.began_by, v.vague))
+            fellows[f] = fellows.get(f, set()) | stalled_with
+    views.update(implied)
+    _settle(G, implied, views, s, ev_passive, settings, fellows)
+
+
 def _imply_servers(
     G: nx.MultiDiGraph, s: Symptoms, views: dict[str, NodeView], ev_passive: dict[str, Evidence],
     settings: RcaSettings,
@@ -532,19 +556,12 @@ def _imply_servers(
     becomes a candidate when a client of it has such symptoms of its own and its inputs do not
     explain them.
     """
-    implied: dict[str, NodeView] = {}
-    for n, v in list(views.items()):
+    def servers(n: str, v: NodeView) -> Iterator[tuple[str, set[str]]]:
         # its own logs or outputs, not what it shares with its process (CPU, memory)
-        if v.upstream >= UNEXPLAINED or not v.own_kinds & {"alert", "output"}:
-            continue
-        for srv in called_servers(G, n):
-            if srv in views:
-                continue  # it has evidence of its own, or an alert named it
-            sv = implied.setdefault(srv, NodeView(srv, implied=True))
-            _charge(sv, n, v.own_anomaly * settings.charge * IMPLIED_SERVER, v.own_onset, v.spans, "client",
-                    (v.began, v.began_by, v.vague))
-    views.update(implied)
-    _settle(G, implied, views, s, ev_passive, settings)
+        if v.upstream < UNEXPLAINED and v.own_kinds & {"alert", "output"}:
+            yield from ((srv, set()) for srv in called_servers(G, n))
+
+    _imply(G, s, views, ev_passive, settings, servers, IMPLIED_SERVER, "client")
 
 
 def _imply_fellows(
@@ -559,20 +576,13 @@ def _imply_fellows(
     its own. Its fellows without a symptom become candidates, below the node whose outputs
     stopped; what else stopped with the executor does not excuse them.
     """
-    implied: dict[str, NodeView] = {}
-    fellows: dict[str, set[str]] = {}
-    for n, v in list(views.items()):
+    def fellows(n: str, v: NodeView) -> Iterator[tuple[str, set[str]]]:
         p = None if v.implied or not v.executor_idle else process_of_node(G, n)
-        if p is None:
-            continue
-        group = set(nodes_of_process(G, p))
-        for f in group - views.keys():
-            fv = implied.setdefault(f, NodeView(f, implied=True))
-            _charge(fv, n, v.own_anomaly * settings.charge * IMPLIED_FELLOW, v.own_onset, v.spans, "fellow",
-                    (v.began, v.began_by, v.vague))
-            fellows[f] = fellows.get(f, set()) | (group - {f})
-    views.update(implied)
-    _settle(G, implied, views, s, ev_passive, settings, fellows)
+        if p is not None:
+            group = set(nodes_of_process(G, p))
+            yield from ((f, group - {f}) for f in group)
+
+    _imply(G, s, views, ev_passive, settings, fellows, IMPLIED_FELLOW, "fellow")
 
 
 def _await(G: nx.MultiDiGraph, views: Mapping[str, NodeView], settings: RcaSettings) -> None:
