@@ -641,11 +641,11 @@ def _upstream(
     """
     parents = {} if parents is None else parents
     home = process_of_node(G, n)
-    if v.onset < INF:
-        lo, hi = v.onset - settings.episode_gap, v.onset + settings.tolerance
+    onset, latest = _present_start(v, settings.tolerance)  # latest: the latest it can have begun
+    if onset < INF:
+        lo, hi = onset - settings.episode_gap, onset + settings.tolerance
     else:  # evidence without a time: any time
         lo, hi = -INF, INF
-    latest = min(v.began_by, v.vague)  # the latest its first symptom can have begun
     mine = set(outputs(G, n))
     left = None if sources is None else sources - mine - {n}
     worst = 0.0
@@ -678,7 +678,7 @@ def _upstream(
             found = _excuse(G, p, n, s, views, ev_passive, when, home, parents, bare)
             # A symptom that led n's and still held is no coincidence behind the silent nodes: the
             # time it took is its way through them (a timeout, a control loop winding down).
-            if found > 0 and w < 1.0 and _led(G, p, s, views, v.onset, settings, parents):
+            if found > 0 and w < 1.0 and _led(G, p, s, views, onset, settings, parents):
                 w = 1.0
             worst = max(worst, w * found)
             if shut or found > 0 or w * SILENT_DECAY <= worst:
@@ -791,6 +791,22 @@ def _excuse(
 
 
 STAMPED_SLACK = 0.25  # s: two stamped starts, from the clocks of processes on one host
+
+
+def _present_start(v: NodeView, tolerance: float) -> tuple[float, float]:
+    """When ``v``'s present symptoms began, and the latest they can have begun.
+
+    From its first symptom; but from its own change (an output, a log) when all it showed
+    before that was what it shares with its process (CPU, memory: it has no own symptom earlier)
+    and had ended, as measured (`Evidence` with an end), ``tolerance`` before: a burst of its
+    container's work that ended does not date a later fault of the node, nor keep an input that
+    went bad in between from explaining it.
+    """
+    cut = v.own_onset - tolerance
+    first = v.onset, min(v.began_by, v.vague)
+    if v.own_onset == INF or v.onset >= cut or not any(a < cut for a, _ in v.metric_spans):
+        return first
+    return (v.own_onset, v.own_onset) if all(b < cut for a, b in v.spans if a < cut) else first
 
 
 def began_after(began: float, vague: float, latest: float, tolerance: float) -> bool:

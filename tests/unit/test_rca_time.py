@@ -109,6 +109,23 @@ def test_process_evidence_is_judged_in_time_like_an_alert():
     assert views(G, fault, {PROC: Evidence(1.0, 110.0)}, metric=1.0)[PLAN].upstream == 0.0
 
 
+def test_a_process_burst_that_ended_does_not_date_a_node_s_later_change():
+    G = graph()  # perception's process worked hard from 30 to 50 (a container's burst), then /scan
+    burst = [al(PERC, "process_resources", t, "warn", process=PROC) for t in (32, 37, 42, 47)]
+    later = [al(SCAN, "topic_rate", t) for t in (58, 63, 68)] + [al(OBJ, "topic_rate", t) for t in (60, 65)]
+    ended = views(G, burst + later, {PROC: Evidence(1.0, 30.0, 50.0)}, metric=1.0)
+    # /objects stopped after /scan went bad: the burst that had ended keeps /scan from nothing.
+    assert ended[PERC].onset == 30.0 and ended[PERC].upstream == pytest.approx(0.8)  # /scan's error
+    # A burst still going on when /scan went bad began the node's trouble: /scan came after.
+    holds = views(G, burst + later, {PROC: Evidence(1.0, 30.0)}, metric=1.0)
+    assert holds[PERC].upstream == 0.0
+    # Without a measured end (its process's alerts alone), when it ended is not known.
+    assert views(G, burst + later, metric=1.0)[PERC].upstream == 0.0
+    # Perception's own log before /scan went bad dates it: /scan is no cause of it.
+    own = views(G, [*burst, al(PERC, "rosout", 40), *later], {PROC: Evidence(1.0, 30.0, 50.0)}, metric=1.0)
+    assert own[PERC].upstream == 0.0
+
+
 def test_the_engine_stamps_evidence_with_the_update_time():
     G = graph()
     eng = RcaEngine(RcaSettings(metric=1.0), watchlist=None)
