@@ -132,12 +132,34 @@ def discovery_server(env: dict[str, str], log: Path) -> subprocess.Popen:
     raise RuntimeError("fast-discovery-server did not listen within 20 s")
 
 
+# Fast DDS gives each participant of a computer its own unicast ports, trying ``mutation_tries``
+# (100 by default) in turn: the 101st participant of one computer finds none free and is never
+# discovered (eProsima/Fast-DDS#6359; ROS 2's documentation, "Large number of participants").
+MANY_PARTICIPANTS = """<?xml version="1.0" encoding="UTF-8" ?>
+<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <participant profile_name="many_participants" is_default_profile="true">
+    <rtps><builtin><mutation_tries>{tries}</mutation_tries></builtin></rtps>
+  </participant>
+</profiles>
+"""
+
+
+def many_participants(tries: int = 1000) -> Path:
+    """A Fast DDS profile file that lets ``tries`` participants share one computer: every
+    participant of the benchmark, the agent too, loads it (``FASTRTPS_DEFAULT_PROFILES_FILE``:
+    Jazzy's Fast DDS is 2.14)."""
+    path = Path(tempfile.mkdtemp(prefix="bench_agent_xml_")) / "many_participants.xml"
+    path.write_text(MANY_PARTICIPANTS.format(tries=tries))
+    return path
+
+
 def with_server(env_of: Callable[[int], dict[str, str]]) -> Callable[[int], dict[str, str]]:
-    """``env_of`` for the clients of the discovery server `discovery_server` starts. UDP only: with
-    200 participants, the later ones' shared-memory transport failed to lock its port files
-    ("open_and_lock_file failed")."""
+    """``env_of`` for the clients of the discovery server `discovery_server` starts, each able to
+    find its ports among many (`many_participants`). UDP only: with 200 participants, the later
+    ones' shared-memory transport failed to lock its port files ("open_and_lock_file failed")."""
+    profile = str(many_participants())
     return lambda domain: dict(env_of(domain), ROS_DISCOVERY_SERVER=f"127.0.0.1:{DS_PORT}",
-                               FASTDDS_BUILTIN_TRANSPORTS="UDPv4")
+                               FASTDDS_BUILTIN_TRANSPORTS="UDPv4", FASTRTPS_DEFAULT_PROFILES_FILE=profile)
 
 
 def measure(n: int, seconds: float, period: float, settle: float,
