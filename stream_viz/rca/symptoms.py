@@ -677,9 +677,11 @@ def _upstream(
             bare = bare or (not is_node(G, p) and measured(G, p))
             found = _excuse(G, p, n, s, views, ev_passive, when, home, parents, bare)
             # A symptom that led n's and still held is no coincidence behind the silent nodes: the
-            # time it took is its way through them (a timeout, a control loop winding down).
-            if found > 0 and w < 1.0 and _led(G, p, s, views, onset, settings, parents):
-                w = 1.0
+            # time it took is its way through them (a timeout, a control loop winding down). It
+            # explains n as fully as n's own trouble weighs: one plugin's warning and another's
+            # error are not on one scale (a transform gone, then "robot pose is not available").
+            if found > 0 and _led(G, p, s, views, onset, settings, parents):
+                w, found = 1.0, max(found, v.anomaly)
             worst = max(worst, w * found)
             if shut or found > 0 or w * SILENT_DECAY <= worst:
                 continue  # an alerting member ends its path: the earlier ones are its own causes

@@ -126,6 +126,20 @@ def test_a_process_burst_that_ended_does_not_date_a_node_s_later_change():
     assert own[PERC].upstream == 0.0
 
 
+def test_an_input_s_trouble_that_led_and_holds_explains_a_louder_complaint():
+    G = graph()  # /objects warns (0.5) from 100; the planner then logs an error (0.8)
+    warned = [al(OBJ, "topic_rate", t, "warn") for t in range(100, 130, 5)]
+    led = views(G, [*warned, al(PLAN, "rosout", 116)], window=0)
+    # It began 16 s before the planner's and still held: it explains the error as fully as it weighs.
+    assert led[PLAN].upstream == pytest.approx(0.8) and led[PLAN].ht == pytest.approx(0.8 * 0.2)
+    # In the same sample (within tolerance) it may be a coincidence: its own weight only.
+    same = views(G, [*warned, al(PLAN, "rosout", 101)], window=0)
+    assert same[PLAN].upstream == pytest.approx(0.5)
+    # Standing for longer than led_max before: a standing condition, its own weight only.
+    standing = [al(OBJ, "topic_rate", t, "warn") for t in range(0, 130, 5)]
+    assert views(G, [*standing, al(PLAN, "rosout", 116)], window=0)[PLAN].upstream == pytest.approx(0.5)
+
+
 def test_the_engine_stamps_evidence_with_the_update_time():
     G = graph()
     eng = RcaEngine(RcaSettings(metric=1.0), watchlist=None)
