@@ -37,7 +37,7 @@ participant announces itself to every other) saturate a 2-core machine before an
 every participant, as ROS 2's tools must be to see the whole graph), the set-up large robots use.
 Every participant loads a profile raising Fast DDS's ``mutation_tries`` (`many_participants`):
 with the default, the 101st participant of a computer opens no port. On this machine the agent
-mapped all of 10 and 50 processes so, and 53-100 of 100 before the benchmark stopped waiting;
+mapped all of 10 and 50 processes so, and 53 of 100 before the benchmark stopped waiting;
 200 idle rclpy processes saturate its two cores (`bench/results/agent-ds-425c6b3/`).
 
     .venv/bin/python bench/bench_agent.py --lab --discovery-server --processes 10 50 200
