@@ -32,6 +32,7 @@ from stream_viz.records import Alert
 
 Baseline = tuple[float, float, int] | None
 TRANSITIONS_KEPT = 8  # per node: enough for the changes around one quiet
+COMPLAINTS_KEPT_S = 30.0  # a node's complaints kept this long: a transition is seen samples after
 _NUMBER = re.compile(r"[-+]?\d[\d.,:]*")  # a reading in a status's message, not its mode
 STATE_GAP_S = 10.0  # a latched topic's message this long after its last is a state published on change
 EXECUTOR_CPU = "executor_cpu_percent"
@@ -464,8 +465,17 @@ def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[
     period = 1.0 / r.rate if r.rate > 0 else None
     if r.gaps:  # its next message may be due only after its longest healthy gap
         period = max(period or 0.0, max(r.gaps))
-    return _changed_state(ctx, ctx.publishers(topic), last, last, transitions, topic, period) \
-        and not _complained(ctx, topic, r)
+    pubs = ctx.publishers(topic)
+    if not _changed_state(ctx, pubs, last, last, transitions, topic, period):
+        return False
+    if not _complained(ctx, topic, r):
+        return True
+    # A lifecycle node put in another state says so after it ("Standby", a WARN of a driver not
+    # streaming): the state, not trouble. One that complained before its transition changed state
+    # because of it (a localiser deactivating itself on an ERROR): that transition excuses nothing.
+    due = last + max(ctx.settings["transition_grace_s"], (period or 0.0) + FEED_SLACK_S)
+    clean = ctx.state.get("clean_lifecycle", {})
+    return any(last - ctx.settings["transition_grace_s"] <= x <= due for p in pubs for x in clean.get(p, ()))
 
 
 def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm],
@@ -709,8 +719,17 @@ def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
 
     states = ctx.structural(lambda: [m for m in ctx.members("topic") if latched(ctx.attr(m, "qos"))],
                             key="states", token=ctx.graph.graph.get("qos_version"))
+    complaints, clean = ctx.state.setdefault("complaints", {}), ctx.state.setdefault("clean_lifecycle", {})
+    grace = ctx.settings["transition_grace_s"]
     for node, at in lifecycle_transitions(ctx):
         note(node, at)
+        times = clean.setdefault(node, [])
+        # A line it logs as it changes state is why (stamped by its clock as the transition is
+        # sent: the same moment); a status it publishes after is the state it is in.
+        said = complaints.get(node, ())
+        if all(abs(x - at) > SAME_MESSAGE_S for x in times) \
+                and not any(at - grace <= x < at + (SAME_MESSAGE_S if logged else 0.0) for x, logged in said):
+            times[:] = sorted([*times, at])[-TRANSITIONS_KEPT:]
     newest: dict[str, float] = ctx.state.setdefault("state_newest", {})
     for topic in states:
         age = ctx.value(topic, "age_s")
@@ -750,6 +769,9 @@ def _self_reports(ctx: PluginContext) -> None:
             continue
         last = said.setdefault(e.member, [-math.inf, -math.inf])
         last[k] = max(last[k], e.t)
+        if k:  # when, as well as the last time: a lifecycle transition asks what came before it
+            recent = ctx.state.setdefault("complaints", {}).setdefault(e.member, [])
+            recent[:] = [x for x in recent if e.t - x[0] <= COMPLAINTS_KEPT_S] + [(e.t, e.kind == "log")]
 
 
 def _complained(ctx: PluginContext, topic: str, r: Rhythm) -> bool:

@@ -513,6 +513,34 @@ def test_topic_rate_a_deactivated_lifecycle_publisher_is_not_silent():
     assert alerts[0].data["limit_s"] == 1.5
 
 
+def test_topic_rate_a_lifecycle_node_saying_standby_after_its_transition_is_not_silent():
+    # Deactivated at 20.0 (last message 19.9), active again at 40. Its own status, each second at
+    # .2, is OK while active and WARN "Standby" while not: the state it was put in, not trouble.
+    msgs = [i / 10 for i in range(200)] + [40 + i / 10 for i in range(200)]
+
+    def status(t, before=False, line_at=19.3):  # its status of 0.3 s before the sample
+        u = t - 0.3
+        bad = (before and 19.0 <= u < 20.0) or 20.0 <= u < 40.0
+        text = f"lidar: {'WARN Standby' if bad else 'OK Streaming'}"
+        ev = [Event(u, "diag", "node:/camera", "info", text,
+                    {"name": "lidar", "level": 1 if bad else 0, "publisher": "node:/camera"})]
+        if before and t == 20.5:  # it said something was wrong as it changed state
+            ev.append(Event(line_at, "log", "node:/camera", "error", "Scan matching diverged", {}))
+        return ev
+
+    standby = [(t, lifecycle_model([20.0, 40.0], t, **seen(msgs, t)), status(t)) for t in HALF[:80]]
+    assert drive("topic_rate", standby) == []
+    # A node that complained before its transition changed state because of it: a silence.
+    troubled = [(t, lifecycle_model([20.0, 40.0], t, **seen(msgs, t)), status(t, before=True))
+                for t in HALF[:80]]
+    assert drive("topic_rate", troubled)[:1] == [(20.5, "topic:/img", "error")]
+    # ... or as it did: a line stamped by its clock a moment after the transition was received
+    # (the blind courier's costmap: "rolling window lost the robot pose; deactivating").
+    said = [(t, lifecycle_model([20.0, 40.0], t, **seen(msgs, t)), status(t, before=True, line_at=20.2))
+            for t in HALF[:80]]
+    assert drive("topic_rate", said)[:1] == [(20.5, "topic:/img", "error")]
+
+
 def test_topic_rate_a_goal_ending_by_the_last_message_explains_the_quiet():
     # /camera serves an action; its goal ends at 20.0, its output's last message is at 19.9.
     msgs = [i / 10 for i in range(200)]
