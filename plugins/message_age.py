@@ -1,4 +1,5 @@
-"""The age of a topic's data from its messages' header stamps: stale data, or skewed clocks.
+"""The age of a topic's data from its messages' header stamps: stale data, skewed clocks, or
+stamps that left the topics they matched.
 
 The collector measures ``stamp_age_ms`` (received − ``header.stamp``, mean over its window) for
 types that begin with a ``std_msgs/Header`` whose stamp is set. It is the age of the data (since
@@ -46,6 +47,8 @@ class MessageAge(Plugin):
       publisher's clock runs ahead, another host's or a simulated one) or above ``implausible_s``
       (stamps not from this clock at all: simulated time, an unset or unsynchronised clock), for
       ``confirm`` samples. No stale check on such a topic: its ages say nothing about delay.
+    * ``desync`` (warn): its stamps no longer match those of the topics that carried the same
+      stamps (cameras on one trigger, a synchronizer's inputs), `_desync`.
 
     On a topic several nodes publish (``/tf``), the alert names those whose own messages are late
     (``publisher_ages``; data ``publishers``) when the others' are not: the RCA charges them.
@@ -85,6 +88,9 @@ class MessageAge(Plugin):
         "loop_share": 0.3,
         "min_messages": 8,
         "error_ms": 1000.0,
+        "partner_share": 0.8,
+        "partner_samples": 5,
+        "lost_share": 0.1,
     }
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
@@ -122,6 +128,9 @@ class MessageAge(Plugin):
             if standing(ctx.state, topic, ctx.t, skew, s["learn_s"]):
                 if skew == "ahead":
                     yield from self._stale(ctx, topic, age, fresh, alerting)
+                continue
+            if (moved := _desync(ctx, topic, age, fresh)) is not None:
+                yield moved
                 continue
             if streak(ctx.state, (topic, "skew"), skew is not None, fresh) >= s["confirm"]:
                 yield _skew(ctx, topic, age)
@@ -218,6 +227,60 @@ def _all_late(ctx: PluginContext, topic: str, seen: tuple[float, float, bool] | 
             med, sigma, _ = base
             late = exceeds(young, med, sigma, s["k"], max(s["min_rise_ms"], s["rise_ratio"] * abs(med)))
     return streak(ctx.state, (topic, "all_late"), late, fresh) >= s["fast_confirm"]
+
+
+def _desync(ctx: PluginContext, topic: str, age: float, fresh: bool) -> Alert | None:
+    """``desync`` (warn): the topic's stamps no longer match those of the topics that carried the
+    same stamps (``stamp_partners``: a camera trio on one trigger, a synchronizer's inputs), while
+    both publish, for ``confirm`` samples with a new message. A partner is learnt from
+    ``partner_samples`` samples sharing ``partner_share`` of the stamps; one is lost under
+    ``lost_share``. It began after the last sample in which every stamp matched (data ``since``),
+    by the first that saw them part (``since`` + ``since_within``): the newest stamps compared
+    span a few samples, so the share falls below ``lost_share`` only later. The topic that moved
+    is the one whose partners still match each other; of a pair, the one whose age moved (twice
+    the other's shift at least), else both."""
+    s = ctx.settings
+    now = ctx.attr(topic, "stamp_partners") or {}
+    learned = ctx.state.setdefault("partners", {}).setdefault(topic, {})  # partner -> samples matched
+    if fresh:
+        for p, share in now.items():
+            if share >= s["partner_share"]:
+                learned[p] = learned.get(p, 0) + 1
+    compared = [p for p, k in learned.items() if k >= s["partner_samples"] and p in now]
+    lost = bool(compared) and all(now[p] < s["lost_share"] for p in compared)
+    ages = ctx.state.setdefault("matched_age", {})  # topic -> its age while it matched its partners
+    matched = ctx.state.setdefault("matched_at", {})  # topic -> the last sample it matched them all
+    if not lost:
+        if compared and fresh and all(now[p] >= s["partner_share"] for p in compared):
+            ages[topic], matched[topic] = age, ctx.t
+    elif not any(_matched_elsewhere(ctx, p, topic) for p in compared):  # a pair: whose stamps moved?
+        mine = abs(age - ages.get(topic, age))
+        theirs = max(abs(ctx.value(p, "stamp_age_ms") - ages.get(p, math.nan)) for p in compared)
+        lost = not theirs > 2.0 * mine  # NaN: unknown, both are charged
+    began = ctx.state.setdefault("desync_since", {})
+    if not lost:
+        if fresh:
+            began.pop(topic, None)
+        return None
+    began.setdefault(topic, ctx.t)
+    if streak(ctx.state, (topic, "desync"), True, fresh) < s["confirm"]:
+        return None
+    names = ", ".join(name_of(p) for p in compared)
+    shift = age - ages.get(topic, math.nan)
+    moved = f"; its stamps moved {shift:+.0f} ms" if shift == shift else ""
+    # It moved after the last sample its stamps all matched, by the first that saw them part.
+    since = min(matched.get(topic, began[topic]), began[topic])
+    return ctx.alert(topic, "warn", f"header stamps no longer match those of {names}, which they "
+                     f"matched{moved}: a trigger or clock of its publisher changed (what synchronizes "
+                     "them receives no set)", symptom="desync", partners=compared,
+                     **({"shift_ms": shift} if shift == shift else {}), since=since,
+                     since_within=began[topic] - since)
+
+
+def _matched_elsewhere(ctx: PluginContext, topic: str, but: str) -> bool:
+    """True when ``topic`` still matches a partner other than ``but``."""
+    shares = ctx.attr(topic, "stamp_partners") or {}
+    return any(u != but and share >= ctx.settings["partner_share"] for u, share in shares.items())
 
 
 def _skew(ctx: PluginContext, topic: str, age: float) -> Alert:

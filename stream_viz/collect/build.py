@@ -37,7 +37,8 @@ def build_model(
         Topic → `TopicStats` (a topic missing here is ``measured=False``). Its messages/s per
         publisher gid become the topic attribute ``publisher_rates`` (node id → Hz, the gids
         mapped with ``reading.publisher_gids``) and add up to each node's θ ``sent_hz``; its mean
-        message age per publisher gid, ``publisher_ages`` (node id → ms, where two or more have one).
+        message age per publisher gid, ``publisher_ages`` (node id → ms, where two or more have one);
+        the topics carrying the same header stamps, ``stamp_partners`` (topic id → share).
     service_stats : dict, optional
         Service → `ServiceStats` of the services whose calls are observed (introspection).
     calls : dict, optional
@@ -70,6 +71,8 @@ def build_model(
         ages = publisher_ages(st.age_by_publisher, reading.publisher_gids.get(topic, {}))
         if len(ages) > 1:  # whose stamps are late, where several publish (`/tf`)
             attrs["publisher_ages"] = {make_id("node", n): ms for n, ms in ages.items()}
+        if st.stamp_partners:  # topics carrying its stamps: sensors triggered together (`stamp_partners`)
+            attrs["stamp_partners"] = {make_id("topic", u): share for u, share in st.stamp_partners.items()}
         for n, hz in shares.items():
             if n in counts:
                 sent = counts[n]["sent_hz"]

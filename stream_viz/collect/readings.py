@@ -88,3 +88,4 @@ class TopicStats:
     by_publisher: dict[bytes, float] = field(default_factory=dict)  # publisher gid -> messages/s
     age_by_publisher: dict[bytes, float] = field(default_factory=dict)  # publisher gid -> mean age ms
     stamp_resets: list[tuple[int, int]] = field(default_factory=list)  # (received ns, back ns)
+    stamp_partners: dict[str, float] = field(default_factory=dict)  # topic -> share of stamps it also has

@@ -32,6 +32,7 @@ from stream_viz.collect.rcltake import RclTake
 from stream_viz.collect.readings import TopicStats
 from stream_viz.collect.services import EVENT_SUFFIX
 from stream_viz.collect.simclock import CLOCK_TYPE, ROS_CLOCK, SimClock
+from stream_viz.collect.stamp_partners import COMPARED, stamp_partners
 from stream_viz.collect.window import TopicWindow
 from stream_viz.records import Event
 
@@ -112,6 +113,7 @@ class TopicMonitor:
         self.rcl = RclTake(rclpy.get_rmw_implementation_identifier()) if gids else None
         self.taken = 0  # messages taken so far (for the benchmark)
         self.clock = SimClock()  # simulated time, when the system publishes /clock
+        self._stamp_pairs: set[frozenset[str]] = set()  # topics seen carrying the same stamps
 
     def start(self) -> None:
         """Subscribe to the log, parameter and diagnostics topics and start draining."""
@@ -286,6 +288,7 @@ class TopicMonitor:
         self.drain()  # the thread drains rarely on a calm system: be up to date now
         now = time.time_ns()
         out: dict[str, TopicStats] = {t: TopicStats(False, why) for t, why in self._failed.items()}
+        stamps: dict[str, list[int]] = {}
         with self._lock:
             for t, w in self._watches.items():
                 if w.kind == "event":  # service events: not a topic of the model
@@ -300,6 +303,11 @@ class TopicMonitor:
                     m["sim_pace"] = pace
                 out[t] = TopicStats(True, "", m, w.window.publisher_rates(now, w.created_ns, self.window_ns),
                                     w.window.publisher_ages(), w.window.take_resets())
+                if w.window.n_age:
+                    stamps[t] = w.window.newest_stamps(COMPARED)
+        for t, partners in stamp_partners(stamps, self._stamp_pairs).items():
+            out[t].stamp_partners = partners
+            self._stamp_pairs.update(frozenset((t, u)) for u, share in partners.items() if share > 0)
         if not self.metrics:
             for t in publishers:
                 out.setdefault(t, TopicStats(False, "topic metrics are off"))

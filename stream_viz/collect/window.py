@@ -171,6 +171,16 @@ class TopicWindow:
             return {}
         return {gid: n * 1e9 / span_ns for gid, n in self.by_gid.items()}
 
+    def newest_stamps(self, k: int) -> list[int]:
+        """Return the header stamps (ns) of the newest ``k`` records that have one."""
+        out: list[int] = []
+        for r in reversed(self.buf):
+            if r[5] is not None:
+                out.append(r[0] - r[5])
+                if len(out) >= k:
+                    break
+        return out
+
     def publisher_ages(self) -> dict[bytes, float]:
         """Return publisher gid → mean message age (ms) of its records in the window that have
         one: whose stamps are late when several publish on the topic (``/tf``)."""

@@ -40,7 +40,7 @@ from stream_viz.collect.rosgraph import INFINITE_NS, qos_dict
 from stream_viz.collect.services import ServiceCalls, party
 from stream_viz.collect.topics import log_event
 from stream_viz.collect.window import TopicWindow, window_metrics
-from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge
+from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.model.theta import make_theta
 from stream_viz.rca import RcaSettings, analyze
 from stream_viz.records import Alert, Event
@@ -913,3 +913,49 @@ def test_a_parameter_event_that_changes_or_deletes_is_one_param_event_of_its_nod
     long = param_event(ParameterEvent(node="/n", changed_parameters=[p("s", type=4, string_value="x" * 100)]),
                        1.0)
     assert len(long.data["changed"]["s"]) == 60 and long.data["changed"]["s"].endswith("…")
+
+
+def _triggered(t, shares, ages):
+    """Three cameras on one trigger, each topic's ``stamp_partners`` from ``shares`` (pair -> share)
+    and its age from ``ages`` (topic -> ms)."""
+    G = new_graph()
+    for cam in ("left", "center", "right"):
+        add_member(G, f"node:/{cam}", pid=100, alive=True)
+        add_member(G, f"topic:/{cam}/image", theta=make_theta("topic", {
+            "rate_hz": 5.0, "publishers": 1, "subscribers": 1, "age_s": 0.1, "stamp_age_ms": ages[cam]}),
+            stamp_partners={f"topic:/{o}/image": shares[frozenset((cam, o))]
+                            for o in ("left", "center", "right") if o != cam})
+        add_flow_edge(G, f"node:/{cam}", f"topic:/{cam}/image", "pub")
+    return (float(t), G, [])
+
+
+def test_message_age_a_camera_whose_stamps_leave_its_trigger_group_is_out_of_sync():
+    pairs = [frozenset(p) for p in (("left", "center"), ("left", "right"), ("center", "right"))]
+    matched = dict.fromkeys(pairs, 1.0)
+    moved = {**matched, pairs[1]: 0.0, pairs[2]: 0.0}  # the right camera's stamps 41 ms later
+    same = {"left": 100.0, "center": 100.0, "right": 100.0}
+    frames = [_triggered(t, matched, same) for t in range(10)]
+    assert drive("message_age", frames) == []
+    frames += [_triggered(t, moved, {**same, "right": 59.0}) for t in range(10, 15)]
+    alerts = drive_alerts("message_age", frames)
+    assert [(a.t, a.member) for a in alerts] == [(12.0, "topic:/right/image"), (13.0, "topic:/right/image"),
+                                                 (14.0, "topic:/right/image")]
+    assert alerts[0].data["symptom"] == "desync" and alerts[0].data["since"] == 9.0  # the last sample matched
+    assert alerts[0].data["since_within"] == 1.0  # the first that saw them part: 10
+    assert alerts[0].data["partners"] == ["topic:/left/image", "topic:/center/image"]
+    assert alerts[0].data["shift_ms"] == pytest.approx(-41.0)
+    # Before the partners were learnt (5 samples matching), nothing is lost.
+    assert drive("message_age", frames[6:]) == []
+
+
+def test_message_age_of_a_pair_out_of_sync_the_one_whose_age_moved_is_charged():
+    frames = [_triggered(t, {frozenset(("left", "right")): 1.0, frozenset(("left", "center")): 0.0,
+                             frozenset(("center", "right")): 0.0}, dict(left=100.0, center=7.0, right=100.0))
+              for t in range(10)]
+    apart = {frozenset(("left", "right")): 0.0, frozenset(("left", "center")): 0.0,
+             frozenset(("center", "right")): 0.0}
+    moved = frames + [_triggered(t, apart, dict(left=100.0, center=7.0, right=59.0)) for t in range(10, 14)]
+    assert {m for _, m, _ in drive("message_age", moved)} == {"topic:/right/image"}
+    # Neither age moved: both are charged.
+    both = frames + [_triggered(t, apart, dict(left=100.0, center=7.0, right=100.0)) for t in range(10, 14)]
+    assert {m for _, m, _ in drive("message_age", both)} == {"topic:/right/image", "topic:/left/image"}

@@ -1,0 +1,99 @@
+"""Cameras on one trigger and the synchronizer that matches them (issue 16 items 1 and 4),
+through the real monitor against real rclpy nodes in subprocesses.
+
+Three cameras in one process stamp each 5 Hz frame with the trigger's time; a stitcher in
+another process publishes a panorama for each set whose stamps are equal, and WARNs when it
+drops unmatched ones. The right camera's trigger is lost (its stamps 41 ms later): every camera
+goes on at 5 Hz, the panorama stops. The monitor says the right camera's stamps left its group
+and ranks that camera first, not the stitcher whose output stopped.
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from stream_viz.testing import wait_for
+from tests.ros.test_dynamics import HEAD, _monitor, _no_alerts, _observe
+
+pytestmark = pytest.mark.ros
+
+CAMERAS = HEAD + """
+import math
+import rclpy.executors
+from sensor_msgs.msg import Image
+from builtin_interfaces.msg import Time
+trigger = sys.argv[1]
+qos = rclpy.qos.qos_profile_sensor_data
+nodes, pubs = [], []
+for side in ("left", "center", "right"):
+    n = Node(side)
+    nodes.append(n)
+    pubs.append(n.create_publisher(Image, f"/{side}/image_raw", qos))
+def grab():
+    edge = math.floor(time.time() / 0.2) * 0.2
+    for side, pub in zip(("left", "center", "right"), pubs):
+        t = edge + (0.041 if side == "right" and os.path.exists(trigger) else 0.0)
+        m = Image(height=1, width=4, encoding="mono8", step=4, data=bytes(4))
+        m.header.stamp = Time(sec=int(t), nanosec=int(round((t - int(t)) * 1e9)))
+        pub.publish(m)
+nodes[0].create_timer(0.2, grab)
+ex = rclpy.executors.SingleThreadedExecutor()
+for n in nodes:
+    ex.add_node(n)
+print("ready", flush=True)
+ex.spin()
+"""
+
+STITCHER = HEAD + """
+from sensor_msgs.msg import Image
+n = Node("stitcher")
+pub = n.create_publisher(Image, "/panorama", 10)
+sets, last_warn = {}, [0.0]
+def cb(side):
+    def take(m):
+        key = (m.header.stamp.sec, m.header.stamp.nanosec)
+        got = sets.setdefault(key, {})
+        got[side] = m
+        if len(got) == 3:
+            pub.publish(Image(header=m.header, height=1, width=12, encoding="mono8", step=12, data=bytes(12)))
+            del sets[key]
+        for k in [k for k in sets if k[0] < m.header.stamp.sec - 1]:
+            del sets[k]
+            if time.monotonic() - last_warn[0] > 5.0:
+                last_warn[0] = time.monotonic()
+                n.get_logger().warn("Dropped unmatched images: no set within slop 0.015 s")
+    return take
+for side in ("left", "center", "right"):
+    n.create_subscription(Image, f"/{side}/image_raw", cb(side), rclpy.qos.qos_profile_sensor_data)
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+
+def test_a_camera_whose_stamps_leave_its_trigger_group_is_ranked_first(children, tmp_path):
+    trigger = tmp_path / "drift"
+    children.python(CAMERAS, str(trigger), name="cameras")
+    children.python(STITCHER, name="stitcher")
+    mon = _monitor(children, tmp_path)
+    try:
+        wait_for(lambda: (mon.step(), {"node:/right", "node:/stitcher"} <= set(mon.seen))[1],
+                 timeout=20, period=1.0)
+        _observe(mon, 15.0)
+        _no_alerts(mon, "three triggered cameras and a stitcher")
+
+        t0 = time.time()
+        trigger.touch()
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline and not any(
+                a.data.get("symptom") == "desync" for a in mon.store.alerts(since=t0)):
+            _observe(mon, 1.0)
+        _observe(mon, 3.0)
+        after = mon.store.alerts(since=t0)
+        desync = {a.member for a in after if a.data.get("symptom") == "desync"}
+        assert desync == {"topic:/right/image_raw"}, [(a.member, a.message) for a in after]
+        top = mon.engine.result().root_causes
+        assert top and top[0].member == "node:/right", [(c.member, c.score) for c in top[:3]]
+    finally:
+        mon.close()
