@@ -23,7 +23,6 @@ import random
 import sys
 import threading
 import time
-import traceback
 from pathlib import Path
 
 import rclpy
@@ -48,7 +47,7 @@ from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue, SetPara
 from rcl_interfaces.srv import SetParameters
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -57,6 +56,8 @@ from std_msgs.msg import Bool, Header, String, UInt8MultiArray
 from std_srvs.srv import Trigger
 from test_msgs.action import Fibonacci
 from test_msgs.srv import BasicTypes
+
+from bench.robot_process import spin
 
 NS = "cg"
 FAULT_DIR = Path("/tmp")
@@ -1882,36 +1883,6 @@ PROCESSES = {
 HOOKS: dict = {}  # "cpu" / "leak" -> what the process logs or does when its fault file appears
 
 
-def burn() -> None:
-    x = 0
-    while True:
-        for i in range(10_000):
-            x = (x * 31 + i) % 1_000_003
-
-
-def leak() -> None:
-    keep = []
-    while True:
-        keep.append(b"x" * 300_000)
-        time.sleep(0.1)
-
-
-def watch_process() -> None:
-    done = set()
-    while True:
-        time.sleep(0.5)
-        for how in ("cpu", "leak"):
-            if how not in done and (FAULT_DIR / f"{PROCESS}.{how}").exists():
-                done.add(how)
-                hook = HOOKS.get(how)
-                if hook:
-                    hook()
-                if how == "cpu":
-                    threading.Thread(target=burn, daemon=True).start()
-                elif how == "leak" and hook is None:
-                    threading.Thread(target=leak, daemon=True).start()
-
-
 def main() -> int:
     global FAULT_DIR, PROCESS
     PROCESS, FAULT_DIR = sys.argv[1], Path(sys.argv[2])
@@ -1920,27 +1891,7 @@ def main() -> int:
         print("Loading model ggml-small.en.bin ...", flush=True)
         time.sleep(8.0)  # the model loads before the node exists: it joins late
     rclpy.init()
-    ex = PROCESSES[PROCESS]()
-    threading.Thread(target=watch_process, daemon=True).start()
-    if run_for > 0:
-        threading.Timer(run_for, rclpy.try_shutdown).start()
-    code = 0
-    try:
-        ex.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:  # an uncaught exception in a callback ends the process
-        traceback.print_exc()
-        sys.stderr.flush()
-        code = 1
-    if code:
-        os._exit(code)
-    try:
-        ex.shutdown(timeout_sec=1.0)
-    except Exception:
-        pass
-    rclpy.try_shutdown()
-    os._exit(0)
+    spin(PROCESSES[PROCESS](), FAULT_DIR, PROCESS, run_for, HOOKS)
 
 
 if __name__ == "__main__":

@@ -25,7 +25,6 @@ import random
 import sys
 import threading
 import time
-import traceback
 from collections import deque
 from pathlib import Path
 
@@ -50,7 +49,7 @@ from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue, SetPara
 from rcl_interfaces.srv import SetParameters
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -58,6 +57,8 @@ from sensor_msgs.msg import BatteryState, Image, PointCloud2, PointField
 from std_msgs.msg import Bool, Float32, Header, String
 from std_srvs.srv import SetBool
 from test_msgs.action import Fibonacci
+
+from bench.robot_process import spin
 
 NS = "rs"
 FAULT_DIR = Path("/tmp")
@@ -1183,36 +1184,6 @@ PROCESSES = {
 HOOKS: dict = {}  # "cpu" / "leak" -> what the process logs or does when its fault file appears
 
 
-def burn() -> None:
-    x = 0
-    while True:
-        for i in range(10_000):
-            x = (x * 31 + i) % 1_000_003
-
-
-def leak() -> None:
-    keep = []
-    while True:
-        keep.append(b"x" * 300_000)
-        time.sleep(0.1)
-
-
-def watch_process() -> None:
-    done = set()
-    while True:
-        time.sleep(0.5)
-        for how in ("cpu", "leak"):
-            if how not in done and (FAULT_DIR / f"{PROCESS}.{how}").exists():
-                done.add(how)
-                hook = HOOKS.get(how)
-                if hook:
-                    hook()
-                if how == "cpu":
-                    threading.Thread(target=burn, daemon=True).start()
-                elif how == "leak" and hook is None:
-                    threading.Thread(target=leak, daemon=True).start()
-
-
 def main() -> int:
     global FAULT_DIR, PROCESS
     PROCESS, FAULT_DIR = sys.argv[1], Path(sys.argv[2])
@@ -1223,27 +1194,7 @@ def main() -> int:
         print("Waiting for the LTE modem (wwan0) ...", flush=True)
         time.sleep(12.0)  # the modem comes up before the uploader node exists: it joins late
     rclpy.init()
-    ex = PROCESSES[PROCESS]()
-    threading.Thread(target=watch_process, daemon=True).start()
-    if run_for > 0:
-        threading.Timer(run_for, rclpy.try_shutdown).start()
-    code = 0
-    try:
-        ex.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:  # an uncaught exception in a callback ends the process
-        traceback.print_exc()
-        sys.stderr.flush()
-        code = 1
-    if code:
-        os._exit(code)
-    try:
-        ex.shutdown(timeout_sec=1.0)
-    except Exception:
-        pass
-    rclpy.try_shutdown()
-    os._exit(0)
+    spin(PROCESSES[PROCESS](), FAULT_DIR, PROCESS, run_for, HOOKS)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,77 @@
+"""How a hand-written robot's process runs (`bench.concierge.robot`, `bench.retail.robot`).
+
+Its executor spins until Ctrl-C, or ``run_for`` s when > 0 (an operator's session); an uncaught
+exception in a callback ends the process with code 1, its traceback printed, as a launched node
+dies. The harness's ``cpu`` and ``leak`` faults (`bench.handwritten.Robot.inject`) write
+``FAULT_DIR/<process>.cpu`` / ``.leak``: the process then runs a hook of its own (a log line, its
+own leak) and a CPU burner thread or, without a leak hook of its own, a generic leak.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+from typing import NoReturn
+
+import rclpy
+from rclpy.executors import Executor, ExternalShutdownException
+
+
+def burn() -> None:
+    """Keep one thread busy for good."""
+    x = 0
+    while True:
+        for i in range(10_000):
+            x = (x * 31 + i) % 1_000_003
+
+
+def leak() -> None:
+    """Grow by ~3 MB/s for good."""
+    keep = []
+    while True:
+        keep.append(b"x" * 300_000)
+        time.sleep(0.1)
+
+
+def watch_faults(fault_dir: Path, process: str, hooks: dict[str, Callable[[], None]]) -> None:
+    """Start the process's burner or leak once its fault file appears (polled every 0.5 s)."""
+    done: set[str] = set()
+    while True:
+        time.sleep(0.5)
+        for how in ("cpu", "leak"):
+            if how not in done and (fault_dir / f"{process}.{how}").exists():
+                done.add(how)
+                hook = hooks.get(how)
+                if hook:
+                    hook()
+                if how == "cpu":
+                    threading.Thread(target=burn, daemon=True).start()
+                elif how == "leak" and hook is None:
+                    threading.Thread(target=leak, daemon=True).start()
+
+
+def spin(ex: Executor, fault_dir: Path, process: str, run_for: float,
+         hooks: dict[str, Callable[[], None]]) -> NoReturn:
+    """Spin ``ex`` as the process's life (module docstring) and exit with its code."""
+    threading.Thread(target=watch_faults, args=(fault_dir, process, hooks), daemon=True).start()
+    if run_for > 0:
+        threading.Timer(run_for, rclpy.try_shutdown).start()
+    try:
+        ex.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:  # an uncaught exception in a callback ends the process
+        traceback.print_exc()
+        sys.stderr.flush()
+        os._exit(1)
+    try:
+        ex.shutdown(timeout_sec=1.0)
+    except Exception:
+        pass
+    rclpy.try_shutdown()
+    os._exit(0)
