@@ -724,11 +724,12 @@ def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
     for node, at in lifecycle_transitions(ctx):
         note(node, at)
         times = clean.setdefault(node, [])
-        # A line it logs as it changes state is why (stamped by its clock as the transition is
-        # sent: the same moment); a status it publishes after is the state it is in.
+        # Why it changed state: a line it logs with the transition (stamped by its clock as the
+        # transition is sent: the same moment, not a recurring WARN a second before), or a status
+        # of its own worse than OK before it; a status it publishes after is the state it is in.
         said = complaints.get(node, ())
-        if all(abs(x - at) > SAME_MESSAGE_S for x in times) \
-                and not any(at - grace <= x < at + (SAME_MESSAGE_S if logged else 0.0) for x, logged in said):
+        if all(abs(x - at) > SAME_MESSAGE_S for x in times) and not any(
+                abs(x - at) < SAME_MESSAGE_S if logged else at - grace <= x < at for x, logged in said):
             times[:] = sorted([*times, at])[-TRANSITIONS_KEPT:]
     newest: dict[str, float] = ctx.state.setdefault("state_newest", {})
     for topic in states:
