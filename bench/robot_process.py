@@ -1,4 +1,5 @@
-"""How a hand-written robot's process runs (`bench.concierge.robot`, `bench.retail.robot`).
+"""How a hand-written robot's process runs, and what its nodes share (`bench.concierge.robot`,
+`bench.retail.robot`).
 
 Its executor spins until Ctrl-C, or ``run_for`` s when > 0 (an operator's session); an uncaught
 exception in a callback ends the process with code 1, its traceback printed, as a launched node
@@ -9,6 +10,7 @@ own leak) and a CPU burner thread or, without a leak hook of its own, a generic 
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
 import threading
@@ -19,7 +21,12 @@ from pathlib import Path
 from typing import NoReturn
 
 import rclpy
+from builtin_interfaces.msg import Time as TimeMsg
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.executors import Executor, ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from std_msgs.msg import Header
 
 
 def burn() -> None:
@@ -75,3 +82,66 @@ def spin(ex: Executor, fault_dir: Path, process: str, run_for: float,
         pass
     rclpy.try_shutdown()
     os._exit(0)
+
+
+# What both robots' nodes use: stamps, headers, diagnostic_updater-like statuses, futures.
+
+RELIABLE = QoSProfile(depth=10)
+
+
+def stamp(t: float | None = None) -> TimeMsg:
+    """``t`` (default now, wall time) as a ROS time."""
+    t = time.time() if t is None else t
+    sec = int(t)
+    return TimeMsg(sec=sec, nanosec=int((t - sec) * 1e9))
+
+
+def to_s(ts: TimeMsg) -> float:
+    """A ROS time in seconds."""
+    return ts.sec + ts.nanosec * 1e-9
+
+
+def header(frame: str, t: float | None = None) -> Header:
+    """A header of ``frame`` stamped ``t`` (default now)."""
+    return Header(stamp=stamp(t), frame_id=frame)
+
+
+def status(level: bytes, name: str, message: str, hardware_id: str = "", **values) -> DiagnosticStatus:
+    """One diagnostic status, its values as strings."""
+    return DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id,
+                            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+
+
+class Diagnostics:
+    """A node's diagnostic_updater: ``fill()`` -> statuses published on /diagnostics every ``period`` s."""
+
+    def __init__(self, node: Node, fill, period: float = 1.0, group=None) -> None:
+        self.pub = node.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE)
+        self.fill = fill
+        node.create_timer(period, self.publish, callback_group=group)
+
+    def publish(self) -> None:
+        self.pub.publish(DiagnosticArray(header=header(""), status=list(self.fill())))
+
+
+def wait_future(fut, timeout: float):
+    """Wait for an rclpy future spun by another thread; its result or None on timeout."""
+    ev = threading.Event()
+    fut.add_done_callback(lambda _f: ev.set())
+    if not ev.wait(timeout):
+        return None
+    return fut.result()
+
+
+def on_shutdown_quiet(fn):
+    """A thread's body that ends quietly when rclpy shuts down under it (Ctrl-C)."""
+
+    @functools.wraps(fn)
+    def run(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except Exception:
+            if rclpy.ok():
+                raise
+
+    return run

@@ -29,8 +29,7 @@ from collections import deque
 from pathlib import Path
 
 import rclpy
-from builtin_interfaces.msg import Time as TimeMsg
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import (
     Pose,
     PoseArray,
@@ -54,11 +53,12 @@ from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from sensor_msgs.msg import BatteryState, Image, PointCloud2, PointField
-from std_msgs.msg import Bool, Float32, Header, String
+from std_msgs.msg import Bool, Float32, String
 from std_srvs.srv import SetBool
 from test_msgs.action import Fibonacci
 
-from bench.robot_process import spin
+from bench.robot_process import Diagnostics, header, spin, status, to_s, wait_future
+from bench.robot_process import on_shutdown_quiet as quiet
 
 NS = "rs"
 FAULT_DIR = Path("/tmp")
@@ -83,60 +83,6 @@ def fault(node: str) -> str:
         return (FAULT_DIR / node.strip("/").replace("/", ".")).read_text().strip()
     except OSError:
         return ""
-
-
-def stamp(t: float | None = None) -> TimeMsg:
-    t = time.time() if t is None else t
-    sec = int(t)
-    return TimeMsg(sec=sec, nanosec=int((t - sec) * 1e9))
-
-
-def to_s(ts: TimeMsg) -> float:
-    return ts.sec + ts.nanosec * 1e-9
-
-
-def header(frame: str, t: float | None = None) -> Header:
-    return Header(stamp=stamp(t), frame_id=frame)
-
-
-def status(level: bytes, name: str, message: str, hardware_id: str = "", **values) -> DiagnosticStatus:
-    return DiagnosticStatus(level=level, name=name, message=message, hardware_id=hardware_id,
-                            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
-
-
-class Diagnostics:
-    """A node's diagnostic_updater: ``fill()`` -> statuses published on /diagnostics every ``period`` s."""
-
-    def __init__(self, node: Node, fill, period: float = 1.0, group=None) -> None:
-        self.pub = node.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE)
-        self.fill = fill
-        node.create_timer(period, self.publish, callback_group=group)
-
-    def publish(self) -> None:
-        self.pub.publish(DiagnosticArray(header=header(""), status=list(self.fill())))
-
-
-def wait_future(fut, timeout: float):
-    """Wait for an rclpy future spun by another thread; its result or None on timeout."""
-    ev = threading.Event()
-    fut.add_done_callback(lambda _f: ev.set())
-    if not ev.wait(timeout):
-        return None
-    return fut.result()
-
-
-def quiet(fn):
-    """A thread's body that ends quietly when rclpy shuts down under it (Ctrl-C)."""
-
-    @functools.wraps(fn)
-    def run(*args, **kwargs):
-        try:
-            return fn(*args, **kwargs)
-        except Exception:
-            if rclpy.ok():
-                raise
-
-    return run
 
 
 def yaw_quat(yaw: float) -> Quaternion:
