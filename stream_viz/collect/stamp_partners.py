@@ -13,8 +13,12 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Mapping, Sequence, Set
 
-COMPARED = 10  # the newest stamps of each topic compared: one sample's worth at 5 Hz, O(1) a topic
+COMPARED = 10  # the newest stamps of each topic compared: 2 s at 5 Hz, O(1) a topic
 MIN_STAMPS = 3  # a topic with fewer stamps inside its partner's span is not compared with it
+# A stamp this many topics or more carry is a clock's tick (simulated time stamps every sensor on
+# its step), not a trigger: not counted, which keeps a sample's cost linear in the topics.
+MAX_SHARING = 16
+PAIR_SHARE = 0.5  # a pair shares this much of one's stamps at least to be compared from then on
 
 
 def stamp_partners(stamps: Mapping[str, Sequence[int]], pairs: Set[frozenset[str]] = frozenset(),
@@ -30,21 +34,26 @@ def stamp_partners(stamps: Mapping[str, Sequence[int]], pairs: Set[frozenset[str
     stamps : mapping
         Topic -> its newest header stamps (ns), any order.
     pairs : set of frozenset
-        Pairs of topics known to have shared stamps: compared even when they now share none.
+        Pairs of topics known to have shared stamps (`PAIR_SHARE`): compared even when they now
+        share none.
     min_stamps : int
         The least stamps of a topic inside its partner's span for a share.
 
     Returns
     -------
     dict
-        Topic -> {partner: share in [0, 1]}, for partners that share a stamp now or are a known
-        pair, where comparable; a topic without any is left out.
+        Topic -> {partner: share in [0, 1]}, for partners that share a stamp now (one fewer than
+        `MAX_SHARING` topics carry) or are a known pair, where comparable; a topic without any is
+        left out.
     """
     sets = {t: set(s) for t, s in stamps.items() if s}
     by_stamp: dict[int, list[str]] = {}
     for t, s in sets.items():
         for x in s:
             by_stamp.setdefault(x, []).append(t)
+    for x, ts in by_stamp.items():
+        if len(ts) >= MAX_SHARING:
+            by_stamp[x] = []
     known: dict[str, set[str]] = {}
     for pair in pairs:
         if len(pair) == 2:
@@ -55,7 +64,7 @@ def stamp_partners(stamps: Mapping[str, Sequence[int]], pairs: Set[frozenset[str
     for t, s in sets.items():
         shared: Counter[str] = Counter()
         for x in s:
-            shared.update(u for u in by_stamp[x] if u != t)
+            shared.update(u for u in by_stamp[x] if u != t)  # [] for a tick of many
         found: dict[str, float] = {}
         for u in sorted(set(shared) | (known.get(t, set()) & sets.keys())):
             lo, hi = min(sets[u]), max(sets[u])

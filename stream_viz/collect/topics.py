@@ -32,7 +32,7 @@ from stream_viz.collect.rcltake import RclTake
 from stream_viz.collect.readings import TopicStats
 from stream_viz.collect.services import EVENT_SUFFIX
 from stream_viz.collect.simclock import CLOCK_TYPE, ROS_CLOCK, SimClock
-from stream_viz.collect.stamp_partners import COMPARED, stamp_partners
+from stream_viz.collect.stamp_partners import COMPARED, PAIR_SHARE, stamp_partners
 from stream_viz.collect.window import TopicWindow
 from stream_viz.records import Event
 
@@ -307,7 +307,7 @@ class TopicMonitor:
                     stamps[t] = w.window.newest_stamps(COMPARED)
         for t, partners in stamp_partners(stamps, self._stamp_pairs).items():
             out[t].stamp_partners = partners
-            self._stamp_pairs.update(frozenset((t, u)) for u, share in partners.items() if share > 0)
+            self._stamp_pairs.update(frozenset((t, u)) for u, sh in partners.items() if sh >= PAIR_SHARE)
         if not self.metrics:
             for t in publishers:
                 out.setdefault(t, TopicStats(False, "topic metrics are off"))

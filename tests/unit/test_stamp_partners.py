@@ -26,3 +26,10 @@ def test_a_share_counts_only_stamps_inside_the_partner_s_span():
     # two of its stamps inside the panorama's span are too few to compare
     assert stamp_partners({"/pano": pano, "/det": det[:-1]}, {frozenset(("/pano", "/det"))}) \
         == {"/pano": {"/det": 0.333}}  # 2 of its 6 stamps in 0-11.0 s
+
+
+def test_a_stamp_many_topics_carry_is_a_clock_s_tick_not_a_trigger():
+    tick = [k * 100 * MS for k in range(10)]  # simulated time: every 10 Hz sensor on its steps
+    many = {f"/s{i}": tick for i in range(16)}
+    assert stamp_partners(many) == {}
+    assert stamp_partners(dict(list(many.items())[:15]))["/s0"] == {f"/s{i}": 1.0 for i in range(1, 15)}
