@@ -269,7 +269,7 @@ def _desync(ctx: PluginContext, topic: str, age: float, fresh: bool) -> Alert | 
     shift = age - ages.get(topic, math.nan)
     moved = f"; its stamps moved {shift:+.0f} ms" if shift == shift else ""
     # It moved after the last sample its stamps all matched, by the first that saw them part.
-    since = min(matched.get(topic, began[topic]), began[topic])
+    since = matched.get(topic, began[topic])
     return ctx.alert(topic, "warn", f"header stamps no longer match those of {names}, which they "
                      f"matched{moved}: a trigger or clock of its publisher changed (what synchronizes "
                      "them receives no set)", symptom="desync", partners=compared,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections import deque
 from collections.abc import Iterator
 from typing import Any, ClassVar
 
@@ -33,6 +34,7 @@ from stream_viz.records import Alert
 Baseline = tuple[float, float, int] | None
 TRANSITIONS_KEPT = 8  # per node: enough for the changes around one quiet
 COMPLAINTS_KEPT_S = 30.0  # a node's complaints kept this long: a transition is seen samples after
+COMPLAINTS_KEPT = 1024  # ... and at most this many
 _NUMBER = re.compile(r"[-+]?\d[\d.,:]*")  # a reading in a status's message, not its mode
 STATE_GAP_S = 10.0  # a latched topic's message this long after its last is a state published on change
 EXECUTOR_CPU = "executor_cpu_percent"
@@ -473,9 +475,7 @@ def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[
     # A lifecycle node put in another state says so after it ("Standby", a WARN of a driver not
     # streaming): the state, not trouble. One that complained before its transition changed state
     # because of it (a localiser deactivating itself on an ERROR): that transition excuses nothing.
-    due = last + max(ctx.settings["transition_grace_s"], (period or 0.0) + FEED_SLACK_S)
-    clean = ctx.state.get("clean_lifecycle", {})
-    return any(last - ctx.settings["transition_grace_s"] <= x <= due for p in pubs for x in clean.get(p, ()))
+    return _own_change(ctx, pubs, last, last, ctx.state.get("clean_lifecycle", {}), period)
 
 
 def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm],
@@ -761,6 +761,7 @@ def _self_reports(ctx: PluginContext) -> None:
     a status of its own worse than OK (published by the node it is mapped to, not an aggregator's
     copy), or a WARN or worse on /rosout."""
     said: dict[str, list[float]] = ctx.state.setdefault("self_reports", {})  # node -> [ok at, worse at]
+    complaints = ctx.state.setdefault("complaints", {})  # node -> (when, logged: a line, not a status)
     for e in ctx.events:
         if e.kind == "diag" and e.member.startswith("node:") and e.member == e.data.get("publisher"):
             k = 0 if e.data.get("level") == 0 else 1
@@ -771,8 +772,10 @@ def _self_reports(ctx: PluginContext) -> None:
         last = said.setdefault(e.member, [-math.inf, -math.inf])
         last[k] = max(last[k], e.t)
         if k:  # when, as well as the last time: a lifecycle transition asks what came before it
-            recent = ctx.state.setdefault("complaints", {}).setdefault(e.member, [])
-            recent[:] = [x for x in recent if e.t - x[0] <= COMPLAINTS_KEPT_S] + [(e.t, e.kind == "log")]
+            recent = complaints.setdefault(e.member, deque(maxlen=COMPLAINTS_KEPT))
+            recent.append((e.t, e.kind == "log"))
+            while e.t - recent[0][0] > COMPLAINTS_KEPT_S:  # O(1) a line, a node WARNing at 100 Hz too
+                recent.popleft()
 
 
 def _complained(ctx: PluginContext, topic: str, r: Rhythm) -> bool:
@@ -1126,15 +1129,23 @@ def _changed_state(ctx: PluginContext, nodes: list[str], since: float, until: fl
     so a feeding node's change comes before the stop, by ``until`` plus a period and
     ``FEED_SLACK_S`` at the latest: one later is the stop's consequence (a mission aborted because
     its setpoints stopped)."""
+    if _own_change(ctx, nodes, since, until, transitions, period):
+        return True
     grace = ctx.settings["transition_grace_s"]
     feeding = {u for p in nodes for i in ctx.subscribed_topics(p) if i != topic for u in ctx.publishers(i)}
-    own = (x for p in nodes for x in transitions.get(p, ()))
-    due = until + (period + FEED_SLACK_S if period is not None else 0.0)
-    if any(since - grace <= x <= max(until + grace, due) for x in own):
-        return True
     after = grace if period is None else min(grace, period + FEED_SLACK_S)
     upstream = (x for p in feeding.difference(nodes) for x in transitions.get(p, ()))
     return any(since - grace <= x <= until + after for x in upstream)
+
+
+def _own_change(ctx: PluginContext, nodes: list[str], since: float, until: float,
+                transitions: dict[str, list[float]], period: float | None) -> bool:
+    """True when one of ``nodes`` changed state (a time in ``transitions``) from
+    ``transition_grace_s`` before ``since`` to as long after ``until``, or while its next message
+    was not due yet (``until`` plus ``period`` and ``FEED_SLACK_S``): `_changed_state`'s own part."""
+    grace = ctx.settings["transition_grace_s"]
+    due = until + (period + FEED_SLACK_S if period is not None else 0.0)
+    return any(since - grace <= x <= max(until + grace, due) for p in nodes for x in transitions.get(p, ()))
 
 
 def _lost_on_the_way(ctx: PluginContext, topic: str, rate: float, med: float) -> bool:

@@ -60,6 +60,7 @@ def stamp_partners(stamps: Mapping[str, Sequence[int]], pairs: Set[frozenset[str
             a, b = tuple(pair)
             known.setdefault(a, set()).add(b)
             known.setdefault(b, set()).add(a)
+    spans = {t: (min(s), max(s)) for t, s in sets.items()}
     out: dict[str, dict[str, float]] = {}
     for t, s in sets.items():
         shared: Counter[str] = Counter()
@@ -67,7 +68,7 @@ def stamp_partners(stamps: Mapping[str, Sequence[int]], pairs: Set[frozenset[str
             shared.update(u for u in by_stamp[x] if u != t)  # [] for a tick of many
         found: dict[str, float] = {}
         for u in sorted(set(shared) | (known.get(t, set()) & sets.keys())):
-            lo, hi = min(sets[u]), max(sets[u])
+            lo, hi = spans[u]
             inside = sum(1 for x in s if lo <= x <= hi)
             if inside >= min_stamps:
                 found[u] = round(min(shared[u], inside) / inside, 3)
