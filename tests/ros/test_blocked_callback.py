@@ -15,8 +15,7 @@ import time
 
 import pytest
 
-from stream_viz.testing import wait_for
-from tests.ros.test_dynamics import HEAD, _monitor, _no_alerts, _observe
+from tests.ros.test_dynamics import HEAD, _monitor, _observe, _settle
 
 pytestmark = pytest.mark.ros
 
@@ -53,9 +52,7 @@ def test_the_callback_that_blocked_a_container_ranks_its_node_first(children, tm
     children.python(CONTAINER, str(trigger), name="sensors")
     mon = _monitor(children, tmp_path)
     try:
-        wait_for(lambda: (mon.step(), {CAMERA, LIDAR, IMU} <= set(mon.seen))[1], timeout=20, period=1.0)
-        _observe(mon, 15.0)
-        _no_alerts(mon, "a sensor container")
+        _settle(mon, {CAMERA, LIDAR, IMU}, "a sensor container")
 
         t0 = time.time()
         trigger.touch()

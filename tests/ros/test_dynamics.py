@@ -155,6 +155,25 @@ def _observe(mon: Monitor, seconds: float) -> None:
         time.sleep(max(0.0, 1.0 - (time.monotonic() - t0)))
 
 
+def _settle(mon: Monitor, members: set[str], what: str, seconds: float = 15.0) -> None:
+    """Step until ``members`` are seen (20 s at most), observe ``seconds`` (baselines learnt) and
+    assert that ``what``, healthy, raised no alert."""
+    wait_for(lambda: (mon.step(), members <= set(mon.seen))[1], timeout=20, period=1.0)
+    _observe(mon, seconds)
+    _no_alerts(mon, what)
+
+
+def _observe_until(mon: Monitor, since: float, found, timeout: float) -> list:
+    """Observe a second at a time until ``found`` holds of the alerts raised since ``since`` (wall
+    time) or ``timeout`` s passed; return those alerts."""
+    deadline = time.monotonic() + timeout
+    alerts = mon.store.alerts(since=since)
+    while time.monotonic() < deadline and not found(alerts):
+        _observe(mon, 1.0)
+        alerts = mon.store.alerts(since=since)
+    return alerts
+
+
 def _no_alerts(mon: Monitor, what: str) -> None:
     alerts = mon.store.alerts()
     assert alerts == [], f"{what} raised alerts:\n" + "\n".join(

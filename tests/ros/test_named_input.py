@@ -15,8 +15,7 @@ import time
 
 import pytest
 
-from stream_viz.testing import wait_for
-from tests.ros.test_dynamics import HEAD, _monitor, _no_alerts, _observe
+from tests.ros.test_dynamics import HEAD, _monitor, _observe, _observe_until, _settle
 
 pytestmark = pytest.mark.ros
 
@@ -63,16 +62,11 @@ def test_an_error_naming_the_node_it_reads_from_ranks_that_node_first(children, 
     children.python(CONTROLLER, name="controller")
     mon = _monitor(children, tmp_path)
     try:
-        wait_for(lambda: (mon.step(), {"node:/localizer", "node:/controller"} <= set(mon.seen))[1],
-                 timeout=20, period=1.0)
-        _observe(mon, 15.0)
-        _no_alerts(mon, "a localiser and its controller")
+        _settle(mon, {"node:/localizer", "node:/controller"}, "a localiser and its controller")
 
         t0 = time.time()
         trigger.touch()
-        deadline = time.monotonic() + 20.0
-        while time.monotonic() < deadline and not mon.store.alerts(since=t0):
-            _observe(mon, 1.0)
+        _observe_until(mon, t0, bool, 20.0)
         _observe(mon, 3.0)
         after = mon.store.alerts(since=t0)
         assert after, "the controller's ERRORs raised nothing"

@@ -15,7 +15,7 @@ import time
 import pytest
 
 from stream_viz.testing import wait_for
-from tests.ros.test_dynamics import HEAD, _monitor, _no_alerts, _observe, _plugin
+from tests.ros.test_dynamics import HEAD, _monitor, _no_alerts, _observe, _observe_until, _plugin
 
 pytestmark = pytest.mark.ros
 
@@ -70,10 +70,7 @@ def test_a_topic_published_on_request_is_quiet_while_nobody_asks_and_its_hang_sh
         t_hang = time.time()
         os.killpg(detector.pid, signal.SIGSTOP)
         try:  # the next call comes within 25 s, and times out 2 s later
-            deadline = time.monotonic() + 40.0
-            while time.monotonic() < deadline and not any(
-                    a.member == "node:/executive" for a in mon.store.alerts(since=t_hang)):
-                _observe(mon, 1.0)
+            _observe_until(mon, t_hang, lambda got: any(a.member == "node:/executive" for a in got), 40.0)
             _observe(mon, 2.0)
         finally:
             os.killpg(detector.pid, signal.SIGCONT)

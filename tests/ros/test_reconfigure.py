@@ -21,7 +21,7 @@ from stream_viz.monitor import Monitor
 from stream_viz.progress import Progress
 from stream_viz.testing import wait_for
 from stream_viz.viz import paths
-from tests.ros.test_dynamics import CONFIG, HEAD, _monitor, _no_alerts, _observe, _plugin
+from tests.ros.test_dynamics import CONFIG, HEAD, _monitor, _no_alerts, _observe, _plugin, _settle
 from tests.viz.rrd import rows
 
 pytestmark = pytest.mark.ros
@@ -218,9 +218,7 @@ def test_a_cpu_rise_beside_the_executor_is_no_parameter_change_s(children, tmp_p
     camera = children.python(RUNAWAY, name="camera")
     mon = _monitor(children, tmp_path)
     try:
-        wait_for(lambda: (mon.step(), "node:/camera" in mon.seen)[1], timeout=20, period=1.0)
-        _observe(mon, 15.0)  # the CPU baseline learnt
-        _no_alerts(mon, "a camera at work")
+        _settle(mon, {"node:/camera"}, "a camera at work")  # the CPU baseline learnt
         sample, seen = mon.collector.sample, []
         mon.collector.sample = lambda: (s := sample(), seen.extend(s.events))[0]  # the events it read
         t_fault = time.time()

@@ -14,8 +14,7 @@ import time
 
 import pytest
 
-from stream_viz.testing import wait_for
-from tests.ros.test_dynamics import HEAD, _monitor, _no_alerts, _observe
+from tests.ros.test_dynamics import HEAD, _monitor, _observe, _observe_until, _settle
 
 pytestmark = pytest.mark.ros
 
@@ -78,17 +77,11 @@ def test_a_camera_whose_stamps_leave_its_trigger_group_is_ranked_first(children,
     children.python(STITCHER, name="stitcher")
     mon = _monitor(children, tmp_path)
     try:
-        wait_for(lambda: (mon.step(), {"node:/right", "node:/stitcher"} <= set(mon.seen))[1],
-                 timeout=20, period=1.0)
-        _observe(mon, 15.0)
-        _no_alerts(mon, "three triggered cameras and a stitcher")
+        _settle(mon, {"node:/right", "node:/stitcher"}, "three triggered cameras and a stitcher")
 
         t0 = time.time()
         trigger.touch()
-        deadline = time.monotonic() + 20.0
-        while time.monotonic() < deadline and not any(
-                a.data.get("symptom") == "desync" for a in mon.store.alerts(since=t0)):
-            _observe(mon, 1.0)
+        _observe_until(mon, t0, lambda alerts: any(a.data.get("symptom") == "desync" for a in alerts), 20.0)
         _observe(mon, 3.0)
         after = mon.store.alerts(since=t0)
         desync = {a.member for a in after if a.data.get("symptom") == "desync"}
