@@ -23,7 +23,7 @@ from typing import NoReturn
 import rclpy
 from builtin_interfaces.msg import Time as TimeMsg
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rclpy.executors import Executor, ExternalShutdownException
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Header
@@ -122,6 +122,14 @@ class Diagnostics:
 
     def publish(self) -> None:
         self.pub.publish(DiagnosticArray(header=header(""), status=list(self.fill())))
+
+
+def single_threaded(*nodes: Node) -> SingleThreadedExecutor:
+    """One SingleThreadedExecutor running ``nodes``: a process's, or a component container's."""
+    ex = SingleThreadedExecutor()
+    for n in nodes:
+        ex.add_node(n)
+    return ex
 
 
 def wait_future(fut, timeout: float):

@@ -46,7 +46,7 @@ from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue, SetPara
 from rcl_interfaces.srv import SetParameters
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -56,7 +56,17 @@ from std_srvs.srv import Trigger
 from test_msgs.action import Fibonacci
 from test_msgs.srv import BasicTypes
 
-from bench.robot_process import Diagnostics, header, on_shutdown_quiet, spin, stamp, status, to_s, wait_future
+from bench.robot_process import (
+    Diagnostics,
+    header,
+    on_shutdown_quiet,
+    single_threaded,
+    spin,
+    stamp,
+    status,
+    to_s,
+    wait_future,
+)
 
 NS = "cg"
 FAULT_DIR = Path("/tmp")
@@ -461,10 +471,7 @@ def head_container():
     trk.create_subscription(PoseArray, f"/{NS}/face_detector/faces", on_faces, RELIABLE)
     trk.create_timer(0.2, tick)
     trk.create_timer(3.0, save_gallery)
-    ex = SingleThreadedExecutor()
-    for n in (cam, det, trk):
-        ex.add_node(n)
-    return ex
+    return single_threaded(cam, det, trk)
 
 
 # ---------------------------------------- base_sensors
@@ -537,10 +544,7 @@ def base_sensors():
             )
         ],
     )
-    ex = SingleThreadedExecutor()
-    ex.add_node(lidar)
-    ex.add_node(imu)
-    return ex
+    return single_threaded(lidar, imu)
 
 
 # ---------------------------------------- speech
@@ -646,10 +650,7 @@ def speech():
     vad = Vad()
     vad.trigger_configure()
     vad.trigger_activate()
-    ex = SingleThreadedExecutor()
-    ex.add_node(cap)
-    ex.add_node(vad)
-    return ex
+    return single_threaded(cap, vad)
 
 
 # ---------------------------------------- asr
@@ -921,10 +922,7 @@ def hri():
         touching["on"] = on
 
     tab.create_timer(0.25, touch)
-    ex = SingleThreadedExecutor()
-    ex.add_node(dm)
-    ex.add_node(tab)
-    return ex
+    return single_threaded(dm, tab)
 
 
 def leak_history(history: list) -> None:
@@ -1488,10 +1486,7 @@ def safety():
     mux.create_subscription(Twist, f"/{NS}/cmd_vel_nav", on_input("navigation"), COMMAND)
     mux.create_subscription(Twist, f"/{NS}/cmd_vel_teleop", on_input("teleop"), COMMAND)
     mux.create_timer(0.25, idle)
-    ex = SingleThreadedExecutor()
-    ex.add_node(cm)
-    ex.add_node(mux)
-    return ex
+    return single_threaded(cm, mux)
 
 
 # ---------------------------------------- state_publisher
@@ -1544,9 +1539,7 @@ def state_publisher():
 
     node.create_subscription(JointState, f"/{NS}/joint_states", on_js, RELIABLE)
     node.create_timer(0.1, publish)
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    return ex
+    return single_threaded(node)
 
 
 # ---------------------------------------- pms_bridge
@@ -1686,9 +1679,7 @@ def aggregator():
 
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, RELIABLE)
     node.create_timer(1.0, publish)
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    return ex
+    return single_threaded(node)
 
 
 # ---------------------------------------- recorder
@@ -1758,9 +1749,7 @@ def recorder():
 
     node.create_timer(1.0, discover)
     threading.Thread(target=writer, daemon=True, name="writer").start()
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    return ex
+    return single_threaded(node)
 
 
 # ---------------------------------------- console (operator)
@@ -1796,9 +1785,7 @@ def console():
             teleop.publish(cmd)
 
     node.create_timer(0.1, tick)
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    return ex
+    return single_threaded(node)
 
 
 # ---------------------------------------- process main

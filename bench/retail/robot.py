@@ -48,7 +48,7 @@ from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue, SetPara
 from rcl_interfaces.srv import SetParameters
 from rclpy.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
-from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -57,7 +57,7 @@ from std_msgs.msg import Bool, Float32, String
 from std_srvs.srv import SetBool
 from test_msgs.action import Fibonacci
 
-from bench.robot_process import Diagnostics, header, spin, status, to_s, wait_future
+from bench.robot_process import Diagnostics, header, single_threaded, spin, status, to_s, wait_future
 from bench.robot_process import on_shutdown_quiet as quiet
 
 NS = "rs"
@@ -255,10 +255,7 @@ def camera_container():
     for c in CAMS:
         st_node.create_subscription(Image, f"/{NS}/{c}/image_raw", on_image(c), SENSOR)
     st_node.create_timer(2.0, archive)
-    ex = SingleThreadedExecutor()
-    for n in (*nodes, st_node):
-        ex.add_node(n)
-    return ex
+    return single_threaded(*nodes, st_node)
 
 
 # ---------------------------------------- perception (multi-threaded container)
@@ -429,9 +426,7 @@ def lidar_driver():
     Diagnostics(node, lambda: [status(OK if node.active else WARN, "lidar: Ouster OS0-32 status",
                                       "Streaming" if node.active else "Standby", "os-992109000123",
                                       rpm=node.get_parameter("rpm").value, clouds=node.n)])
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    return ex
+    return single_threaded(node)
 
 
 # ---------------------------------------- base (driver + robot_state_publisher)
@@ -492,10 +487,7 @@ def base():
         static.publish(tf("base_link", f"{c}_optical_frame", 0.15, 0.2, 0.4 + 0.5 * i, -math.pi / 2))
     static.publish(tf("base_link", "os_lidar", 0.2, 0.0, 0.35))
     static.publish(tf("base_link", "rfid_antenna", 0.1, 0.25, 0.8, -math.pi / 2))
-    ex = SingleThreadedExecutor()
-    ex.add_node(drv)
-    ex.add_node(rsp)
-    return ex
+    return single_threaded(drv, rsp)
 
 
 # ---------------------------------------- navigation (multi-threaded container)
@@ -721,10 +713,7 @@ def safety():
     mux.create_subscription(Twist, f"/{NS}/cmd_vel_dock", on_input("docking"), COMMAND)
     mux.create_subscription(Twist, f"/{NS}/cmd_vel_teleop", on_input("teleop"), COMMAND)
     mux.create_timer(0.25, idle)
-    ex = SingleThreadedExecutor()
-    ex.add_node(sl)
-    ex.add_node(mux)
-    return ex
+    return single_threaded(sl, mux)
 
 
 # ---------------------------------------- rfid
@@ -769,9 +758,7 @@ def rfid():
     node.create_timer(0.05, poll)
     Diagnostics(node, lambda: [status(OK, "rfid_reader: Impinj R700 link", "Connected",
                                       "impinj-r700 sn 37021120549", tags_read=st["n"])])
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    return ex
+    return single_threaded(node)
 
 
 # ---------------------------------------- docking (action server)
@@ -947,9 +934,7 @@ def mission():
                 k += 1
 
     threading.Thread(target=worker, daemon=True, name="mission").start()
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    return ex
+    return single_threaded(node)
 
 
 # ---------------------------------------- cloud uploader
@@ -1010,9 +995,7 @@ def cloud():
     threading.Thread(target=uploader, daemon=True, name="uploader").start()
     Diagnostics(node, lambda: [status(OK, "cloud_uploader: Upload link", st["link"], "lte0 quectel-em06",
                                       sent=st["sent"], pending=len(buf))])
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    return ex
+    return single_threaded(node)
 
 
 # ---------------------------------------- diagnostics aggregator
@@ -1048,9 +1031,7 @@ def aggregator():
 
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, RELIABLE)
     node.create_timer(1.0, publish)
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    return ex
+    return single_threaded(node)
 
 
 # ---------------------------------------- handheld (operator)
@@ -1084,9 +1065,7 @@ def handheld():
             teleop.publish(cmd)
 
     node.create_timer(0.1, tick)
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    return ex
+    return single_threaded(node)
 
 
 # ---------------------------------------- ros2 param set (a technician's CLI call)
