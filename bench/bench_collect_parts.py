@@ -4,8 +4,9 @@
    (Python children with threads and open files, like rclpy nodes, one thread working at 10 Hz
    as an executor does), in alternation. The metrics are the same (``tests/robust/test_system.py``)
    but for the /proc path's own: the running threads, counted by a probe of every thread every
-   30th sample, and the one running thread's CPU read every sample. Also its cost with a probe at
-   every sample, and the mean (the median misses the 30th samples).
+   30th sample, and the one running thread's CPU and the main thread's read every sample. Also its
+   cost with a probe at every sample, without the main thread's read (``nomain``), and the mean
+   (the median misses the 30th samples).
 2. Topic metrics of one sample: `TopicWindow` running sums (adds of one second of messages plus
    expire and metrics) vs `window_metrics`, the numpy computation over the window's records
    that every sample ran before (now the definition the sums are tested against), on
@@ -28,6 +29,7 @@ import subprocess
 import sys
 import time
 
+from stream_viz.collect import processes as sampler_module
 from stream_viz.collect.processes import ProcessSampler, read_file
 from stream_viz.collect.window import TopicWindow, window_metrics
 
@@ -51,14 +53,18 @@ def processes(n_children: int, rounds: int) -> None:
         # Ancestors read every time, so both read the same processes every round.
         samplers = {"procfs": ProcessSampler(ancestors_every=1, procfs=True),
                     "probe1": ProcessSampler(ancestors_every=1, procfs=True, probe_every=1),
+                    "nomain": ProcessSampler(ancestors_every=1, procfs=True),
                     "psutil": ProcessSampler(ancestors_every=1, procfs=False)}
+        measure_main = sampler_module._measure_main
         cost: dict[str, list[float]] = {k: [] for k in samplers}
         n = 0
         for _ in range(rounds):
             for name, s in samplers.items():
+                sampler_module._measure_main = (lambda *a: None) if name == "nomain" else measure_main
                 t0 = time.thread_time()
                 n = len(s.sample(pids).processes)
                 cost[name].append(time.thread_time() - t0)
+        sampler_module._measure_main = measure_main
         us = {k: 1e6 * statistics.median(v) / n for k, v in cost.items()}
         mean = {k: 1e6 * statistics.fmean(v) / n for k, v in cost.items()}
         print(f"1. {n_children} children + their ancestors = {n} processes, {rounds} rounds"
@@ -67,7 +73,9 @@ def processes(n_children: int, rounds: int) -> None:
             print(f"   {k:7s} {us[k]:6.1f} µs per process per sample (median), {mean[k]:6.1f} (mean)")
         print(f"   procfs / psutil = {us['procfs'] / us['psutil']:.2f} (median), "
               f"{mean['procfs'] / mean['psutil']:.2f} (mean); "
-              f"probe1 / psutil = {us['probe1'] / us['psutil']:.2f}")
+              f"probe1 / psutil = {us['probe1'] / us['psutil']:.2f}; "
+              f"procfs / nomain = {us['procfs'] / us['nomain']:.2f} (median), "
+              f"{mean['procfs'] / mean['nomain']:.2f} (mean)")
         proc_files(pids, rounds)
     finally:
         for k in kids:

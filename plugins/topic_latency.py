@@ -10,6 +10,7 @@ import numpy as np
 
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, held, held_since
+from stream_viz.detect.process import publishers_dispatching
 from stream_viz.model.qos import qos_policy
 from stream_viz.records import Alert
 
@@ -36,7 +37,9 @@ class TopicLatency(Plugin):
     started or stopped within the last ``switch_samples`` (`_inputs_switched`: a mux handing over
     to a joystick, a relay of an on-demand topic forwards what comes, when it comes), nor while
     the topic's endpoints changed in number within them (`_endpoints_changed`: a recorder
-    joining).
+    joining). Neither latency nor jitter is judged while every publisher's process is busy in the
+    main thread that dispatches its multi-threaded executor (`publishers_dispatching`: callbacks
+    wait for a worker while it spins, rclpy#1452; no node is at fault).
 
     Carried from a healthy run (``--healthy``): a rise like one it showed, that ended by itself,
     is its normal (`_shown_before`) while no more than ``carried_margin`` × as high and as long.
@@ -93,6 +96,8 @@ class TopicLatency(Plugin):
                 if attr == "jitter_ms" and ex is not None and ex[2] and (
                         _inputs_switched(ctx, topic, s["switch_samples"])
                         or _endpoints_changed(ctx, topic, s["switch_samples"])):
+                    continue
+                if ex is not None and ex[2] and publishers_dispatching(ctx, topic):
                     continue
                 seen.append((topic, attr, ex, fresh))
                 floors[topic, attr] = floor

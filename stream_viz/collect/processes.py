@@ -75,6 +75,11 @@ RAN_SHARE = 1e-3  # a thread that ran less than this share of a core between two
 # executor worked (or as it blocked) is not a second executor thread. An rclpy multi-threaded
 # executor's workers each use many times less CPU than its dispatching main thread (docs/collector.md).
 RAN_OF_BUSIEST = 0.01
+# A main thread that used this many times the CPU of each other thread that ran, with at least two
+# of them running, dispatches a multi-threaded executor: rclpy's spin loop in the main thread hands
+# callbacks to a pool of workers (11-17x at a light load, docs/collector.md).
+DISPATCH_RATIO = 5.0
+RISE_PROBE = 25.0  # a process's CPU up this many points since the last sample: probe it now and next
 FIRST_PROBES = 4
 PROBE_MIN_S = 0.5  # probes closer than this say nothing (the sampler is called between samples too)
 
@@ -139,6 +144,10 @@ class _Tracked:
     running: float = float("nan")  # threads that ran between the last two probes
     probes: int = 0
     worker: tuple[int, float, float] | None = None  # the one that ran: (tid, when, its CPU time s)
+    main: tuple[float, float] | None = None  # its main thread: (when, its CPU time s)
+    dispatching: float = float("nan")  # 1.0: its main thread dispatched at the last probe; 0.0: not
+    rise_probes: int = 0  # probes still due for a CPU rise
+    last_cpu: float = float("nan")
 
 
 @dataclass
@@ -347,14 +356,23 @@ class ProcessSampler:
                 tr = self._track(psutil.Process(pid))
                 tr.start = st.start
             r = self._measure(tr, _procfs_counters(pid, st))
-            # Its first probes every sample: its start-up (the interpreter, imports) ends soon.
+            # Its first probes every sample: its start-up (the interpreter, imports) ends soon. A CPU
+            # rise is probed as it starts and a sample on, a span of the rise only: which thread rose.
+            cpu = r.metrics.get("cpu_percent", math.nan)
+            if cpu - tr.last_cpu >= RISE_PROBE:
+                tr.rise_probes = 2
+            tr.last_cpu = cpu
             due = tr.probes < FIRST_PROBES or self._calls % self.probe_every == 0
-            if due and time.monotonic() - tr.probe_t >= PROBE_MIN_S:
-                _probe_threads(pid, tr)
+            if (due or tr.rise_probes > 0) and time.monotonic() - tr.probe_t >= PROBE_MIN_S:
+                _probe_threads(pid, tr, executor=due)
+                tr.rise_probes = max(0, tr.rise_probes - 1)
             if tr.running == tr.running:
                 r.metrics["running_threads"] = tr.running
+            if tr.dispatching == tr.dispatching:
+                r.metrics["dispatching"] = tr.dispatching
             if tr.worker is not None:
                 _measure_worker(pid, tr, r.metrics)
+            _measure_main(pid, tr, r.metrics)
         except (FileNotFoundError, ProcessLookupError, psutil.NoSuchProcess):
             if tr is None:
                 out.errors[pid] = "process is not running"
@@ -428,9 +446,11 @@ def _procfs_counters(pid: int, st: ProcStat) -> Counters:
     return Counters(st.ppid or None, st.cpu_s, st.rss_bytes, st.threads, ctx, fds, io)
 
 
-def _probe_threads(pid: int, tr: _Tracked) -> None:
+def _probe_threads(pid: int, tr: _Tracked, executor: bool = True) -> None:
     """Count the threads of ``pid`` (the middleware's aside) that ran since the last probe; keep the
-    one when one did, and what was known when none did."""
+    one when one did, and what was known when none did; whether its main thread dispatches. A
+    probe of a CPU rise (not ``executor``) says only that: a runaway thread running beside a
+    single-threaded executor does not make it another (its CPU tells the rise beside it)."""
     now: dict[int, int] = {}
     for name in os.listdir(f"/proc/{pid}/task"):
         try:
@@ -444,7 +464,9 @@ def _probe_threads(pid: int, tr: _Tracked) -> None:
     ran = None if tr.thread_ns is None else threads_that_ran(tr.thread_ns, now, t - tr.probe_t)
     # Nothing ran: an idle or blocked executor is still the one it was (kept), and its CPU (none)
     # is what tells a blocked callback.
-    if ran is not None and (ran or tr.running != tr.running):
+    if ran is not None and ran:
+        tr.dispatching = float(dispatches(tr.thread_ns or {}, now, ran, pid))
+    if executor and ran is not None and (ran or tr.running != tr.running):
         tr.running = float(len(ran))
         if len(ran) != 1:
             tr.worker = None
@@ -474,6 +496,26 @@ def threads_that_ran(before: dict[int, int], now: dict[int, int], span_s: float)
     return [tid for tid, ns in used.items() if ns >= least]
 
 
+def dispatches(before: dict[int, int], now: dict[int, int], ran: list[int], main: int) -> bool:
+    """True when ``main`` dispatches a multi-threaded executor: it and at least two other threads
+    ran between two probes, and it used at least ``DISPATCH_RATIO`` × the CPU of each of them.
+
+    Parameters
+    ----------
+    before, now : dict
+        Thread id -> its CPU time (ns) at each probe, as `threads_that_ran` reads them.
+    ran : list of int
+        The threads that ran (`threads_that_ran`).
+    main : int
+        The main thread's id (the process id).
+    """
+    others = [tid for tid in ran if tid != main]
+    if main not in ran or len(others) < 2:
+        return False
+    used = {tid: now[tid] - before.get(tid, 0) for tid in ran}
+    return used[main] >= DISPATCH_RATIO * max(used[tid] for tid in others)
+
+
 def _thread_ns(pid: int, tid: int) -> int:
     """CPU time (ns) of thread ``tid`` of ``pid``: the first field of its ``schedstat``."""
     return int(read_file(f"/proc/{pid}/task/{tid}/schedstat").split()[0])
@@ -490,6 +532,17 @@ def _measure_worker(pid: int, tr: _Tracked, m: dict[str, float]) -> None:
     if t1 > t0 and s0 <= s1:
         m["executor_cpu_percent"] = 100.0 * (s1 - s0) / (t1 - t0)
     tr.worker = (tid, t1, s1)
+
+
+def _measure_main(pid: int, tr: _Tracked, m: dict[str, float]) -> None:
+    """``main_cpu_percent``: the CPU of the process's main thread since the last sample."""
+    try:
+        s1, t1 = _thread_ns(pid, pid) / 1e9, time.monotonic()
+    except (OSError, ValueError, IndexError):
+        return  # no schedstat (a kernel without it): unknown
+    if tr.main is not None and t1 > tr.main[0] and tr.main[1] <= s1:
+        m["main_cpu_percent"] = 100.0 * (s1 - tr.main[1]) / (t1 - tr.main[0])
+    tr.main = (t1, s1)
 
 
 def _psutil_counters(p: psutil.Process) -> Counters:

@@ -80,6 +80,9 @@ SETTINGS: dict[str, Any] = {
 RESOURCES = (("cpu_percent", "cpu_min_rise", "cpu", "%"), ("rss_mb", "rss_min_rise_mb", "memory", " MB"))
 _CPU = SCHEMAS["process"].index("cpu_percent")
 EXECUTOR = "executor_cpu_percent"
+MAIN = "main_cpu_percent"
+_MAIN = SCHEMAS["process"].index(MAIN)
+_DISPATCHING = SCHEMAS["process"].index("dispatching")
 _RSS = SCHEMAS["process"].index("rss_mb")
 
 
@@ -133,6 +136,8 @@ def _symptoms(ctx: PluginContext, proc: str, alerting: set, changes: bool) -> li
             nodes = ()
         if reconfigured(ctx, proc, attr, nodes, seen, within):
             seen = None  # a parameter change brought it: learnt anew from the change
+        if what == "cpu" and seen is not None and seen[2] and _dispatching(ctx, proc, seen):
+            seen = None  # its executor's dispatcher spinning while callbacks wait: no work of a node's
         if what == "cpu":
             seen = _beyond_bursts(ctx, proc, seen)
         risen = confirm(ctx, proc, attr, seen, alerting)
@@ -158,6 +163,31 @@ def _beside_executor(ctx: PluginContext, proc: str, seen: tuple[float, float, bo
     if now != now or len(before) == 0:  # not read (a multi-threaded executor): not known
         return False
     return now - float(np.median(before)) < 0.5 * (seen[0] - seen[1])
+
+
+def _dispatching(ctx: PluginContext, proc: str, seen: tuple[float, float, bool]) -> bool:
+    """True when the process's CPU rise ``seen`` is its executor's dispatching main thread's
+    (`dispatcher_rise`)."""
+    _, before = ctx.past(proc, MAIN, last=int(ctx.settings["window"]))
+    return dispatcher_rise(seen[0], seen[1], ctx.value(proc, MAIN), before, ctx.value(proc, "dispatching"))
+
+
+def dispatcher_rise(cpu: float, baseline: float, main: float, main_before: np.ndarray,
+                    dispatching: float) -> bool:
+    """True when a process's CPU rise from ``baseline`` to ``cpu`` is carried by the main thread
+    that dispatches its multi-threaded executor (``dispatching`` 1, `collect.processes`): that
+    thread's CPU ``main`` rose by at least half as much over the median of ``main_before``.
+
+    rclpy's MultiThreadedExecutor spins its dispatch loop while the callbacks it handed to its
+    workers wait for one (ros2/rclpy#1452): a core for seconds to a minute, now and then, on a
+    healthy robot; so does a flood of small callbacks. No node's callback works then; a node's
+    heavy callback or a runaway thread rises on a worker or a thread of its own. Unknown (NaN: not
+    read) is False.
+    """
+    before = main_before[np.isfinite(main_before)]
+    if dispatching != 1.0 or main != main or len(before) == 0:
+        return False
+    return main - float(np.median(before)) >= 0.5 * (cpu - baseline)
 
 
 def _beyond_bursts(ctx: PluginContext, proc: str,
@@ -221,14 +251,33 @@ def publishers_busy(ctx: PluginContext, topic: str) -> bool:
     return all(_cpu_risen(ctx, proc) for proc in procs)
 
 
-def _cpu_risen(ctx: PluginContext, proc: str) -> bool:
+def publishers_dispatching(ctx: PluginContext, topic: str) -> bool:
+    """True when the process of every publisher of ``topic`` is busy (`publishers_busy`) in the
+    main thread that dispatches its multi-threaded executor (`dispatcher_rise`): callbacks wait
+    for a worker while that thread spins, and the topic's messages come late and unevenly with
+    no node at fault."""
+    pubs = ctx.publishers(topic)
+    procs = {ctx.process_of(p) for p in pubs}
+    if not pubs or None in procs:
+        return False
+    return all(_cpu_risen(ctx, proc, dispatched=True) for proc in procs)
+
+
+def _cpu_risen(ctx: PluginContext, proc: str, dispatched: bool = False) -> bool:
+    """True when ``proc``'s CPU is risen above its window's median (and, ``dispatched``, the rise
+    is its dispatcher's)."""
     now = ctx.value(proc, "cpu_percent")
     _, past = ctx.past(proc, "cpu_percent", last=SETTINGS["window"])
     past = past[np.isfinite(past)]
     if now != now or len(past) < SETTINGS["min_samples"]:
         return False
     med, sigma, _ = robust(past)
-    return exceeds(now, med, sigma, SETTINGS["k"], SETTINGS["cpu_min_rise"])
+    if not exceeds(now, med, sigma, SETTINGS["k"], SETTINGS["cpu_min_rise"]):
+        return False
+    if not dispatched:
+        return True
+    _, before = ctx.past(proc, MAIN, last=SETTINGS["window"])
+    return dispatcher_rise(now, med, ctx.value(proc, MAIN), before, ctx.value(proc, "dispatching"))
 
 
 def _rose_lately(ctx: PluginContext, proc: str, value: float) -> bool:
@@ -407,7 +456,9 @@ def process_anomaly(times: np.ndarray, values: np.ndarray, now: float,
         if what == "memory" and cur[col] - np.fmin.reduce(span, initial=np.inf) < floor / 2:
             continue  # risen long ago and level since: its new normal (`_rose_lately`)
         med, sigma, _ = robust(past[:, col])
-        if np.isfinite(med) and exceeds(cur[col], med, sigma, rule.k, floor):
+        dispatched = what == "cpu" and dispatcher_rise(cur[col], med, cur[_MAIN], past[:, _MAIN],
+                                                       cur[_DISPATCHING])
+        if np.isfinite(med) and exceeds(cur[col], med, sigma, rule.k, floor) and not dispatched:
             out.append(what)
     grew = np.fmax.reduce(span, initial=-np.inf) - np.fmin.reduce(span, initial=np.inf)
     growing = recent.sum() >= rule.growth_samples and grew >= rule.growth_min_mb

@@ -13,7 +13,7 @@ SCHEMAS: dict[str, tuple[str, ...]] = {
     "process": (
         "cpu_percent", "rss_mb", "threads", "ctx_switches_per_s", "open_files",
         "io_read_kBps", "io_write_kBps", "running_threads",
-        "executor_cpu_percent",
+        "executor_cpu_percent", "main_cpu_percent", "dispatching",
     ),
     "topic": (
         "rate_hz", "jitter_ms", "latency_ms", "bandwidth_kBps", "drops_per_s",

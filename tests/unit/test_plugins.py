@@ -19,11 +19,13 @@ RNG = np.random.default_rng(7)
 
 
 def model(rate=10.0, latency=2.0, jitter=1.0, drops=0.0, cpu=5.0, rss=80.0, alive=True, recent=None,
-          age=None, subscribers=1, executor=None):
+          age=None, subscribers=1, executor=None, dispatch=None):
     """camera (pid 100) -> /img -> detector (pid 200); ``recent``/``age``: the fast rate signals;
-    ``executor``: the camera process's executor thread's CPU."""
+    ``executor``: the camera process's executor thread's CPU; ``dispatch``: its main thread's, one
+    that dispatches a multi-threaded executor."""
     G = new_graph()
     ex = {} if executor is None else {"executor_cpu_percent": executor}
+    ex |= {} if dispatch is None else {"main_cpu_percent": dispatch, "dispatching": 1.0}
     add_member(G, "process:100", pid=100, alive=alive,
                theta=make_theta("process", {"cpu_percent": cpu, "rss_mb": rss, "threads": 4, **ex}))
     add_member(G, "process:200", pid=200, alive=True,
@@ -1248,6 +1250,42 @@ def test_process_resources_a_rise_a_parameter_change_brought_is_the_new_normal()
     beside = [(float(t), model(cpu=c, executor=noisy(4.0, 0.2)), [change] if t == 30 else [])
               for t, c in enumerate(cpu[:36])]
     assert drive("process_resources", beside)[:1] == [(34.0, "node:/camera", "warn")]
+
+
+def test_process_resources_a_rise_of_the_executors_dispatching_thread_is_no_symptom():
+    # A multi-threaded executor at 10 %, its dispatching main thread 8 % of it; at 30 s the process
+    # goes to 90 % for 20 s. Carried by that thread (rclpy's dispatch loop spinning while callbacks
+    # wait for a worker): no alert, nor jitter on its topic. Carried by another thread (a worker's
+    # callback, a runaway thread; the dispatcher at its 8 %): the rise it always was.
+    def frames(dispatched, n=50):
+        return [(float(t), model(cpu=noisy(10.0) if t < 30 else noisy(90.0),
+                                 jitter=1.0 if t < 30 else 60.0,
+                                 dispatch=noisy(8.0) if t < 30 or not dispatched else noisy(87.0)), [])
+                for t in range(n)]
+    assert drive("process_resources", frames(True)) == []
+    assert drive("topic_latency", frames(True)) == []
+    hog = drive("process_resources", frames(False))
+    assert hog[:1] == [(34.0, "node:/camera", "warn")] and hog[-1] == (49.0, "node:/camera", "warn")
+    assert drive("topic_latency", frames(False))[:1] == [(34.0, "topic:/img", "warn")]
+    # Nor is it evidence for the RCA.
+    from stream_viz.detect.process import process_anomalies
+    for dispatched, found in ((True, set()), (False, {"process:100", "node:/camera"})):
+        hist = History()
+        for t, G, _ in frames(dispatched, 36):
+            record_history(hist, G, t)
+        assert process_anomalies(G, hist) == found
+
+
+def test_dispatcher_rise_is_half_the_process_rise_or_more():
+    from stream_viz.detect.process import dispatcher_rise
+
+    before = np.array([7.0, 8.0, 9.0, np.nan])
+    assert dispatcher_rise(90.0, 10.0, 48.0, before, 1.0)  # 40 of the 80 points
+    assert not dispatcher_rise(90.0, 10.0, 47.0, before, 1.0)
+    assert not dispatcher_rise(90.0, 10.0, 80.0, before, 0.0)  # not a dispatching main thread
+    assert not dispatcher_rise(90.0, 10.0, 80.0, before, float("nan"))
+    assert not dispatcher_rise(90.0, 10.0, float("nan"), before, 1.0)
+    assert not dispatcher_rise(90.0, 10.0, 80.0, np.array([np.nan]), 1.0)
 
 
 def test_process_resources_memory_growth():
