@@ -535,7 +535,17 @@ def _measure_worker(pid: int, tr: _Tracked, m: dict[str, float]) -> None:
 
 
 def _measure_main(pid: int, tr: _Tracked, m: dict[str, float]) -> None:
-    """``main_cpu_percent``: the CPU of the process's main thread since the last sample."""
+    """``main_cpu_percent``: the CPU of the process's main thread since the last sample, when it is
+    the one running thread (its ``executor_cpu_percent``) or more than one ran (read); not read
+    while another thread is the one running, nor before a probe counted them."""
+    if tr.worker is not None:
+        if tr.worker[0] == pid and "executor_cpu_percent" in m:
+            m["main_cpu_percent"] = m["executor_cpu_percent"]
+        tr.main = None  # read afresh should more threads run
+        return
+    if not tr.running >= 2:
+        tr.main = None
+        return
     try:
         s1, t1 = _thread_ns(pid, pid) / 1e9, time.monotonic()
     except (OSError, ValueError, IndexError):
