@@ -58,8 +58,9 @@ def processes(n_children: int, rounds: int) -> None:
         measure_main = sampler_module._measure_main
         cost: dict[str, list[float]] = {k: [] for k in samplers}
         n = 0
-        for _ in range(rounds):
-            for name, s in samplers.items():
+        order = list(samplers.items())
+        for i in range(rounds):
+            for name, s in order[i % len(order):] + order[: i % len(order)]:  # no one always first
                 sampler_module._measure_main = (lambda *a: None) if name == "nomain" else measure_main
                 t0 = time.thread_time()
                 n = len(s.sample(pids).processes)
