@@ -168,15 +168,14 @@ def _beside_executor(ctx: PluginContext, proc: str, seen: tuple[float, float, bo
 def _dispatching(ctx: PluginContext, proc: str, seen: tuple[float, float, bool]) -> bool:
     """True when the process's CPU rise ``seen`` is its executor's dispatching main thread's
     (`dispatcher_rise`)."""
-    _, before = ctx.past(proc, MAIN, last=int(ctx.settings["window"]))
-    return dispatcher_rise(seen[0], seen[1], ctx.value(proc, MAIN), before, ctx.value(proc, "dispatching"))
+    return dispatcher_rise(seen[0], seen[1], ctx.value(proc, MAIN), ctx.value(proc, "dispatching"))
 
 
-def dispatcher_rise(cpu: float, baseline: float, main: float, main_before: np.ndarray,
-                    dispatching: float) -> bool:
+def dispatcher_rise(cpu: float, baseline: float, main: float, dispatching: float) -> bool:
     """True when a process's CPU rise from ``baseline`` to ``cpu`` is carried by the main thread
     that dispatches its multi-threaded executor (``dispatching`` 1, `collect.processes`): that
-    thread's CPU ``main`` rose by at least half as much over the median of ``main_before``.
+    thread's CPU ``main`` is at least half the rise above the process's baseline (its own share
+    of the baseline being no more than all of it, it carries half the rise or more).
 
     rclpy's MultiThreadedExecutor spins its dispatch loop while the callbacks it handed to its
     workers wait for one (ros2/rclpy#1452): a core for seconds to a minute, now and then, on a
@@ -184,10 +183,7 @@ def dispatcher_rise(cpu: float, baseline: float, main: float, main_before: np.nd
     heavy callback or a runaway thread rises on a worker or a thread of its own. Unknown (NaN: not
     read) is False.
     """
-    before = main_before[np.isfinite(main_before)]
-    if dispatching != 1.0 or main != main or len(before) == 0:
-        return False
-    return main - float(np.median(before)) >= 0.5 * (cpu - baseline)
+    return dispatching == 1.0 and main - baseline >= 0.5 * (cpu - baseline)
 
 
 def _beyond_bursts(ctx: PluginContext, proc: str,
@@ -274,10 +270,7 @@ def _cpu_risen(ctx: PluginContext, proc: str, dispatched: bool = False) -> bool:
     med, sigma, _ = robust(past)
     if not exceeds(now, med, sigma, SETTINGS["k"], SETTINGS["cpu_min_rise"]):
         return False
-    if not dispatched:
-        return True
-    _, before = ctx.past(proc, MAIN, last=SETTINGS["window"])
-    return dispatcher_rise(now, med, ctx.value(proc, MAIN), before, ctx.value(proc, "dispatching"))
+    return not dispatched or dispatcher_rise(now, med, ctx.value(proc, MAIN), ctx.value(proc, "dispatching"))
 
 
 def _rose_lately(ctx: PluginContext, proc: str, value: float) -> bool:
@@ -456,8 +449,7 @@ def process_anomaly(times: np.ndarray, values: np.ndarray, now: float,
         if what == "memory" and cur[col] - np.fmin.reduce(span, initial=np.inf) < floor / 2:
             continue  # risen long ago and level since: its new normal (`_rose_lately`)
         med, sigma, _ = robust(past[:, col])
-        dispatched = what == "cpu" and dispatcher_rise(cur[col], med, cur[_MAIN], past[:, _MAIN],
-                                                       cur[_DISPATCHING])
+        dispatched = what == "cpu" and dispatcher_rise(cur[col], med, cur[_MAIN], cur[_DISPATCHING])
         if np.isfinite(med) and exceeds(cur[col], med, sigma, rule.k, floor) and not dispatched:
             out.append(what)
     grew = np.fmax.reduce(span, initial=-np.inf) - np.fmin.reduce(span, initial=np.inf)
