@@ -183,7 +183,19 @@ def dispatcher_rise(cpu: float, baseline: float, main: float, dispatching: float
     heavy callback or a runaway thread rises on a worker or a thread of its own. Unknown (NaN: not
     read) is False.
     """
-    return dispatching == 1.0 and main - baseline >= 0.5 * (cpu - baseline)
+    return bool(_carried_by_dispatcher(cpu, baseline, main, dispatching))
+
+
+def undispatched(cpu: np.ndarray, main: np.ndarray, dispatching: np.ndarray, baseline: float) -> np.ndarray:
+    """Return ``cpu`` with each sample whose rise above ``baseline`` the dispatching main thread
+    carries (`dispatcher_rise`, sample by sample) set to ``baseline``: an executor's dispatcher
+    spinning is no burst of the process's own, which would hide a hog for twice as long."""
+    return np.where(_carried_by_dispatcher(cpu, baseline, main, dispatching), baseline, cpu)
+
+
+def _carried_by_dispatcher(cpu, baseline, main, dispatching):  # scalars or arrays; NaN is False
+    rise = np.asarray(cpu) - baseline
+    return (np.asarray(dispatching) == 1.0) & (np.asarray(main) - baseline >= 0.5 * rise)
 
 
 def _beyond_bursts(ctx: PluginContext, proc: str,
@@ -203,6 +215,7 @@ def _beyond_bursts(ctx: PluginContext, proc: str,
         return seen
     rising.setdefault(proc, ctx.t)
     times, cpu = ctx.past(proc, "cpu_percent")
+    cpu = undispatched(cpu, ctx.past(proc, MAIN)[1], ctx.past(proc, "dispatching")[1], seen[1])
     s = ctx.settings
     level = seen[1] + s["cpu_min_rise"]
     since = times[0] + s["warmup_s"] if len(times) else ctx.t
@@ -518,6 +531,7 @@ def _within_bursts(times: np.ndarray, values: np.ndarray, rule: EvidenceRule, ca
     med = float(np.nanmedian(cpu[-rule.window:-1])) if len(cpu) > 1 else np.nan
     if not np.isfinite(med):
         return False
+    cpu = undispatched(cpu, values[:, _MAIN], values[:, _DISPATCHING], med)
     lasted, longest = excursions(times, cpu, med + rule.cpu_min_rise, times[0] + rule.warmup)
     longest = max(longest, carried)
     return longest > 0 and lasted <= rule.burst_margin * longest

@@ -1277,6 +1277,22 @@ def test_process_resources_a_rise_of_the_executors_dispatching_thread_is_no_symp
         assert process_anomalies(G, hist) == found
 
 
+def test_a_dispatchers_spin_is_no_burst_that_would_hide_a_hog():
+    # 15 s of the dispatcher spinning (20-35 s), then a runaway thread from 60 s (the main thread at
+    # its 8 %): a rise after cpu_hold_s, not after twice the spin.
+    def frame(t):
+        if 20 <= t < 35:
+            return model(cpu=noisy(90.0), dispatch=noisy(87.0))
+        return model(cpu=noisy(100.0) if t >= 60 else noisy(10.0), dispatch=noisy(8.0))
+    frames = [(float(t), frame(t), []) for t in range(70)]
+    assert drive("process_resources", frames)[:1] == [(64.0, "node:/camera", "warn")]
+    from stream_viz.detect.process import process_anomalies
+    hist = History()
+    for t, G, _ in frames[:66]:
+        record_history(hist, G, t)
+    assert process_anomalies(G, hist) == {"process:100", "node:/camera"}
+
+
 def test_dispatcher_rise_is_half_the_process_rise_or_more():
     from stream_viz.detect.process import dispatcher_rise
 
@@ -1286,6 +1302,9 @@ def test_dispatcher_rise_is_half_the_process_rise_or_more():
     assert not dispatcher_rise(90.0, 10.0, 80.0, 0.0)  # not a dispatching main thread
     assert not dispatcher_rise(90.0, 10.0, 80.0, float("nan"))
     assert not dispatcher_rise(90.0, 10.0, float("nan"), 1.0)
+    from stream_viz.detect.process import undispatched
+    assert undispatched(np.array([10.0, 90.0, 90.0, 90.0]), np.array([8.0, 85.0, 20.0, 85.0]),
+                        np.array([1.0, 1.0, 1.0, np.nan]), 10.0).tolist() == [10.0, 10.0, 90.0, 90.0]
 
 
 def test_process_resources_memory_growth():
