@@ -464,8 +464,8 @@ def _probe_threads(pid: int, tr: _Tracked, executor: bool = True) -> None:
     ran = None if tr.thread_ns is None else threads_that_ran(tr.thread_ns, now, t - tr.probe_t)
     # Nothing ran: an idle or blocked executor is still the one it was (kept), and its CPU (none)
     # is what tells a blocked callback.
-    if ran is not None and ran:
-        tr.dispatching = float(dispatches(tr.thread_ns or {}, now, ran, pid))
+    if ran:
+        tr.dispatching = float(dispatches(tr.thread_ns or {}, now, t - tr.probe_t, pid))
     if executor and ran is not None and (ran or tr.running != tr.running):
         tr.running = float(len(ran))
         if len(ran) != 1:
@@ -496,24 +496,27 @@ def threads_that_ran(before: dict[int, int], now: dict[int, int], span_s: float)
     return [tid for tid, ns in used.items() if ns >= least]
 
 
-def dispatches(before: dict[int, int], now: dict[int, int], ran: list[int], main: int) -> bool:
+def dispatches(before: dict[int, int], now: dict[int, int], span_s: float, main: int) -> bool:
     """True when ``main`` dispatches a multi-threaded executor: it and at least two other threads
-    ran between two probes, and it used at least ``DISPATCH_RATIO`` × the CPU of each of them.
+    used ``RAN_SHARE`` of a core between two probes, and it used at least ``DISPATCH_RATIO`` × the
+    CPU of each of them. The workers' share of the busiest thread (`threads_that_ran`) is no test
+    here: while the dispatcher spins they use 1 % of what it does, or less.
 
     Parameters
     ----------
     before, now : dict
         Thread id -> its CPU time (ns) at each probe, as `threads_that_ran` reads them.
-    ran : list of int
-        The threads that ran (`threads_that_ran`).
+    span_s : float
+        Seconds between the probes.
     main : int
         The main thread's id (the process id).
     """
-    others = [tid for tid in ran if tid != main]
-    if main not in ran or len(others) < 2:
+    least = RAN_SHARE * 1e9 * span_s
+    used = {tid: ns - before.get(tid, 0) for tid, ns in now.items()}
+    others = [ns for tid, ns in used.items() if tid != main and ns >= least]
+    if used.get(main, 0) < least or len(others) < 2:
         return False
-    used = {tid: now[tid] - before.get(tid, 0) for tid in ran}
-    return used[main] >= DISPATCH_RATIO * max(used[tid] for tid in others)
+    return used[main] >= DISPATCH_RATIO * max(others)
 
 
 def _thread_ns(pid: int, tid: int) -> int:

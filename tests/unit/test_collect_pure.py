@@ -440,19 +440,22 @@ def test_a_main_thread_dispatches_when_it_outworks_two_others_five_times():
     from stream_viz.collect.processes import dispatches
 
     # rclpy's multi-threaded executor at a light load, over 30 s (pid 1): its main thread 5 % of a
-    # core, its two workers 0.3 % each; the same in a dispatch spin (main 84 %, workers 2 %).
-    assert dispatches({}, {1: 1_500_000_000, 5: 90_000_000, 6: 90_000_000}, [1, 5, 6], 1)
-    assert dispatches({1: 0, 5: 0, 6: 0}, {1: 840_000_000, 5: 20_000_000, 6: 20_000_000}, [1, 5, 6], 1)
+    # core, its two workers 0.3 % each; in a dispatch spin over 1 s, main 97 %, workers 0.8 % and
+    # 0.3 % (under 1 % of the main thread's CPU, still over 0.1 % of a core).
+    assert dispatches({}, {1: 1_500_000_000, 5: 90_000_000, 6: 90_000_000}, 30.0, 1)
+    assert dispatches({1: 0, 5: 0, 6: 0}, {1: 970_000_000, 5: 8_000_000, 6: 3_000_000}, 1.0, 1)
     # Workers that do the work (main 3 %, workers 30 % each): the main thread does not dispatch.
-    assert not dispatches({}, {1: 30_000_000, 5: 300_000_000, 6: 300_000_000}, [1, 5, 6], 1)
+    assert not dispatches({}, {1: 30_000_000, 5: 300_000_000, 6: 300_000_000}, 1.0, 1)
     # A runaway thread beside the main thread's executor is busier than the main thread.
-    assert not dispatches({}, {1: 100_000_000, 5: 1_000_000_000, 6: 2_000_000}, [1, 5, 6], 1)
-    # One other thread (a single-threaded executor and a helper thread) is no pool.
-    assert not dispatches({}, {1: 1_500_000_000, 5: 90_000_000}, [1, 5], 1)
+    assert not dispatches({}, {1: 100_000_000, 5: 1_000_000_000, 6: 2_000_000}, 1.0, 1)
+    # One other thread that ran (a single-threaded executor and a helper thread) is no pool; nor
+    # is a second under 0.1 % of a core (a sleeper that woke).
+    assert not dispatches({}, {1: 1_500_000_000, 5: 90_000_000}, 30.0, 1)
+    assert not dispatches({}, {1: 970_000_000, 5: 8_000_000, 6: 900_000}, 1.0, 1)
     # The main thread did not run (the executor spun in another thread).
-    assert not dispatches({}, {2: 1_500_000_000, 5: 90_000_000, 6: 90_000_000}, [2, 5, 6], 1)
+    assert not dispatches({}, {1: 0, 2: 1_500_000_000, 5: 90_000_000, 6: 90_000_000}, 30.0, 1)
     # 4.9x is not 5x.
-    assert not dispatches({}, {1: 490, 5: 100, 6: 90}, [1, 5, 6], 1)
+    assert not dispatches({}, {1: 49_000_000, 5: 10_000_000, 6: 9_000_000}, 1.0, 1)
 
 
 def test_threads_that_ran_are_above_a_core_share_and_a_share_of_the_busiest():
