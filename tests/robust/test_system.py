@@ -523,11 +523,15 @@ def test_procfs_reads_what_psutil_reads(children):
     for s in (fast, slow):
         s.sample([p.pid])
     time.sleep(1.0)
+    fast.sample([p.pid])  # the threads counted: the main thread's CPU is read from the next sample
+    time.sleep(1.0)
     a, b = fast.sample([p.pid]).processes[p.pid], slow.sample([p.pid]).processes[p.pid]
-    assert a.metrics.keys() - {"running_threads"} == b.metrics.keys() == {
+    assert a.metrics.keys() - {"running_threads", "dispatching", "main_cpu_percent"} == b.metrics.keys() == {
         "cpu_percent", "rss_mb", "threads", "ctx_switches_per_s", "open_files", "io_read_kBps",
         "io_write_kBps"}
-    assert a.metrics["running_threads"] == 2  # the two burners; the main thread sleeps (/proc only)
+    # /proc only: the two burners ran; the main thread sleeps, so it dispatches nothing.
+    assert a.metrics["running_threads"] == 2 and a.metrics["dispatching"] == 0.0
+    assert a.metrics["main_cpu_percent"] < 5.0
     assert a.metrics["threads"] == b.metrics["threads"] == 3
     assert a.metrics["open_files"] == b.metrics["open_files"]
     assert abs(a.metrics["rss_mb"] - b.metrics["rss_mb"]) < 2 and a.metrics["rss_mb"] > 50
