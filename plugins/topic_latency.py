@@ -10,7 +10,7 @@ import numpy as np
 
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.baseline import BASELINE_SETTINGS, confirm, excess, held, held_since
-from stream_viz.detect.process import publishers_dispatching
+from stream_viz.detect.process import publishers_busy
 from stream_viz.model.qos import qos_policy
 from stream_viz.records import Alert
 
@@ -38,7 +38,7 @@ class TopicLatency(Plugin):
     to a joystick, a relay of an on-demand topic forwards what comes, when it comes), nor while
     the topic's endpoints changed in number within them (`_endpoints_changed`: a recorder
     joining). Neither latency nor jitter is judged while every publisher's process is busy in the
-    main thread that dispatches its multi-threaded executor (`publishers_dispatching`: callbacks
+    main thread that dispatches its multi-threaded executor (`publishers_busy`, ``dispatched``: callbacks
     wait for a worker while it spins, rclpy#1452; no node is at fault).
 
     Carried from a healthy run (``--healthy``): a rise like one it showed, that ended by itself,
@@ -97,7 +97,7 @@ class TopicLatency(Plugin):
                         _inputs_switched(ctx, topic, s["switch_samples"])
                         or _endpoints_changed(ctx, topic, s["switch_samples"])):
                     continue
-                if ex is not None and ex[2] and publishers_dispatching(ctx, topic):
+                if ex is not None and ex[2] and publishers_busy(ctx, topic, dispatched=True):
                     continue
                 seen.append((topic, attr, ex, fresh))
                 floors[topic, attr] = floor

@@ -247,29 +247,20 @@ def _keep_burst(ctx: PluginContext, proc: str, seconds: float) -> None:
         known[key] = max(seconds, known.get(key, 0.0))
 
 
-def publishers_busy(ctx: PluginContext, topic: str) -> bool:
+def publishers_busy(ctx: PluginContext, topic: str, dispatched: bool = False) -> bool:
     """True when the process of every publisher of ``topic`` is busy beyond its own baseline now
     (CPU risen as ``process_resources`` judges a rise, with its default ``k`` and floor, bursts
     or not): a node whose executor is held by its own work (a plan computed in a callback, an
     executor spinning) pauses its topics and delays its data. The CPU is that process's symptom
-    (``process_resources``, which learns its bursts), not one more per topic."""
+    (``process_resources``, which learns its bursts), not one more per topic. ``dispatched``:
+    busy in the main thread that dispatches its multi-threaded executor (`dispatcher_rise`), so
+    callbacks wait for a worker while it spins and the topic's messages come late and unevenly
+    with no node at fault (and no CPU symptom either)."""
     pubs = ctx.publishers(topic)
     procs = {ctx.process_of(p) for p in pubs}
     if not pubs or None in procs:
         return False
-    return all(_cpu_risen(ctx, proc) for proc in procs)
-
-
-def publishers_dispatching(ctx: PluginContext, topic: str) -> bool:
-    """True when the process of every publisher of ``topic`` is busy (`publishers_busy`) in the
-    main thread that dispatches its multi-threaded executor (`dispatcher_rise`): callbacks wait
-    for a worker while that thread spins, and the topic's messages come late and unevenly with
-    no node at fault."""
-    pubs = ctx.publishers(topic)
-    procs = {ctx.process_of(p) for p in pubs}
-    if not pubs or None in procs:
-        return False
-    return all(_cpu_risen(ctx, proc, dispatched=True) for proc in procs)
+    return all(_cpu_risen(ctx, proc, dispatched) for proc in procs)
 
 
 def _cpu_risen(ctx: PluginContext, proc: str, dispatched: bool = False) -> bool:
