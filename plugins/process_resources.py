@@ -7,6 +7,7 @@ from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.detect.process import SETTINGS, symptoms
+from stream_viz.detect.warned import began_warning, note_warnings
 from stream_viz.records import Alert
 
 
@@ -25,16 +26,34 @@ class ProcessResources(Plugin):
     name = "process_resources"
     kinds = ("process", "node")
     uses = (symptoms,)
-    settings: ClassVar[dict[str, Any]] = {**SETTINGS, "alert_on": "nodes"}
+    settings: ClassVar[dict[str, Any]] = {**SETTINGS, "alert_on": "nodes",
+                                          "warned_quiet_s": 60.0, "warned_lead_s": 10.0}
 
     def check(self, ctx: PluginContext) -> Iterator[Alert]:
+        s = ctx.settings
+        warnings = ctx.state.setdefault("warnings", {})
+        note_warnings(warnings, ctx.events, s["warned_quiet_s"])
         procs = {m if ctx.kind(m) == "process" else ctx.process_of(m) for m in ctx.watched()}
         for proc, found in symptoms(ctx, sorted(procs - {None})):
+            nodes = ctx.nodes_of(proc, by_pid=True)
             message = "; ".join(text for _, text, _ in found)
             data = {"process": proc, "symptoms": [what for what, _, _ in found]}
             data |= {f"{what}_{k}": v for what, _, values in found for k, v in values.items()}
-            for m in _targets(ctx.nodes_of(proc, by_pid=True), proc, ctx.settings["alert_on"]):
+            warned = began_warning(warnings, nodes, _began(ctx, proc, found) - s["warned_lead_s"])
+            if len(nodes) > 1 and warned:
+                data["names"] = [n for n, _ in warned]
+                message += "; " + "; ".join(f"{n.removeprefix('node:')} began to warn: {text}"
+                                            for n, text in warned)
+            for m in _targets(nodes, proc, s["alert_on"]):
                 yield ctx.alert(m, "warn", f"{proc}: {message}", **data)
+
+
+def _began(ctx: PluginContext, proc: str, found: list) -> float:
+    """When the process's symptom began: its CPU rise's first sample, else (memory) the recent
+    half of the trend window in which it rose or grew."""
+    if any(what == "cpu" for what, _, _ in found) and proc in ctx.state.get("cpu_rising", {}):
+        return ctx.state["cpu_rising"][proc]
+    return ctx.t - ctx.settings["trend_s"] / 2
 
 
 def _targets(nodes: list[str], proc: str, alert_on: str) -> list[str]:

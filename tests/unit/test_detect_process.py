@@ -112,6 +112,7 @@ def test_settings_of_a_plugin_switched_off():
     ps = PluginSet.load(cwd_plugins=False, disable=["process_resources"],
                         settings={"process_resources": {"k": 6}, "rosout": {"min_level": "warn"}})
     assert "process_resources" not in ps.names
-    assert ps.settings_of("process_resources") == {**SETTINGS, "k": 6.0, "alert_on": "nodes"}
+    assert ps.settings_of("process_resources") == {**SETTINGS, "k": 6.0, "alert_on": "nodes",
+                                                   "warned_quiet_s": 60.0, "warned_lead_s": 10.0}
     assert ps.settings_of("rosout") == {"min_level": "warn", "watched_only": False, "startup_s": 10.0}
     assert ps.settings_of("nope") is None

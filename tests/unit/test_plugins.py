@@ -1277,6 +1277,32 @@ def test_process_resources_a_rise_of_the_executors_dispatching_thread_is_no_symp
         assert process_anomalies(G, hist) == found
 
 
+def test_a_process_rise_names_the_sibling_that_began_to_warn_with_it():
+    # The camera's process hosts a reader too; at 20 s the process goes from 10 % to 95 %. The
+    # reader logs a WARN as it rises and its status turns WARN; the camera has warned every 5 s
+    # since the start (its normal). The alert names the reader, whose warning began with the rise.
+    def frame(t):
+        G = model(cpu=noisy(95.0) if t >= 20 else noisy(10.0))
+        add_member(G, "node:/reader", pid=100, alive=True)
+        add_tree_edge(G, "process:100", "node:/reader")
+        return G
+
+    def events(t, reader_from):
+        out = [Event(t, "log", "node:/camera", "warn", "exposure clipped", {})] if t % 5 == 0 else []
+        if t >= reader_from and t % 5 == 0:
+            out += [Event(t, "log", "node:/reader", "warn", "falling back to CPU inference", {}),
+                    Event(t, "diag", "node:/reader", "warn", "reader: WARN CPU fallback", {"level": 1})]
+        return out
+
+    alerts = drive("process_resources", [(float(t), frame(t), events(t, 20)) for t in range(30)], full=True)
+    assert alerts and {a.member for a in alerts} == {"node:/camera", "node:/reader"}
+    assert all(a.data["names"] == ["node:/reader"] for a in alerts), alerts[0].data
+    assert "/reader began to warn: falling back to CPU inference" in alerts[0].message
+    # A reader that has warned all along began nothing with the rise: the alert names nobody.
+    alerts = drive("process_resources", [(float(t), frame(t), events(t, 0)) for t in range(30)], full=True)
+    assert alerts and all("names" not in a.data for a in alerts), alerts[0].data
+
+
 def test_a_dispatchers_spin_is_no_burst_that_would_hide_a_hog():
     # 15 s of the dispatcher spinning (20-35 s), then a runaway thread from 60 s (the main thread at
     # its 8 %): a rise after cpu_hold_s, not after twice the spin.

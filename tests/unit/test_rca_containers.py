@@ -90,6 +90,18 @@ def test_a_process_alert_alone_cannot_tell_its_nodes_apart(G):
     assert by[LIDAR].evidence["indistinguishable_from"] == [CAM, IMU]
 
 
+def test_a_process_alert_naming_the_node_that_began_to_warn_tells_it_apart(G):
+    # The container's CPU rose as lidar began to warn ("falling back to CPU"): process_resources
+    # names lidar in the alert it gives each node (data ``names``); lidar ranks first, alone.
+    busy = [al(n, "process_resources", 9 + 5 * k, "warn", process=BOX, names=[LIDAR])
+            for n in (CAM, LIDAR, IMU) for k in range(3)]
+    by, order = rank(G, busy)
+    assert order[0] == LIDAR and "indistinguishable_from" not in by[LIDAR].evidence
+    assert by[LIDAR].score > by[CAM].score == by[IMU].score
+    for sib in (CAM, IMU):  # excused by the node named, as by a sibling whose own change came first
+        assert by[sib].evidence["upstream"] > 0 and "indistinguishable_from" not in by[sib].evidence
+
+
 def test_a_client_waiting_on_one_of_the_nodes_tells_it_apart(G):
     # The container burns CPU and arm, which calls lidar's service, logs a timeout: of nodes
     # that share the process's alert alone, the one a complaining client waits on ranks first.
