@@ -30,6 +30,7 @@ from typing import Any
 import networkx as nx
 import numpy as np
 
+from stream_viz.model.queries import process_of_node
 from stream_viz.model.traffic import TRAFFIC, idle, measured
 from stream_viz.rca.causal import is_node, path_back, trace
 from stream_viz.rca.charge import pointed_nodes
@@ -134,7 +135,8 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
         cost = _unblocked(ctx, c, cost, back)
     # A symptom that began before the candidate's own (beyond the tolerance) is not its effect.
     since = onset - settings.tolerance if np.isfinite(onset) else -np.inf  # metric evidence only: no time
-    explained = [m for m in cost if m in s.times and s.onset[m] >= since and not _before(ctx, c, m)]
+    explained = [m for m in cost if m in s.times and s.onset[m] >= since and not _before(ctx, c, m)
+                 and not _shared(ctx, c, m)]
     coverage = len(explained) / len(s.times) if s.times else 0.0
     first = ctx.first or s.first
     own = ctx.views[c].own if c in ctx.views else []
@@ -229,6 +231,16 @@ def _before(ctx: Context, c: str, m: str) -> bool:
     v, s = ctx.views.get(c), ctx.symptoms
     latest = min(s.began_by.get(m, np.inf), s.vague.get(m, np.inf))
     return v is not None and began_after(v.began, v.vague, latest, ctx.settings.tolerance)
+
+
+def _shared(ctx: Context, c: str, m: str) -> bool:
+    """True when ``m`` is another node of ``c``'s process whose symptoms are all the process's (its
+    CPU, memory, exit): what they share is no effect of ``c`` reaching ``m`` through the data flow
+    (docs/rca.md, *Nodes in one process*), so it is not among the symptoms ``c`` explains."""
+    if m == c or m in ctx.symptoms.own_anomaly or not is_node(ctx.G, m):
+        return False
+    p = process_of_node(ctx.G, c)
+    return p is not None and process_of_node(ctx.G, m) == p
 
 
 def _cheap(ctx: Context, v: NodeView) -> float:

@@ -148,6 +148,18 @@ def test_a_process_symptom_does_not_travel_along_the_data_flow_between_its_nodes
     assert by[LIDAR].evidence["indistinguishable_from"] == [CAM]
 
 
+def test_a_named_node_ranks_first_though_a_sibling_feeds_it(G):
+    # The same, lidar named by the process's alerts (it began to warn as the CPU rose): cam, which
+    # feeds it, explains no symptom of lidar's, which are the process's, through the data flow.
+    # Before: cam's trajectory covered lidar's alert and cam ranked first (the blind retail robot's
+    # gap detector over its label reader, through a handheld, the mux, the base and the odometry).
+    with_cam_info(G)
+    busy = [al(n, "process_resources", 9, "warn", process=BOX, names=[LIDAR]) for n in (CAM, LIDAR)]
+    by, order = rank(G, busy)
+    assert order[0] == LIDAR and by[CAM].evidence["explains"] == 1, by[CAM].evidence
+    assert by[LIDAR].score > by[CAM].score
+
+
 def test_a_fellows_own_changed_output_still_excuses_the_node_it_feeds(G):
     # The same, but cam's own output changed too: that does travel, and tells them apart.
     with_cam_info(G)
