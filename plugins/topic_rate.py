@@ -73,8 +73,9 @@ class TopicRate(Plugin):
       or quiet the topic has shown (in this run, or in the healthy run it started from,
       ``--healthy``: `Rhythm.carried`), or, for a topic whose arrivals are irregular, the longest
       quiet random arrivals at its rate show in ``irregular_horizon_s`` (`_by_chance`). Judged
-      only once the topic's rhythm is settled: it published for ``warmup_s`` without such a
-      quiet, or showed ``min_gaps`` healthy gaps; a topic that left the graph, or had no
+      only once the topic's rhythm is settled: it published for ``warmup_s`` (and
+      ``settle_messages`` of its periods) without such a quiet, or showed ``min_gaps`` healthy
+      gaps; a topic that left the graph, or had no
       publisher, after its last message from the sample its publishers were back (an
       operator's joystick, its node gone with the operator, is back a second before it
       publishes). Never while it has
@@ -138,6 +139,7 @@ class TopicRate(Plugin):
         "rate_window_s": 3.0,
         "gap_margin": 2.0,
         "min_gaps": 3,
+        "settle_messages": 10,
         "flap_window_s": 30.0,
         "transition_grace_s": 2.0,
         "input_grace_s": 5.0,
@@ -353,12 +355,20 @@ def _follow(ctx: PluginContext, r: Rhythm, topic: str, rate: float, base: Baseli
     gap = ctx.value(topic, "gap_s")
     ended = r.ended
     quiet = follow(r, ctx.t, newest, rate, window_s=s["rate_window_s"], notable=limit,
-                   settle_s=max(s["warmup_s"], limit), margin=s["gap_margin"], min_gaps=s["min_gaps"],
+                   settle_s=_settle_s(s, _ref_hz(r, base), limit), margin=s["gap_margin"],
+                   min_gaps=s["min_gaps"],
                    gap=0.0 if math.isnan(gap) else gap)
     if r.ended > ended:
         known = ctx.learned.setdefault("gaps", {})
         known[topic] = max(r.ended, known.get(topic, 0.0))
     return quiet
+
+
+def _settle_s(s: dict[str, Any], ref_hz: float, limit: float) -> float:
+    """How long a topic publishes without a notable quiet before it counts as continuous:
+    ``warmup_s``, its base limit, and ``settle_messages`` of its periods (a topic at 0.3 Hz has
+    sent three messages in 10 s, too few to say it never pauses)."""
+    return max(s["warmup_s"], limit, s["settle_messages"] / ref_hz if ref_hz > 0 else 0.0)
 
 
 def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, base: Baseline,

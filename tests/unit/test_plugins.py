@@ -318,9 +318,20 @@ def test_topic_rate_modes_are_lower_rates_shown_and_left():
 
 def test_topic_rate_slow_topic_needs_three_periods():
     # A 0.2 Hz topic: silence only after 3 periods (15 s) without a message.
-    rates = [0.2] * 20 + [0.0] * 20
+    rates = [0.2] * 60 + [0.0] * 20
     frames = [(float(t), model(rate=r), []) for t, r in enumerate(rates)]
-    assert drive("topic_rate", frames)[0] == (34.0, "topic:/img", "error")
+    assert drive("topic_rate", frames)[0] == (74.0, "topic:/img", "error")
+
+
+def test_topic_rate_a_slow_topic_is_continuous_once_it_sent_settle_messages():
+    # A gap detector's findings every 3 s while the robot drives an aisle (20 s), none for 20 s
+    # while it turns or docks, and again: seven messages in its first run are too few to say it
+    # never pauses (it settled as continuous after 10 s, and its first pause was a silence).
+    drives = [float(t) for start in range(0, 120, 40) for t in range(start, start + 20, 3)]
+    assert drive("topic_rate", sampled(drives, HALF)) == []
+    # Ten messages or more without a pause: continuous, and a stop is a silence at 3 periods.
+    steady = [float(t) for t in range(0, 45, 3)]
+    assert drive("topic_rate", sampled(steady, HALF))[:1] == [(51.5, "topic:/img", "error")]
 
 
 def test_topic_rate_expected_rate_from_config_and_unmeasured():
