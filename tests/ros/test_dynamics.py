@@ -670,3 +670,34 @@ def test_a_quiet_alerted_in_a_run_judged_healthy_is_no_silence_in_the_next(child
         assert store.get_meta("learned")["topic_rate"]["gaps"]["topic:/detections"] >= 10.0
     finally:
         store.close()
+
+
+# A gap detector's findings every 2 s while the robot drives an aisle (14 s), none while it turns
+# (16 s), again and again.
+AISLES = HEAD + """
+n = Node("gap_detector")
+pub = n.create_publisher(String, "/gaps", 10)
+t0 = time.monotonic()
+def tick():
+    if (time.monotonic() - t0) % 30.0 < 14.0:
+        pub.publish(String(data="gap"))
+n.create_timer(2.0, tick)
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+
+def test_a_slow_topics_first_pause_is_no_silence(children, tmp_path):
+    # Seven messages in its first run are too few to say the topic never pauses (it settled as
+    # continuous after 10 s, five messages, and its first pause was a silence).
+    children.python(AISLES, name="aisles")
+    children.python(LISTENER, "listener", "/gaps", name="listener")
+    mon = _monitor(children, tmp_path)
+    try:
+        wait_for(lambda: (mon.step(), "topic:/gaps" in mon.seen)[1], timeout=20, period=1.0)
+        _observe(mon, 45.0)
+        _no_alerts(mon, "a slow topic pausing between aisles")
+        r = _plugin(mon, "topic_rate").state["rhythms"]["topic:/gaps"]
+        assert r.gaps and all(14.0 <= g <= 20.0 for g in r.gaps), r.gaps  # its pause, learned
+    finally:
+        mon.close()
