@@ -6,7 +6,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.process import SETTINGS, symptoms
+from stream_viz.detect.process import SETTINGS, rise_began, symptoms
 from stream_viz.detect.warned import began_warning, note_warnings
 from stream_viz.records import Alert
 
@@ -39,8 +39,9 @@ class ProcessResources(Plugin):
             message = "; ".join(text for _, text, _ in found)
             data = {"process": proc, "symptoms": [what for what, _, _ in found]}
             data |= {f"{what}_{k}": v for what, _, values in found for k, v in values.items()}
-            warned = began_warning(warnings, nodes, _began(ctx, proc, found) - s["warned_lead_s"])
-            if len(nodes) > 1 and warned:
+            warned = began_warning(warnings, nodes, _began(ctx, proc, found) - s["warned_lead_s"]) \
+                if len(nodes) > 1 else []
+            if warned:
                 data["names"] = [n for n, _ in warned]
                 message += "; " + "; ".join(f"{n.removeprefix('node:')} began to warn: {text}"
                                             for n, text in warned)
@@ -51,9 +52,8 @@ class ProcessResources(Plugin):
 def _began(ctx: PluginContext, proc: str, found: list) -> float:
     """When the process's symptom began: its CPU rise's first sample, else (memory) the recent
     half of the trend window in which it rose or grew."""
-    if any(what == "cpu" for what, _, _ in found) and proc in ctx.state.get("cpu_rising", {}):
-        return ctx.state["cpu_rising"][proc]
-    return ctx.t - ctx.settings["trend_s"] / 2
+    began = rise_began(ctx, proc) if any(what == "cpu" for what, _, _ in found) else None
+    return ctx.t - ctx.settings["trend_s"] / 2 if began is None else began
 
 
 def _targets(nodes: list[str], proc: str, alert_on: str) -> list[str]:

@@ -226,6 +226,11 @@ def _beyond_bursts(ctx: PluginContext, proc: str,
     return seen
 
 
+def rise_began(ctx: PluginContext, proc: str) -> float | None:
+    """When ``proc``'s ongoing CPU rise was first seen (`symptoms` keeps it), or None."""
+    return ctx.state.get("cpu_rising", {}).get(proc)
+
+
 def burst_key(nodes: Iterable[str]) -> str:
     """A process's name across runs, for its carried bursts: the nodes it hosts (its PID is not
     the same in the next run); empty for a process with none (not carried)."""

@@ -135,8 +135,9 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
         cost = _unblocked(ctx, c, cost, back)
     # A symptom that began before the candidate's own (beyond the tolerance) is not its effect.
     since = onset - settings.tolerance if np.isfinite(onset) else -np.inf  # metric evidence only: no time
+    home = process_of_node(ctx.G, c) if is_node(ctx.G, c) else None
     explained = [m for m in cost if m in s.times and s.onset[m] >= since and not _before(ctx, c, m)
-                 and not _shared(ctx, c, m)]
+                 and not _shared(ctx, home, c, m)]
     coverage = len(explained) / len(s.times) if s.times else 0.0
     first = ctx.first or s.first
     own = ctx.views[c].own if c in ctx.views else []
@@ -233,14 +234,13 @@ def _before(ctx: Context, c: str, m: str) -> bool:
     return v is not None and began_after(v.began, v.vague, latest, ctx.settings.tolerance)
 
 
-def _shared(ctx: Context, c: str, m: str) -> bool:
-    """True when ``m`` is another node of ``c``'s process whose symptoms are all the process's (its
-    CPU, memory, exit): what they share is no effect of ``c`` reaching ``m`` through the data flow
-    (docs/rca.md, *Nodes in one process*), so it is not among the symptoms ``c`` explains."""
-    if m == c or m in ctx.symptoms.own_anomaly or not is_node(ctx.G, m):
+def _shared(ctx: Context, home: str | None, c: str, m: str) -> bool:
+    """True when ``m`` is another node of ``c``'s process ``home`` whose symptoms are all the
+    process's (its CPU, memory, exit): what they share is no effect of ``c`` reaching ``m`` through
+    the data flow (docs/rca.md, *Nodes in one process*), so it is not among those ``c`` explains."""
+    if home is None or m == c or m in ctx.symptoms.own_anomaly or not is_node(ctx.G, m):
         return False
-    p = process_of_node(ctx.G, c)
-    return p is not None and process_of_node(ctx.G, m) == p
+    return process_of_node(ctx.G, m) == home
 
 
 def _cheap(ctx: Context, v: NodeView) -> float:
