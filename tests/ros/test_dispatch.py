@@ -96,8 +96,9 @@ def test_a_busy_dispatching_thread_is_no_symptom_and_a_runaway_thread_is(childre
         _observe(mon, 5.0)  # the mapper's rise has held as long as the planner's then
         mapper = f"process:{mon.seen.nodes['node:/mapper']['pid']}"
         theta = mon.shadow.history.values(mapper, last=8)
-        # The flood did load the mapper's dispatching thread (else this test could not fail).
-        assert max(theta[:, MAIN]) >= 40.0 and theta[-1, DISPATCHING] == 1.0, theta
+        # The flood did load the mapper's dispatching thread (else this test could not fail); one
+        # probe may miss the dispatch (a worker under the threshold in its span), most do not.
+        assert max(theta[:, MAIN]) >= 40.0 and sum(theta[:, DISPATCHING] == 1.0) >= len(theta) / 2, theta
         cpu = [a for a in mon.store.alerts(since=since) if a.plugin == "process_resources"]
         assert "node:/planner" in {a.member for a in cpu}, alerts
         assert "node:/mapper" not in {a.member for a in cpu}, cpu
