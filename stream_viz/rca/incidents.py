@@ -7,8 +7,10 @@ two episodes belong to one incident when one fault could explain both (single li
 of such pairs is one incident). In the graph, their members are joined by a path of at most
 ``incident_hops`` hops with no collider (`ball`, `relation`): one is upstream of the other, or
 both are downstream of a member between them; two publishers of ``/diagnostics`` are not. In
-time, the episodes are at most ``episode_gap`` apart, in an order one fault can give
-(`_linked`). Metric evidence joins the incident of the alert closest to it and links no two.
+time, the episodes are at most ``episode_gap`` apart, in an order one fault can give, the effect
+beginning within ``led_max`` of its cause (`_linked`: a node dead for minutes, or a warning
+that has stood that long, is a standing condition, no cause of a new symptom). Metric evidence
+joins the incident of the alert closest to it and links no two.
 Each incident is ranked on its own alerts; the diagnosis is the ranking of the *current*
 incident.
 
@@ -17,8 +19,10 @@ that hosts no node); among those an ongoing one (its last episode ended less tha
 ``episode_gap`` before the latest alert, or lasts: a node that vanished) if any; among those
 one with an alerted symptom still holding (within ``LASTING_S`` of the latest alert: a blip that
 ended 20 s ago does not displace a fault whose alerts still come) if any; among those,
-one that is not a recurrence (an incident all of whose members had symptoms in incidents that ended before it
-began) if any; among those the one whose best candidate stands out most (the strongest
+one that is not a recurrence (an incident all of whose members had symptoms in incidents that
+ended before it began) if any; among those one that is news (it began more than ``led_max``
+after every other ongoing one last changed: those stand, known) if any; among those the one
+whose best candidate stands out most (the strongest
 hypothesis test ``ht`` among its candidates, the same for every ranking method), so a minor
 symptom elsewhere does not displace a fault that is still going on; ties: the one with more
 symptomatic members (a lone symptom as clear as the fault's does not displace its cascade),
@@ -82,6 +86,11 @@ class Incident:
     def members(self) -> list[str]:
         """The symptomatic members, sorted."""
         return sorted(self.episodes)
+
+    @property
+    def changed(self) -> float:
+        """When its newest episode began: the last time something new went wrong in it."""
+        return max(a for eps in self.episodes.values() for a, _ in eps)
 
     def to_report(self) -> dict[str, Any]:
         """The incident in the report JSON (docs/contracts.md)."""
@@ -192,11 +201,12 @@ def _close(a: Episode, b: Episode, gap: float) -> bool:
     return a[0] <= b[1] + gap and b[0] <= a[1] + gap
 
 
-def _linked(r: set[str], sa: float, sb: float, lead: float) -> bool:
+def _linked(r: set[str], sa: float, sb: float, lead: float, reach: float = INF) -> bool:
     """Whether symptoms of two members so related (`relation`), beginning at ``sa`` and ``sb``,
-    can be one fault's: a cause comes first (its detection may lag by ``lead``), and two
-    effects of a cause that shows nothing begin together."""
-    return (("ab" in r and sb >= sa - lead) or ("ba" in r and sa >= sb - lead)
+    can be one fault's: a cause comes first (its detection may lag by ``lead``) and its effects
+    begin within ``reach`` of it (one that began longer before is a standing condition), and
+    two effects of a cause that shows nothing begin together."""
+    return (("ab" in r and sa - lead <= sb <= sa + reach) or ("ba" in r and sb - lead <= sa <= sb + reach)
             or ("fork" in r and abs(sa - sb) <= lead))
 
 
@@ -212,6 +222,7 @@ def find_incidents(
     blamed: Iterable[tuple[str, float, str]] = (),
     tolerance: float = 2.0,
     blamed_only: Container[str] = (),
+    reach: float = INF,
 ) -> list[Incident]:
     """Group symptom episodes into incidents (module docstring), oldest first, ids from 1.
 
@@ -247,6 +258,11 @@ def find_incidents(
     blamed_only : container, optional
         Members related by their ``blamed`` pairs alone, not through the graph: all their alerts
         say what they are about.
+    reach : float, optional
+        Longest a symptom may begin after that of a member upstream of it and be linked to it
+        through the graph: a node that died, or a warning that has stood for minutes, is a
+        standing condition, no cause of a new symptom downstream (``blamed`` pairs have no limit:
+        the alert says what it is about).
     """
     lead = gap if lead is None else lead
     items = [(m, ep) for m in sorted(episodes) for ep in episodes[m]]
@@ -295,7 +311,8 @@ def find_incidents(
                 if found:
                     rel.setdefault((a, b), set()).update(*found)
     pairs = [(i, j) for (a, b), r in rel.items() for i in index[a] for j in index[b]
-             if _close(items[i][1], items[j][1], gap) and _linked(r, items[i][1][0], items[j][1][0], lead)]
+             if _close(items[i][1], items[j][1], gap)
+             and _linked(r, items[i][1][0], items[j][1][0], lead, reach)]
     for idx in index.values():  # a member's own episodes close in time
         idx = sorted(idx, key=lambda i: items[i][1][0])
         reach = items[idx[0]][1][1]  # the latest end so far
@@ -348,12 +365,21 @@ def find_incidents(
     return out
 
 
-def current(incidents: list[Incident]) -> Incident | None:
-    """Return the current incident (module docstring), or None when there is none."""
+def current(incidents: list[Incident], reach: float = INF) -> Incident | None:
+    """Return the current incident (module docstring), or None when there is none.
+
+    ``reach``: an incident that began longer than this after every other ongoing one last
+    changed (its newest episode began) is news: those stand unchanged, known already.
+    """
     if not incidents:
         return None
+    live = [inc for inc in incidents if inc.strength > 0 and inc.ongoing]
+
+    def news(inc: Incident) -> bool:
+        return all(inc.start > o.changed + reach for o in live if o is not inc)
+
     return max(incidents, key=lambda inc: (inc.strength > 0, inc.ongoing, inc.lasting, not inc.recurring,
-                                           round(inc.strength, 9), len(inc.episodes), inc.start))
+                                           news(inc), round(inc.strength, 9), len(inc.episodes), inc.start))
 
 
 @dataclass
@@ -433,7 +459,8 @@ def diagnose(
     orphaned = [(a.member, a.t, p) for a in lost for p in publishers(G, a.data["topic"])]
     only = {a.member for a in lost} - said
     incidents = find_incidents(G, episodes, settings.incident_hops, settings.episode_gap, now, links,
-                               s.episodes, settings.incident_lead, orphaned, settings.tolerance, only)
+                               s.episodes, settings.incident_lead, orphaned, settings.tolerance, only,
+                               settings.led_max)
     if not incidents:
         ctx = make_context(G, alerts, settings, keep, evidence, first, gone)
         return Diagnosis(ranker(ctx), [], ctx.symptoms.first)
@@ -453,7 +480,7 @@ def diagnose(
         inc.root_causes = ranker(ctx)
         inc.strength = max((v.ht for v in ctx.views.values()), default=0.0)
         inc.first = ctx.symptoms.first
-    now_inc = current(incidents)
+    now_inc = current(incidents, settings.led_max)
     assert now_inc is not None  # there are incidents
     now_inc.current = True
     return Diagnosis(now_inc.root_causes, incidents, now_inc.first)

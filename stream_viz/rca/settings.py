@@ -75,7 +75,8 @@ class RcaSettings:
         its incident (the upstream one's detection lagged; a cause comes first).
     led_max : float
         Longest an upstream symptom may lead a node's behind silent members and still excuse it
-        in full (`symptoms._led`); one that held longer is a standing condition, decayed as any.
+        in full (`symptoms._led`); one that held longer is a standing condition, decayed as any,
+        and links no new symptom into its incident (`incidents`).
     """
 
     policy: str = setting("both", choices=POLICIES)

@@ -143,13 +143,16 @@ def test_a_source_that_led_and_still_holds_excuses_in_full_behind_silent_nodes(G
     early = [al(SCAN, "topic_rate", t) for t in (10, 15, 20)] + [al(CTRL, "rosout", 30)]
     ctrl = next(rc for rc in analyze(G, early, s, None).root_causes if rc.member == CTRL)
     assert ctrl.evidence["upstream"] == pytest.approx(0.75 ** 2 * s.severity["error"])
-    # Held for longer than `led_max` (60 s) before the error: a standing condition, decayed again;
-    # within a longer `led_max`, in full.
+    # Held for longer than `led_max` (60 s) before the error: a standing condition, no cause of
+    # it — the error is an incident of its own, the current one (the newest, the other unchanged
+    # since), the controller first; within a longer `led_max`, one incident, excused in full.
     standing = [al(SCAN, "topic_rate", t) for t in range(10, 111, 5)] + [al(CTRL, "rosout", 110)]
-    for led_max, upstream in ((60.0, 0.75 ** 2), (120.0, 1.0)):
-        s = RcaSettings(incident_hops=5, led_max=led_max)
-        ctrl = next(rc for rc in analyze(G, standing, s, None).root_causes if rc.member == CTRL)
-        assert ctrl.evidence["upstream"] == pytest.approx(upstream * s.severity["error"]), led_max
+    r = analyze(G, standing, RcaSettings(incident_hops=5), None)
+    assert [i.members for i in r.incidents] == [[SCAN], [CTRL]] and r.incidents[1].current
+    assert top(r).member == CTRL and top(r).evidence["upstream"] == 0.0
+    s = RcaSettings(incident_hops=5, led_max=120.0)
+    ctrl = next(rc for rc in analyze(G, standing, s, None).root_causes if rc.member == CTRL)
+    assert ctrl.evidence["upstream"] == pytest.approx(s.severity["error"])
 
 
 def test_a_service_server_is_upstream_of_its_client(G):

@@ -118,9 +118,17 @@ def test_find_incidents_groups_by_graph_and_time(G):
     # one hop allowed: /scan and /objects (two hops apart) are separate incidents
     assert [i.members for i in find_incidents(G, episodes, 1, 15.0, 100.0)] == [
         [SCAN], [BATTERY], [OBJ], [CTRL]]
-    # a vanished member's open episode keeps its incident going, and joins what comes later
-    got = find_incidents(G, {SCAN: [(0.0, float("inf"))], CTRL: [(100.0, 100.0)]}, 6, 15.0, 100.0)
+    # a vanished member's open episode keeps its incident going, and joins what comes later ...
+    lasting = {SCAN: [(0.0, float("inf"))], CTRL: [(100.0, 100.0)]}
+    got = find_incidents(G, lasting, 6, 15.0, 100.0)
     assert [(i.members, i.end, i.ongoing) for i in got] == [([CTRL, SCAN], 100.0, True)]
+    # ... within `reach` of it: longer after, it is a standing condition, and what comes is new
+    got = find_incidents(G, lasting, 6, 15.0, 100.0, reach=60.0)
+    assert [(i.members, i.end, i.ongoing) for i in got] == [([SCAN], 100.0, True), ([CTRL], 100.0, True)]
+    assert [i.members for i in find_incidents(G, lasting, 6, 15.0, 100.0, reach=100.0)] == [[CTRL, SCAN]]
+    # the other way round too: a downstream member dead since 0 s and its source's alert at 100 s
+    got = find_incidents(G, {CTRL: [(0.0, float("inf"))], SCAN: [(100.0, 100.0)]}, 6, 15.0, 100.0, reach=60.0)
+    assert len(got) == 2
 
 
 def strengths(incidents, **by_first_member):
@@ -169,6 +177,24 @@ def test_a_blip_that_ended_does_not_displace_a_fault_whose_alerts_still_come(G):
     alerted[BATTERY] = episodes[BATTERY] = [(110.0, 125.0)]
     got = find_incidents(G, episodes, 4, 15.0, 130.0, alerted=alerted)
     assert current(strengths(got, **{SCAN: 0.3, BATT: 0.9})).members == [BATT, BATTERY]
+
+
+def test_a_new_incident_after_an_old_one_stood_unchanged_is_current(G):
+    # /scan's publisher died at 0 s and its subscriber warned from 5 s on (a larger incident,
+    # still going on); a new one begins at 100 s, elsewhere, as clear: once the old one stood
+    # unchanged for `reach` (its newest episode began at 5 s), the new one is the news
+    episodes = {SCAN: [(0.0, float("inf"))], OBJ: [(5.0, 130.0)], BATTERY: [(100.0, 130.0)]}
+    got = find_incidents(G, episodes, 4, 15.0, 130.0)
+    assert [i.members for i in got] == [[OBJ, SCAN], [BATTERY]]
+    assert current(strengths(got, **{OBJ: 0.64, BATTERY: 0.64})).members == [OBJ, SCAN]
+    assert current(strengths(got, **{OBJ: 0.64, BATTERY: 0.4}), reach=60.0).members == [BATTERY]
+    # not when the old one changed within `reach` before (its cascade still growing at 50 s) ...
+    episodes[OBJ] = [(50.0, 130.0)]
+    got = find_incidents(G, episodes, 4, 15.0, 130.0, reach=60.0)
+    assert current(strengths(got, **{OBJ: 0.64, BATTERY: 0.4}), reach=60.0).members == [OBJ, SCAN]
+    # ... nor when the new one is over and the old goes on
+    got = find_incidents(G, {**episodes, OBJ: [(5.0, 130.0)], BATTERY: [(100.0, 101.0)]}, 4, 15.0, 130.0)
+    assert current(strengths(got, **{OBJ: 0.64, BATTERY: 0.9}), reach=60.0).members == [OBJ, SCAN]
 
 
 def test_an_older_unrelated_incident_does_not_take_the_first_place(G):

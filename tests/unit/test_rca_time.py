@@ -149,7 +149,8 @@ def test_the_engine_stamps_evidence_with_the_update_time():
     planner = next(rc for rc in res.root_causes if rc.member == PLAN)
     assert planner.evidence["upstream"] == 0.0
     eng = RcaEngine(RcaSettings(metric=1.0), watchlist=None)
-    eng.update(G, [], {PROC: 1.0}, t=10.0)  # still anomalous when the planner's fault comes
+    # still anomalous when the planner's fault comes (since 60 s: within `led_max`)
+    eng.update(G, [], {PROC: 1.0}, t=60.0)
     res = eng.update(G, [al(PLAN, "rosout", 100)], t=100.0)
     planner = next(rc for rc in res.root_causes if rc.member == PLAN)
     assert planner.evidence["upstream"] == 1.0 and res.root_causes[0].member == PERC
