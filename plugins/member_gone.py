@@ -19,7 +19,9 @@ class MemberGone(Plugin):
       nothing; so does a process that exited with code 0 (``exit_code`` in the event, where the
       collector reads exit codes), its nodes listed or not; data ``killed``: killed by a signal
       another process sends (SIGKILL, SIGTERM, SIGINT, SIGHUP: `stream_viz.detect.exits.killed`),
-      which none of its inputs can have caused;
+      which none of its inputs can have caused; data ``last_words`` (not when killed so): the
+      one node of the process that logged as it died, its line and time (the collector's,
+      `stream_viz.collect.last_words`), said in the text;
     * restart: the node runs in a new process. One restart is news only as a respawn (the node
       changed process between two samples, or its last process crashed): warn. A node that keeps
       reappearing is one symptom, ``restarted N times in M s`` over ``loop_window_s``: warn from
@@ -75,9 +77,9 @@ class MemberGone(Plugin):
                 crashed[m] = ctx.t
                 if ok(m):
                     said.add(m)
-                    yield ctx.alert(m, "error", f"process died: {e.text or 'exited'}", symptom="exit",
-                                    process=e.data.get("process", e.member), clean=False, killed=killed(e),
-                                    **hold)
+                    text = f"process died: {e.text or 'exited'}{_said(e)}"
+                    yield ctx.alert(m, "error", text, symptom="exit", process=e.data.get("process", e.member),
+                                    clean=False, killed=killed(e), **hold, **_last_words(e))
         for m, restarts, respawn in _restarts(ctx, crashed, clean):
             sev = _restart_severity(s, len(restarts), respawn)
             if sev is not None and ok(m):
@@ -205,6 +207,21 @@ def _restart_text(ctx: PluginContext, node: str, restarts: list[float]) -> str:
     if len(restarts) == 1:
         return f"restarted: now in process {pid}"
     return f"restarted {len(restarts)} times in {ctx.t - restarts[0]:.0f} s (now in process {pid})"
+
+
+def _last_words(e: Event) -> dict[str, Any]:
+    """The exit's last words as alert data, unless another process killed it (the node's
+    callback did not end it then)."""
+    said = e.data.get("last_words")
+    return {"last_words": said} if isinstance(said, dict) and not killed(e) else {}
+
+
+def _said(e: Event) -> str:
+    said = _last_words(e).get("last_words")
+    if not said:
+        return ""
+    node = str(said.get("node", "")).removeprefix("node:")
+    return f"; its last words, {node}: \"{said.get('text', '')}\""
 
 
 def _pid_known(ctx: PluginContext, node: str) -> bool:

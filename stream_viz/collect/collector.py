@@ -27,6 +27,7 @@ from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.goals import STATUS_SUFFIX, GoalTracker
 from stream_viz.collect.graphsignal import GraphSignal
 from stream_viz.collect.hosts import HostReports
+from stream_viz.collect.last_words import LAST_WORDS_S, last_words, note_lines
 from stream_viz.collect.naming import NodeNames, recently_left
 from stream_viz.collect.oomkills import OomKill, OomWatch
 from stream_viz.collect.params import param_event
@@ -158,6 +159,8 @@ class Collector:
         self.undiscovered = UndiscoveredWatch(domain_id)
         self._prev = new_graph()
         self._prev_pids: dict[str, int | None] = {}
+        self._prev_t: float | None = None  # the last sample's time
+        self._lines: dict[str, tuple[float, str]] = {}  # /rosout logger → its newest line (`last_words`)
         self._left: dict[str, float] = {}  # node fqn → when it left the graph
         self._dead: dict[int, ProcessReading] = {}
         self._closed = False
@@ -208,6 +211,8 @@ class Collector:
             self.gids.invalidate()
             self.qos.invalidate()
             self.structure.invalidate()
+        messages = self.topics.take_messages()
+        note_lines(self._lines, (msg for topic, msg, _, _ in messages if topic == "/rosout"))
         events = self._process_events(t, ps.exited, node_pids, ooms)
         events += self._restarts(t, node_pids)
         # Keep the process of nodes DDS still lists after their process died (SIGKILL: ~20 s).
@@ -230,7 +235,7 @@ class Collector:
         # An aggregator's "r2_localizer: ERROR" after the crash is about the node that left.
         self._left = recently_left(self._left, self._prev_pids, reading.nodes, t)
         index = NodeNames(reading.nodes, self._left)
-        events += self._message_events(t, reading, index)
+        events += self._message_events(t, reading, index, messages)
         services, calls = self._service_calls(reading)
         G = build_model(reading, pids, processes, stats, services, calls)
         self._goal_progress(G, t, reading, stats)
@@ -248,7 +253,7 @@ class Collector:
             if not st.measured and tp in reading.topics:
                 unreadable[make_id("topic", tp)] = st.reason
         d = diff(self._prev, G)
-        self._prev, self._prev_pids = G, node_pids
+        self._prev, self._prev_pids, self._prev_t = G, node_pids, t
         live = {p.prefix for p in pids.values() if p.prefix}
         self.resolver.forget(live)
         self.undiscovered.update(self._participant_gids, self.resolver.own_host, t)
@@ -267,8 +272,12 @@ class Collector:
             nodes = [make_id("node", n) for n in had]
             data = {"pid": pid, "process": make_id("process", pid), "nodes": nodes, "name": r.name,
                     "still_listed": [make_id("node", n) for n in listed]}
-            code = self.exits.take(pid) if self.exits is not None else None
+            code, ended = self.exits.take_exit(pid) if self.exits is not None else (None, None)
             level = note_exit_code(code, level, bool(listed), data)
+            # Its exit seen by the kernel pins when it died; else some time since the last sample.
+            start = ended if ended is not None else (self._prev_t or t)
+            if had and (said := last_words(self._lines, had, start - LAST_WORDS_S, ended or t)):
+                data["last_words"] = {"node": make_id("node", said[0]), "t": said[1], "text": said[2]}
             text = (f"process {pid} ({r.name}) {describe_exit(code)}"
                     + (f" with nodes {', '.join(had)}" if had else ""))
             if (oom := ooms.get(pid)) is not None:
@@ -301,12 +310,13 @@ class Collector:
                                  {"old_pid": old, "pid": pid}))
         return out
 
-    def _message_events(self, t: float, reading: GraphReading, index: NodeNames) -> list[Event]:
+    def _message_events(self, t: float, reading: GraphReading, index: NodeNames,
+                        messages: list[tuple[str, Any, int, bytes | None]]) -> list[Event]:
         services = frozenset(s for nr in reading.nodes.values() for s in (*nr.services, *nr.clients))
         actions = frozenset(a for nr in reading.nodes.values()
                             for a in (*nr.action_servers, *nr.action_clients))
         out: list[Event] = []
-        for topic, msg, recv, gid in self.topics.take_messages():
+        for topic, msg, recv, gid in messages:
             try:
                 if topic == "/rosout":
                     ev = log_event(msg, index, services, actions)

@@ -20,6 +20,7 @@ import signal
 import socket
 import struct
 import threading
+import time
 from collections import OrderedDict
 
 NETLINK_CONNECTOR = 11
@@ -84,7 +85,7 @@ class ExitCodes:
     """
 
     def __init__(self) -> None:
-        self._codes: OrderedDict[int, int] = OrderedDict()
+        self._codes: OrderedDict[int, tuple[int, float]] = OrderedDict()  # pid → (code, when seen)
         self._lock = threading.Lock()
         self._sock: socket.socket | None = None
         self.reason: str | None = None
@@ -112,8 +113,9 @@ class ExitCodes:
             got = parse(data)
             if got is None:
                 continue
+            now = time.time()
             with self._lock:
-                self._codes[got[0]] = got[1]
+                self._codes[got[0]] = (got[1], now)
                 self._codes.move_to_end(got[0])
                 while len(self._codes) > KEEP:
                     self._codes.popitem(last=False)
@@ -121,8 +123,13 @@ class ExitCodes:
     def take(self, pid: int) -> int | None:
         """The exit code of process ``pid`` if its exit was seen (forgotten once taken: pids are
         reused), else None."""
+        return self.take_exit(pid)[0]
+
+    def take_exit(self, pid: int) -> tuple[int | None, float | None]:
+        """``(exit code, when the kernel's event came, unix s)`` of process ``pid`` if its exit was
+        seen (forgotten once taken), else ``(None, None)``."""
         with self._lock:
-            return self._codes.pop(pid, None)
+            return self._codes.pop(pid, (None, None))
 
     def close(self) -> None:
         sock, self._sock = self._sock, None

@@ -47,10 +47,12 @@ class Symptoms:
     (count × severity); ``plugins`` distinct plugin names; ``first`` the member of the earliest
     alert (the first symptom); ``episodes`` runs of alerts at most ``episode_gap`` apart (the
     last one open, end INF, for a member that is gone); ``own_anomaly``/``own_onset`` the same
-    as ``anomaly``/``onset`` without the alerts a node got for its process (``data["process"]``);
+    as ``anomaly``/``onset`` without the alerts a node got for its process (``data["process"]``)
+    — but its process's death is its own when it alone logged as it died (``last_words``);
     ``named`` the names alerts give of what to blame: ``(alert member, name)`` → (first time,
     strongest severity weight); ``logged`` when a member's own log lines (symptom ``log``) began
-    to alert — a node that logs is running, which a starved one is not; ``exited`` when a node's
+    to alert, or its last words' stamp — a node that logs is running, which a starved one is
+    not; ``exited`` when a node's
     process was seen to die (an alert for its process with symptom ``exit``), ``killed`` those whose
     process was killed by a signal sent to it (data ``killed``: no input of theirs did that);
     ``latest`` the latest
@@ -153,6 +155,13 @@ def collect_symptoms(
             exited[m] = min(exited.get(m, INF), t)
             if data.get("killed") is True:
                 s.killed.add(m)
+            said = data.get("last_words")
+            if isinstance(said, dict) and said.get("node") == m:
+                # It alone logged as its process died: running then, the crash its own change.
+                own_anomaly[m] = max(own_anomaly.get(m, 0.0), x)
+                own_onset[m] = min(own_onset.get(m, INF), t)
+                at = said.get("t")
+                logged[m] = min(logged.get(m, INF), float(at) if isinstance(at, int | float) else t)
         if data and data.get("executor_stopped") is True:
             s.executor_stopped.add(m)
         if data and data.get("executor_idle") is True:
