@@ -211,8 +211,6 @@ class Collector:
             self.gids.invalidate()
             self.qos.invalidate()
             self.structure.invalidate()
-        messages = self.topics.take_messages()
-        note_lines(self._lines, (msg for topic, msg, _, _ in messages if topic == "/rosout"))
         events = self._process_events(t, ps.exited, node_pids, ooms)
         events += self._restarts(t, node_pids)
         # Keep the process of nodes DDS still lists after their process died (SIGKILL: ~20 s).
@@ -235,6 +233,10 @@ class Collector:
         # An aggregator's "r2_localizer: ERROR" after the crash is about the node that left.
         self._left = recently_left(self._left, self._prev_pids, reading.nodes, t)
         index = NodeNames(reading.nodes, self._left)
+        # Taken after `stats` drained the topics: a crash's last line may have come just now.
+        messages = self.topics.take_messages()
+        note_lines(self._lines, (msg for topic, msg, _, _ in messages if topic == "/rosout"))
+        self._last_words(t, events)
         events += self._message_events(t, reading, index, messages)
         services, calls = self._service_calls(reading)
         G = build_model(reading, pids, processes, stats, services, calls)
@@ -274,10 +276,8 @@ class Collector:
                     "still_listed": [make_id("node", n) for n in listed]}
             code, ended = self.exits.take_exit(pid) if self.exits is not None else (None, None)
             level = note_exit_code(code, level, bool(listed), data)
-            # Its exit seen by the kernel pins when it died; else some time since the last sample.
-            start = ended if ended is not None else (self._prev_t or t)
-            if had and (said := last_words(self._lines, had, start - LAST_WORDS_S, ended or t)):
-                data["last_words"] = {"node": make_id("node", said[0]), "t": said[1], "text": said[2]}
+            if ended is not None:
+                data["ended_at"] = ended
             text = (f"process {pid} ({r.name}) {describe_exit(code)}"
                     + (f" with nodes {', '.join(had)}" if had else ""))
             if (oom := ooms.get(pid)) is not None:
@@ -285,6 +285,19 @@ class Collector:
             for m in [*nodes, make_id("process", pid)]:
                 out.append(Event(t, "exit", m, level, text, data))
         return out
+
+    def _last_words(self, t: float, events: list[Event]) -> None:
+        """Put in each exit event of processes with nodes its last words (`last_words`): before
+        the kernel's exit time where known, else since the last sample."""
+        for e in events:
+            data = e.data
+            if e.kind != "exit" or not data.get("nodes") or e.member != data.get("process"):
+                continue
+            ended = data.get("ended_at")
+            start = ended if ended is not None else (self._prev_t or t)
+            fqns = [n.removeprefix("node:") for n in data["nodes"]]
+            if said := last_words(self._lines, fqns, start - LAST_WORDS_S, t if ended is None else ended):
+                data["last_words"] = {"node": make_id("node", said[0]), "t": said[1], "text": said[2]}
 
     def _still_listed(self, names: set[str]) -> set[str]:
         """Return those of ``names`` that DDS still lists a moment after their process ended.

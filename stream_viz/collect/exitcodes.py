@@ -63,6 +63,11 @@ def note_exit_code(code: int | None, level: str, still_listed: bool, data: dict)
     return "info" if code == 0 and still_listed else level
 
 
+def stamp_ns(data: bytes) -> int:
+    """When the kernel sent a process event (``CLOCK_MONOTONIC``, ns; `parse` checked the size)."""
+    return _EVENT.unpack_from(data, _NLMSG.size + _CN_MSG.size)[2]
+
+
 def parse(data: bytes) -> tuple[int, int] | None:
     """Return ``(pid, exit code)`` of a process exit in one netlink message, or None (another
     event, a thread's exit, a short message)."""
@@ -113,9 +118,10 @@ class ExitCodes:
             got = parse(data)
             if got is None:
                 continue
-            now = time.time()
+            # When it ended, by the kernel's clock: this thread may read it late on a busy monitor.
+            ended = time.time() - max(0, time.monotonic_ns() - stamp_ns(data)) / 1e9
             with self._lock:
-                self._codes[got[0]] = (got[1], now)
+                self._codes[got[0]] = (got[1], ended)
                 self._codes.move_to_end(got[0])
                 while len(self._codes) > KEEP:
                     self._codes.popitem(last=False)

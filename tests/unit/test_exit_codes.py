@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import struct
 
-from stream_viz.collect.exitcodes import PROC_EVENT_EXIT, describe_exit, exit_code, parse
+from stream_viz.collect.exitcodes import PROC_EVENT_EXIT, describe_exit, exit_code, parse, stamp_ns
 
 
 def message(what: int, pid: int, tgid: int, status: int) -> bytes:
@@ -25,3 +25,4 @@ def test_parse_keeps_process_exits_only():
     assert parse(message(PROC_EVENT_EXIT, 43, 42, 0)) is None  # a thread of 42 ended
     assert parse(message(0x00000002, 42, 42, 0)) is None  # a fork, not an exit
     assert parse(message(PROC_EVENT_EXIT, 42, 42, 0)[:40]) is None  # cut short
+    assert stamp_ns(message(PROC_EVENT_EXIT, 42, 42, 1 << 8)) == 123  # the kernel's clock, ns
