@@ -20,7 +20,7 @@ class MemberGone(Plugin):
       collector reads exit codes), its nodes listed or not; data ``killed``: killed by a signal
       another process sends (SIGKILL, SIGTERM, SIGINT, SIGHUP: `stream_viz.detect.exits.killed`),
       which none of its inputs can have caused; data ``last_words`` (not when killed so): the
-      one node of the process that logged as it died, its line and time (the collector's,
+      node of the process that logged last as it died, its line and time (the collector's,
       `stream_viz.collect.last_words`), said in the text;
     * restart: the node runs in a new process. One restart is news only as a respawn (the node
       changed process between two samples, or its last process crashed): warn. A node that keeps

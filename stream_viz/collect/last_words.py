@@ -1,4 +1,4 @@
-"""A crashed process's last words: the one of its nodes that logged as it died.
+"""A crashed process's last words: the node of it that logged last as it died.
 
 An exception out of a callback ends an rclpy process with a traceback on its stderr, which the
 monitor does not read, and the nodes of a component container all leave with it alike. What the

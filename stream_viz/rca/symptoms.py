@@ -48,7 +48,7 @@ class Symptoms:
     alert (the first symptom); ``episodes`` runs of alerts at most ``episode_gap`` apart (the
     last one open, end INF, for a member that is gone); ``own_anomaly``/``own_onset`` the same
     as ``anomaly``/``onset`` without the alerts a node got for its process (``data["process"]``)
-    — but its process's death is its own when it alone logged as it died (``last_words``);
+    — but its process's death is its own when it logged last as it died (``last_words``);
     ``named`` the names alerts give of what to blame: ``(alert member, name)`` → (first time,
     strongest severity weight); ``logged`` when a member's own log lines (symptom ``log``) began
     to alert, or its last words' stamp — a node that logs is running, which a starved one is
@@ -157,7 +157,7 @@ def collect_symptoms(
                 s.killed.add(m)
             said = data.get("last_words")
             if isinstance(said, dict) and said.get("node") == m:
-                # It alone logged as its process died: running then, the crash its own change.
+                # It logged last as its process died: running then, the crash its own change.
                 own_anomaly[m] = max(own_anomaly.get(m, 0.0), x)
                 own_onset[m] = min(own_onset.get(m, INF), t)
                 at = said.get("t")

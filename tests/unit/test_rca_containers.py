@@ -253,8 +253,8 @@ def test_the_last_words_before_a_crash_tell_the_crashed_node_apart(G):
     assert by[CAM].evidence["upstream"] > 0 and by[IMU].evidence["upstream"] > 0  # excused by the lidar
 
 
-def test_the_node_that_alone_logged_as_its_process_died_ranks_first(G):
-    # No warning before the crash; the lidar alone logged (an INFO line, the collector's
+def test_the_node_that_logged_last_as_its_process_died_ranks_first(G):
+    # No warning before the crash; the lidar logged last (an INFO line, the collector's
     # last_words in the exit) as the container died: the crash is its own, the others excused.
     said = {"node": LIDAR, "t": 9.8, "text": "Reloaded calibration (0 beams)"}
     quiet = [*silent(IMAGE, 11), *silent(SCAN, 11), *silent(IMUT, 12)]
