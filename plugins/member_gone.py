@@ -70,6 +70,8 @@ class MemberGone(Plugin):
                 continue
             # Code 0 (when the collector can read codes): it ended on purpose, without the goodbye.
             unclean = set() if exited_0(e) else set(e.data.get("still_listed", ()))
+            words = _last_words(e)
+            text = f"process died: {e.text or 'exited'}{_said(words)}"
             for m in _exited_members(ctx, e):
                 exited.add(m)
                 if m not in unclean or m in said:
@@ -77,9 +79,8 @@ class MemberGone(Plugin):
                 crashed[m] = ctx.t
                 if ok(m):
                     said.add(m)
-                    text = f"process died: {e.text or 'exited'}{_said(e)}"
                     yield ctx.alert(m, "error", text, symptom="exit", process=e.data.get("process", e.member),
-                                    clean=False, killed=killed(e), **hold, **_last_words(e))
+                                    clean=False, killed=killed(e), **hold, **words)
         for m, restarts, respawn in _restarts(ctx, crashed, clean):
             sev = _restart_severity(s, len(restarts), respawn)
             if sev is not None and ok(m):
@@ -216,8 +217,9 @@ def _last_words(e: Event) -> dict[str, Any]:
     return {"last_words": said} if isinstance(said, dict) and not killed(e) else {}
 
 
-def _said(e: Event) -> str:
-    said = _last_words(e).get("last_words")
+def _said(words: dict[str, Any]) -> str:
+    """The alert text's part for `_last_words`' data."""
+    said = words.get("last_words")
     if not said:
         return ""
     node = str(said.get("node", "")).removeprefix("node:")
