@@ -10,7 +10,7 @@ from typing import Any, ClassVar
 import networkx as nx
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.exits import exited_0, forget_clean_exits, note_clean_exits
+from stream_viz.detect.exits import error_exits, exited_0, forget_clean_exits, note_clean_exits
 from stream_viz.records import Alert
 
 
@@ -24,7 +24,8 @@ class GraphAnomalies(Plugin):
     * a subscriber whose topic has had no publisher for ``grace_s``, when that is a fault: its
       publisher died uncleanly (its process ended while DDS listed it, or it was seen not alive).
       A topic whose publishers left cleanly (deregistered: a job done, a node destroyed on
-      purpose, an on-demand publisher that comes and goes) is healthy. So is, by default, a topic
+      purpose, an on-demand publisher that comes and goes; not a process that then ended alone
+      with an error) is healthy. So is, by default, a topic
       that never had a publisher: robots subscribe to what only an operator or a tool publishes
       (``/initialpose``, ``/joy``, a console that joins later); ``never_published`` alerts on
       those too (to find a remapping typo: nobody provides what it waits for). Warn on the
@@ -79,8 +80,9 @@ def _publishers_seen(ctx: PluginContext) -> tuple[dict[str, list[str]], set[str]
     """Return topic → its publishers when it last had any, and the nodes seen to die uncleanly.
 
     A node died uncleanly when an ``exit`` event says its process ended while DDS still listed it,
-    or it is marked ``alive=False``, unless its process exited with code 0 (``exit_code``); it is
-    forgiven when it appears again.
+    or it is marked ``alive=False``, unless its process exited with code 0 (``exit_code``), or
+    its process ended alone with an error after it left (`error_exits`: a Python node's uncaught
+    exception); it is forgiven when it appears again.
     """
     had = ctx.state.setdefault("had_publishers", {})
     died = ctx.state.setdefault("died", set())
@@ -89,6 +91,8 @@ def _publishers_seen(ctx: PluginContext) -> tuple[dict[str, list[str]], set[str]
     for e in ctx.events:
         if e.kind == "exit" and not exited_0(e):
             died.update(e.data.get("still_listed", ()))
+    for _, left in error_exits(ctx.events, ctx.t, ctx.state.setdefault("error_exits", {})):
+        died.update(left)
     note_clean_exits(ctx, clean)
     forget_clean_exits(ctx, clean)
     died.update(m for m in ctx.members("node") if ctx.attr(m, "alive") is False and m not in clean)

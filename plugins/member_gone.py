@@ -6,18 +6,32 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.exits import CleanExits, exited_0, forget_clean_exits, killed, note_clean_exits
+from stream_viz.detect.exits import (
+    CleanExits,
+    error_exits,
+    exited_0,
+    forget_clean_exits,
+    killed,
+    note_clean_exits,
+)
 from stream_viz.records import Alert, Event
+
+AFTER_GOODBYE = ("after its nodes left the graph: an uncaught exception (its traceback is on its stderr), "
+                 "or a stop its code does not catch")
 
 
 class MemberGone(Plugin):
     """Alerts on a node's departure only when it is not a clean one, and on restart loops.
 
     * exit (error): the node's process ended while DDS still listed the node (the collector's
-      ``still_listed``: a crash or a kill; a node that deregisters and then its process ends,
-      exit code 0 or not, left cleanly and raises nothing); a process without nodes raises
-      nothing; so does a process that exited with code 0 (``exit_code`` in the event, where the
-      collector reads exit codes), its nodes listed or not; data ``killed``: killed by a signal
+      ``still_listed``: a crash or a kill), or ended with an error after the node left the graph
+      (a code other than 0 and the stop signals, no other process with nodes ending within 2 s:
+      a Python node's uncaught exception; data ``after_goodbye``, said once those 2 s have
+      passed, `stream_viz.detect.exits.error_exits`); a node that deregisters and then its
+      process ends with code 0, with a stop signal or together with others left cleanly and
+      raises nothing; a process without nodes raises nothing; so does a process that exited
+      with code 0 (``exit_code`` in the event, where the collector reads exit codes), its
+      nodes listed or not; data ``killed``: killed by a signal
       another process sends (SIGKILL, SIGTERM, SIGINT, SIGHUP: `stream_viz.detect.exits.killed`),
       which none of its inputs can have caused; data ``last_words`` (not when killed so): the
       node of the process that logged last as it died, its line and time (the collector's,
@@ -81,6 +95,16 @@ class MemberGone(Plugin):
                     said.add(m)
                     yield ctx.alert(m, "error", text, symptom="exit", process=e.data.get("process", e.member),
                                     clean=False, killed=killed(e), **hold, **words)
+        for e, left in error_exits(ctx.events, ctx.t, ctx.state.setdefault("error_exits", {})):
+            words = _last_words(e)
+            text = f"process died: {e.text or 'exited'}{_said(words)}, {AFTER_GOODBYE}"
+            for m in left:
+                if m in said or not ok(m):
+                    continue
+                crashed[m] = ctx.t
+                said.add(m)
+                yield ctx.alert(m, "error", text, symptom="exit", process=e.member, clean=False, killed=False,
+                                after_goodbye=True, **hold, **words)
         for m, restarts, respawn in _restarts(ctx, crashed, clean):
             sev = _restart_severity(s, len(restarts), respawn)
             if sev is not None and ok(m):

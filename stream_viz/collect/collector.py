@@ -46,6 +46,9 @@ from stream_viz.records import Event, Sample
 
 __all__ = ["Collector", "ObserverNode", "build_model", "end_node", "new_node"]
 
+# A node that left this long before its process's end left with it (rclpy sends the goodbye,
+# then the interpreter exits): the process's exit event names it.
+EXIT_AFTER_LEFT_S = 3.0
 EXIT_RECHECK_S = 0.25  # after a process ended with its nodes listed: a clean goodbye arrives by then
 
 
@@ -162,6 +165,7 @@ class Collector:
         self._prev_t: float | None = None  # the last sample's time
         self._lines: dict[str, tuple[float, str]] = {}  # /rosout logger → its newest line (`last_words`)
         self._left: dict[str, float] = {}  # node fqn → when it left the graph
+        self._left_pids: dict[str, int | None] = {}  # node fqn in `_left` → the process it was in
         self._dead: dict[int, ProcessReading] = {}
         self._closed = False
         self._whole_graph = True  # False: a plain client of a discovery server (the user's choice)
@@ -232,6 +236,7 @@ class Collector:
                              if any(g not in reading.publisher_gids.get(tp, {}) for g in st.by_publisher)})
         # An aggregator's "r2_localizer: ERROR" after the crash is about the node that left.
         self._left = recently_left(self._left, self._prev_pids, reading.nodes, t)
+        self._left_pids = {n: self._left_pids.get(n, self._prev_pids.get(n)) for n in self._left}
         index = NodeNames(reading.nodes, self._left)
         # Taken after `stats` drained the topics: a crash's last line may have come just now.
         messages = self.topics.take_messages()
@@ -267,7 +272,11 @@ class Collector:
         listed_at_read = {n for n, p in node_pids.items() if p in exited}
         still = self._still_listed(listed_at_read) if listed_at_read else set()
         for pid, r in sorted(exited.items()):
-            had = sorted({n for n, p in self._prev_pids.items() if p == pid})
+            # A process that outlived its nodes' goodbye past a sample (a slow interpreter exit)
+            # had them still: those that left within `EXIT_AFTER_LEFT_S`.
+            had = sorted({n for n, p in self._prev_pids.items() if p == pid}
+                         | {n for n, p in self._left_pids.items()
+                            if p == pid and t - self._left[n] <= EXIT_AFTER_LEFT_S})
             listed = sorted(n for n in had if node_pids.get(n) == pid and n in still)
             # Nodes still in the DDS graph after their process ended: it did not shut down cleanly.
             level = "error" if listed else ("warn" if had else "info")

@@ -29,6 +29,10 @@ from stream_viz.model.history import History
 from stream_viz.records import Alert, Event
 from stream_viz.settings import check_plugin_settings
 
+# A member that left the graph this recently may still be named by an alert: a plugin that waits
+# to be sure (a process that ended alone) speaks of it after it left.
+LEFT_KNOWN_S = 60.0
+
 
 @dataclass
 class LoadedPlugin:
@@ -84,6 +88,7 @@ class PluginSet:
         load_problems: Sequence[PluginProblem] = (),
     ) -> None:
         self.max_alerts_per_call = max_alerts_per_call
+        self._left: dict[str, float] = {}  # member -> when it left the graph (`LEFT_KNOWN_S`)
         self.max_failures = max_failures
         self.load_problems = list(load_problems)
         self.plugins: list[LoadedPlugin] = []
@@ -183,7 +188,9 @@ class PluginSet:
         watch = frozenset(watch)
         events = list(events)
         rates = dict(expected_rates or {})
-        known = set(graph.nodes) | set(diff.removed_members) | {e.member for e in events}
+        self._left = {m: t0 for m, t0 in self._left.items() if t - t0 <= LEFT_KNOWN_S and m not in graph}
+        self._left.update(dict.fromkeys(diff.removed_members, t))
+        known = set(graph.nodes) | set(self._left) | {e.member for e in events}
         by_kind, of_kind = watched_by_kind(graph, watch), members_by_kind(graph)
         alerts: list[Alert] = []
         problems: list[PluginProblem] = []

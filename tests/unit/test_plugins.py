@@ -1532,6 +1532,49 @@ def test_member_gone_a_clean_exit_and_a_process_without_nodes_raise_nothing():
     assert drive("member_gone", frames) == []
 
 
+def coded_exit(t, pid, nodes, code, still_listed=()):
+    """`exit_of` with the exit code the kernel reported."""
+    events = exit_of(t, pid, nodes, list(still_listed))
+    for e in events:
+        e.data["exit_code"] = code
+    return events
+
+
+def test_member_gone_an_error_exit_after_the_goodbye_alone_is_a_crash():
+    # /camera's process ends with code 1 in the sample its node left the graph (rclpy destroyed it
+    # on the way out of an uncaught exception); said once 2 s have passed without another exit.
+    def run(code, others=()):
+        ended = coded_exit(3.0, 100, ["node:/camera"], code)
+        frames = [(2.0, camera_in(100), []), (3.0, camera_in(None), ended)]
+        frames += [(t, camera_in(None), list(others) if t == 4.0 else []) for t in (4.0, 5.0, 6.0)]
+        return drive("member_gone", frames, full=True)
+
+    [alert] = run(1)
+    assert (alert.t, alert.member, alert.severity) == (5.0, "node:/camera", "error")
+    assert alert.data["after_goodbye"] is True and alert.data["process"] == "process:100"
+    assert "an uncaught exception" in alert.message
+    assert run(0) == [] and run(-2) == [] and run(-15) == []  # exit 0, a stop signal: a stop
+    assert run(None) == []  # no code known: a clean goodbye, as before
+    # Another process with nodes ending within 2 s: a launch file shut down, whatever the codes.
+    assert run(1, coded_exit(4.0, 200, ["node:/detector"], 0)) == []
+    assert run(1, coded_exit(4.0, 300, [], 1)) != []  # a process without nodes is no stop of the robot
+
+
+def test_error_exits_decides_after_the_window_and_groups_stops():
+    from stream_viz.detect.exits import error_exits
+
+    state: dict = {}
+    a, b = coded_exit(10.0, 1, ["node:/a"], 1), coded_exit(11.5, 2, ["node:/b"], 1)
+    assert error_exits(a, 10.0, state) == [] and error_exits([], 11.0, state) == []
+    assert error_exits(b, 11.5, state) == []
+    assert error_exits([], 12.0, state) == []  # /a's window passed: /b ended 1.5 s after it
+    assert error_exits([], 14.0, state) == []  # nor /b: /a ended 1.5 s before it
+    assert state["pending"] == {}
+    c = coded_exit(20.0, 3, ["node:/c", "node:/d"], 134, still_listed=["node:/d"])
+    assert error_exits(c, 20.0, state) == []
+    assert [(e.member, left) for e, left in error_exits([], 22.0, state)] == [("process:3", ["node:/c"])]
+
+
 def test_member_gone_a_restart_loop_is_one_escalating_symptom_of_the_node():
     # /camera crashes (still listed when its process ends) and is started again, 7 times in 35 s.
     frames, pid = [(0.0, camera_in(100), [])], 100
@@ -1858,6 +1901,22 @@ def without_camera(alive=True):
     G = model(alive=alive)
     G.remove_nodes_from(["node:/camera", "process:100"])
     return G
+
+
+def test_graph_anomalies_a_publisher_whose_process_ended_alone_with_an_error_died():
+    # /camera deregisters and its process exits 1 at t=3 (an uncaught exception): /detector's
+    # input lost its publisher, a fault after the grace; with another process ending at once it
+    # is a stop of the robot: nothing.
+    def run(others=()):
+        frames = [(float(t), model(), []) for t in range(3)]
+        frames += [(3.0, without_camera(), coded_exit(3.0, 100, ["node:/camera"], 1) + list(others))]
+        frames += [(float(t), without_camera(), []) for t in range(4, 12)]
+        return drive("graph_anomalies", frames, full=True)
+
+    alerts = run()
+    assert {(a.member, a.data["symptom"]) for a in alerts} == {("node:/detector", "no_publisher")}
+    assert min(a.t for a in alerts) == 8.0 and "since its publisher /camera died" in alerts[0].message
+    assert run(coded_exit(3.0, 400, ["node:/ui"], 1)) == []
 
 
 def test_graph_anomalies_a_publisher_that_left_cleanly_leaves_no_orphan_fault():
