@@ -2,8 +2,10 @@
 `bench.retail.robot`).
 
 Its executor spins until Ctrl-C, or ``run_for`` s when > 0 (an operator's session); an uncaught
-exception in a callback ends the process with code 1, its traceback printed, as a launched node
-dies. The harness's ``cpu`` and ``leak`` faults (`bench.handwritten.Robot.inject`) write
+exception in a callback ends the process with code 1, its traceback printed, at once, its nodes
+still listed (as a C++ node's abort ends it); with ``ROBOT_PYTHON_EXIT=1`` in the environment, as
+Python ends it: the nodes deregister on the way out, then code 1. The harness's ``cpu`` and
+``leak`` faults (`bench.handwritten.Robot.inject`) write
 ``FAULT_DIR/<process>.cpu`` / ``.leak``: the process then runs a hook of its own (a log line, its
 own leak) and a CPU burner thread or, without a leak hook of its own, a generic leak.
 """
@@ -27,6 +29,8 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Header
+
+PYTHON_EXIT = "ROBOT_PYTHON_EXIT"
 
 
 def burn() -> None:
@@ -75,6 +79,10 @@ def spin(ex: Executor, fault_dir: Path, process: str, run_for: float,
     except Exception:  # an uncaught exception in a callback ends the process
         traceback.print_exc()
         sys.stderr.flush()
+        if os.environ.get(PYTHON_EXIT):  # what Python's exit does to rclpy's nodes, then code 1
+            for node in ex.get_nodes():
+                node.destroy_node()
+            rclpy.try_shutdown()
         os._exit(1)
     try:
         ex.shutdown(timeout_sec=1.0)
