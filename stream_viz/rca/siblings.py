@@ -202,9 +202,10 @@ def _stopped(v: OwnChange) -> float:
 
 
 def _spoke(v: OwnChange, tol: float) -> bool:
-    """True when ``v`` logged by the time its outputs stopped: it ran while a stall starved the
-    others (a starved node cannot log)."""
-    return v.logged <= v.own_onset + tol
+    """True when ``v`` logged by the time its outputs stopped or its process died: it ran while
+    a stall starved the others (a starved node cannot log). A node that left with its process
+    (its goodbye sent: no silence follows) may have no own change but the death."""
+    return v.logged < INF and v.logged <= min(v.own_onset, v.exited) + tol
 
 
 def _fed_by(G: nx.MultiDiGraph, n: str, others: set[str],

@@ -267,6 +267,19 @@ def test_the_node_that_logged_last_as_its_process_died_ranks_first(G):
     assert len({by[n].score for n in (CAM, LIDAR, IMU)}) == 1
 
 
+def test_last_words_tell_apart_nodes_that_left_with_their_process(G):
+    # A Python container's exception: rclpy destroyed the nodes on the way out, so their topics
+    # lost their publishers and no silence follows; the crash alerts are all each node has.
+    said = {"node": LIDAR, "t": 9.8, "text": "Reloaded calibration (0 beams)"}
+    gone = [al(n, "member_gone", 12, symptom="exit", process=BOX, last_words=said, after_goodbye=True)
+            for n in (CAM, LIDAR, IMU)]
+    by, order = rank(G, gone)
+    assert order[0] == LIDAR and "indistinguishable_from" not in by[LIDAR].evidence
+    assert by[LIDAR].score > max(by[CAM].score, by[IMU].score)
+    by, order = rank(G, [al(n, "member_gone", 12, symptom="exit", process=BOX) for n in (CAM, LIDAR, IMU)])
+    assert len({by[n].score for n in (CAM, LIDAR, IMU)}) == 1
+
+
 CROP, GROUND, VOXEL = "node:/crop", "node:/ground", "node:/voxel"
 
 
