@@ -97,7 +97,7 @@ class MemberGone(Plugin):
                                     clean=False, killed=killed(e), **hold, **words)
         for e, left in error_exits(ctx.events, ctx.t, ctx.state.setdefault("error_exits", {})):
             words = _last_words(e)
-            text = f"process died: {e.text or 'exited'}{_said(words)}, {AFTER_GOODBYE}"
+            text = f"process died: {e.text or 'exited'}, {AFTER_GOODBYE}{_said(words)}"
             for m in left:
                 if m in said or not ok(m):
                     continue
