@@ -164,8 +164,40 @@ def with_server(env_of: Callable[[int], dict[str, str]]) -> Callable[[int], dict
                                FASTDDS_BUILTIN_TRANSPORTS="UDPv4", FASTRTPS_DEFAULT_PROFILES_FILE=profile)
 
 
+# A star: each process announces itself to the agent alone (its only initial peer, no multicast
+# sent) and never hears of the others, so the N² discovery among the robot's processes, which is
+# not the agent's cost, stays out of the measurement.
+STAR = """<?xml version="1.0" encoding="UTF-8" ?>
+<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <participant profile_name="star" is_default_profile="true">
+    <rtps><builtin>
+      <mutation_tries>{tries}</mutation_tries>
+      <initialPeersList><locator><udpv4><address>127.0.0.1</address><port>{port}</port></udpv4></locator>
+      </initialPeersList>
+    </builtin></rtps>
+  </participant>
+</profiles>
+"""
+
+
+def star_port(domain: int) -> int:
+    """The agent's discovery (metatraffic unicast) port: the computer's first participant of
+    ``domain`` (RTPS's well-known ports: 7400 + 250 × domain + 10 + 2 × participant id)."""
+    return 7410 + 250 * domain
+
+
+def star(env: dict[str, str], domain: int, tries: int = 1000) -> dict[str, str]:
+    """The environment of a process that discovers the agent alone (`STAR`): its own profile,
+    rmw leaving Fast DDS's discovery settings as the profile says, UDP only."""
+    path = Path(tempfile.mkdtemp(prefix="bench_agent_star_")) / "star.xml"
+    path.write_text(STAR.format(tries=tries, port=star_port(domain)))
+    return dict(env, ROS_AUTOMATIC_DISCOVERY_RANGE="SYSTEM_DEFAULT", FASTRTPS_DEFAULT_PROFILES_FILE=str(path),
+                FASTDDS_BUILTIN_TRANSPORTS="UDPv4")
+
+
 def measure(n: int, seconds: float, period: float, settle: float,
-            env_of: Callable[[int], dict[str, str]] = ros_env, server: bool = False) -> dict[str, float]:
+            env_of: Callable[[int], dict[str, str]] = ros_env, server: bool = False,
+            stars: bool = False) -> dict[str, float]:
     domain = claim_domain()
     env = env_of(domain)
     os.environ.update(env)
@@ -177,7 +209,11 @@ def measure(n: int, seconds: float, period: float, settle: float,
         ds = discovery_server(env, Path(tempfile.mkdtemp(prefix="bench_agent_ds_")) / "server.log")
     try:
         with Agent(domain, period) as agent:
-            kids = start(n, env)  # after the agent joined (the module's docstring)
+            if stars:
+                ports = {c.laddr.port for c in psutil.Process().net_connections("udp")}
+                if star_port(domain) not in ports:
+                    raise RuntimeError(f"the agent is not on port {star_port(domain)} ({sorted(ports)})")
+            kids = start(n, star(env, domain) if stars else env)  # after the agent joined (the docstring)
             mapped = _mapped(agent, n)
             for _ in range(int(settle / period)):  # discovery of N participants calms down
                 agent.step()
@@ -293,12 +329,19 @@ def main() -> None:
     ap.add_argument("--discovery-server", action="store_true",
                     help="discovery through Fast DDS's discovery server, the agent a super client "
                          "(only with --lab: the server listens on the lab computer's loopback)")
+    ap.add_argument("--star", action="store_true",
+                    help="each process discovers the agent alone, not the others (only with --lab: "
+                         "their discovery settings are Fast DDS's, multicast included)")
     ap.add_argument("--subnet", action="store_true", help=argparse.SUPPRESS)  # set inside the lab
     a = ap.parse_args()
     if a.lab:
         sys.exit(in_lab([x for x in sys.argv[1:] if x != "--lab"]))
     if a.discovery_server and not a.subnet:
         ap.error("--discovery-server needs --lab (its server's traffic stays in the lab computer)")
+    if a.star and not a.subnet:
+        ap.error("--star needs --lab (its processes' discovery traffic stays in the lab computer)")
+    if a.star and (a.side_by_side or a.discovery_server):
+        ap.error("--star measures one agent, with simple discovery")
     if a.discovery_server and a.side_by_side:
         ap.error("--discovery-server measures one agent, not --side-by-side")
     env_of = lab_env if a.subnet else ros_env
@@ -317,7 +360,7 @@ def main() -> None:
             "bytes/s published", "report (bytes)")
     _table(cols, ((r["processes"], r["mapped"], r["tracked"], f"{r['cpu_percent']:.2f}",
                    f"{r['step_percent']:.2f}", f"{r['bytes_per_s']:.0f}", f"{r['report_bytes']:.0f}")
-                  for r in (measure(n, a.seconds, a.period, a.settle, env_of, a.discovery_server)
+                  for r in (measure(n, a.seconds, a.period, a.settle, env_of, a.discovery_server, a.star)
                             for n in a.processes)))
 
 if __name__ == "__main__":
