@@ -39,6 +39,9 @@ STALE_MIN_S = 2.0
 # A host seen for less than this without a report may still have an agent starting: its nodes
 # wait (as on one computer, pid_status "remote") rather than enter the model under a provisional name.
 AGENT_GRACE_S = 3.0
+# A node that left the graph this long before its agent reported its process ended left with it
+# (rclpy sends the goodbye, then the interpreter exits): an agent's period and a monitor's later.
+REMOTE_LEFT_S = 5.0
 
 
 @dataclass
@@ -202,13 +205,14 @@ def _place_node(G: nx.MultiDiGraph, fqn: str, prefix: str, host: str, got: Recei
 
 
 def remote_exits(t: float, host: str, before: HostReport, now: HostReport,
-                 node_prefix: dict[str, str]) -> list[Event]:
+                 node_prefix: dict[str, str], left: Mapping[str, str] | None = None) -> list[Event]:
     """The ``exit`` events of processes alive in the agent's previous report and ended in this one,
     or left out of it once DDS no longer lists their nodes; as the collector's: nodes DDS still
     lists make it an error (no clean shutdown). The agent keeps a process that ended in its
     reports while DDS lists its nodes, so one left out while they are listed has not ended.
 
-    ``node_prefix`` maps the node fqns listed now to their participant's GUID prefix.
+    ``node_prefix`` maps the node fqns listed now to their participant's GUID prefix, ``left``
+    those that left the graph lately (`recently_left_prefixes`): a process's nodes too.
     """
     listed_prefixes = set(node_prefix.values())
     out = []
@@ -217,8 +221,9 @@ def remote_exits(t: float, host: str, before: HostReport, now: HostReport,
         if not p.alive or (after is not None and after.alive and _same_start(p, after)):
             continue
         prefixes = {pre for pre, q in before.participants.items() if q == pid}
-        had = sorted(n for n, pre in node_prefix.items() if pre in prefixes)
-        listed = [n for n in had if node_prefix[n] in listed_prefixes]
+        had = sorted({n for n, pre in node_prefix.items() if pre in prefixes}
+                     | {n for n, pre in (left or {}).items() if pre in prefixes and n not in node_prefix})
+        listed = [n for n in had if node_prefix.get(n) in listed_prefixes]
         still = bool(prefixes & listed_prefixes)
         if after is None and still and not set(now.participants) & prefixes:
             continue  # left out while the agent maps its participants again: not said to have ended
@@ -264,6 +269,17 @@ def remote_restarts(t: float, before: dict[str, tuple[str, int]],
     return out
 
 
+def recently_left_prefixes(left: Mapping[str, tuple[str, float]], before: Mapping[str, str],
+                           now: Mapping[str, str], t: float,
+                           keep_s: float = REMOTE_LEFT_S) -> dict[str, tuple[str, float]]:
+    """Return node → (its participant's GUID prefix, when it left) of the nodes that left the graph
+    within ``keep_s`` before ``t``: ``left`` the previous answer, ``before`` and ``now`` node →
+    prefix of the previous sample and this one (a node listed again is not left)."""
+    out = {n: v for n, v in left.items() if n not in now and t - v[1] <= keep_s}
+    out.update({n: (pre, t) for n, pre in before.items() if n not in now and n not in out})
+    return out
+
+
 class HostReports:
     """Reads the agents' reports (a raw best-effort subscription, drained at each sample) and
     merges them into the collector's model.
@@ -287,6 +303,8 @@ class HostReports:
         self.first_seen: dict[int, float] = {}
         self.machine = MachineSampler()  # this computer's host θ
         self._pids: dict[str, tuple[str, int]] = {}  # remote node -> (host, pid) last sample
+        self._prefixes: dict[str, str] = {}  # node -> its participant's prefix, last sample
+        self._left: dict[str, tuple[str, float]] = {}  # `recently_left_prefixes`
         self._type = DiagnosticArray
         self._sub = node.create_subscription(DiagnosticArray, AGENT_TOPIC, lambda m: None, QOS)
 
@@ -322,9 +340,12 @@ class HostReports:
         node_prefix = {fqn: p.prefix for fqn, p in pids.items() if p.prefix}
         for prefix in node_prefix.values():
             self.first_seen.setdefault(host_of_prefix(prefix), t)
+        self._left = recently_left_prefixes(self._left, self._prefixes, node_prefix, t)
+        self._prefixes = node_prefix
+        left = {n: pre for n, (pre, _) in self._left.items()}
         events = []
         for _, (before, after) in sorted(new.items()):
-            events += remote_exits(t, after.host, before, after, node_prefix)
+            events += remote_exits(t, after.host, before, after, node_prefix, left)
         local = [p.pid for p in pids.values() if p.status in ("confirmed", "unverified") and p.pid]
         unknown = merge_hosts(G, pids, self.own, self.received, t, self.names,
                               self.first_seen, self.machine.sample(local))

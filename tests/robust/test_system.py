@@ -349,6 +349,65 @@ def test_an_agent_says_how_a_process_of_its_host_ended(children, ros_domain, tmp
     assert (failing.level, failing.data["exit_code"]) == ("error", 1), failing
 
 
+RAISER = """
+import os, sys, rclpy
+rclpy.init()
+n = rclpy.create_node("raiser")
+def tick():
+    if os.path.exists(sys.argv[1]):
+        raise RuntimeError("calibration file is empty")
+n.create_timer(0.1, tick)
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+
+def test_an_agent_says_a_python_node_that_raised_ended_with_an_error(children, ros_domain, tmp_path):
+    """On a computer of its own, a Python node's uncaught exception: rclpy sends its goodbye (DDS
+    lists it no more), then the process exits 1. The monitor's exit event from the agent's report
+    still names the node that left (`recently_left_prefixes`), and it is an error exit alone."""
+    from stream_viz.collect.agent import Agent
+    from stream_viz.collect.fastdds import decode_gid
+    from stream_viz.collect.hostreport import decode, encode
+    from stream_viz.collect.hosts import recently_left_prefixes, remote_exits
+    from stream_viz.detect.exits import error_exits
+    from stream_viz.model.ids import node_fqn
+
+    go = tmp_path / "go"
+    raiser = children.python(RAISER, str(go), name="raiser")
+    with Agent(ros_domain, 0.5, "b") as agent:
+        if agent.exits.reason is not None:
+            pytest.skip(agent.exits.reason)
+
+        def listed():
+            infos = agent.node.get_publishers_info_by_topic("/rosout")
+            return {node_fqn(i.node_namespace, i.node_name): decode_gid(bytes(i.endpoint_gid)).prefix
+                    for i in infos if i.node_name == "raiser"}
+
+        def mapped():
+            r = decode(encode(agent.sample()))
+            return r if raiser.pid in set(r.participants.values()) and listed() else None
+        before = wait_for(mapped, timeout=20, period=0.3)
+        prefixes, left, exits, state = listed(), {}, [], {}
+
+        def ended():
+            nonlocal before, prefixes, left
+            now = decode(encode(agent.sample(), set(before.processes)), before)
+            now_listed, t = listed(), time.time()  # after: a goodbye sent before the exit is in
+            left, prefixes = recently_left_prefixes(left, prefixes, now_listed, t), now_listed
+            exits.extend(remote_exits(t, "b", before, now, now_listed, {n: p for n, (p, _) in left.items()}))
+            before = now
+            return any(e.member == f"process:b/{raiser.pid}" for e in exits)
+        go.touch()
+        wait_for(ended, timeout=10, period=0.3)
+    assert raiser.wait(timeout=5) == 1
+    proc = next(e for e in exits if e.member == f"process:b/{raiser.pid}")
+    said = (proc.data["exit_code"], proc.data["nodes"], proc.data["still_listed"])
+    assert said == (1, ["node:/raiser"], []), proc
+    decided = error_exits(exits, proc.t, state) + error_exits([], proc.t + 2.0, state)
+    assert [(e.member, nodes) for e, nodes in decided] == [(proc.member, ["node:/raiser"])]
+
+
 def test_ancestors_of_the_nodes_processes_are_read_every_fifth_sample(children):
     """The launch tree above the nodes (here: this test process) is read every 5th sample and
     stays in the tree without metrics in between; the given processes are read every time."""

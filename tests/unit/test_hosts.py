@@ -5,7 +5,14 @@ from __future__ import annotations
 import math
 
 from stream_viz.collect.hostreport import HOST_STATUS, HostReport, decode, encode, host_of_prefix
-from stream_viz.collect.hosts import Received, merge_hosts, remote_exits, remote_pids, remote_restarts
+from stream_viz.collect.hosts import (
+    Received,
+    merge_hosts,
+    recently_left_prefixes,
+    remote_exits,
+    remote_pids,
+    remote_restarts,
+)
 from stream_viz.collect.oomkills import OomKill
 from stream_viz.collect.processes import cores_of, parse_pressure, pressure_percent
 from stream_viz.collect.readings import PidInfo, ProcessReading
@@ -148,6 +155,10 @@ def test_remote_exit_is_an_error_while_dds_still_lists_the_node():
     del gone.processes[10]
     ev = remote_exits(5.0, "b", _report(), gone, {})  # ended cleanly: DDS no longer lists /cam
     assert [(e.member, e.level) for e in ev] == [("process:b/10", "warn")]
+    # /cam left the graph a sample before the report of its process's end: still its node
+    ev = remote_exits(5.0, "b", _report(), gone, {}, {"/cam": PRE_B})
+    assert [(e.member, e.level) for e in ev] == [("node:/cam", "warn"), ("process:b/10", "warn")]
+    assert ev[0].data["nodes"] == ["node:/cam"] and ev[0].data["still_listed"] == []
     lost = _report(seq=2)  # the agent maps its participants again: /cam listed, its process left out
     del lost.processes[10]
     lost.participants = {}
@@ -434,3 +445,11 @@ def test_a_host_s_cpu_is_the_use_of_the_cores_its_robot_may_run_on():
     assert cores_of(4, [2, 1, 2]) == [1, 2]  # a cpuset of 2 of 4 cores
     assert cores_of(2, []) == [0, 1]  # none known: every core
     assert cores_of(2, [7]) == [0, 1]  # a core psutil does not list: every core
+
+
+def test_recently_left_prefixes_keeps_a_node_that_left_for_a_while():
+    left = recently_left_prefixes({}, {"/cam": "p1", "/imu": "p2"}, {"/imu": "p2"}, 10.0, keep_s=5.0)
+    assert left == {"/cam": ("p1", 10.0)}
+    assert recently_left_prefixes(left, {"/imu": "p2"}, {"/imu": "p2"}, 15.0, keep_s=5.0) == left
+    assert recently_left_prefixes(left, {"/imu": "p2"}, {"/imu": "p2"}, 15.5, keep_s=5.0) == {}
+    assert recently_left_prefixes(left, {"/imu": "p2"}, {"/imu": "p2", "/cam": "p3"}, 11.0) == {}  # back
