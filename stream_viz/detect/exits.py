@@ -47,8 +47,8 @@ def forget_clean_exits(ctx: PluginContext, clean: CleanExits) -> None:
         del clean[m]
 
 
-# Processes that end this close together were stopped together (a launch file shut down, Ctrl-C
-# to a terminal's process group): a stop, whatever their codes.
+# Processes that end this close together were stopped together (a launch file or a supervisor
+# stopping them all): a stop, whatever their codes.
 STOP_TOGETHER_S = 2.0
 
 
@@ -58,12 +58,13 @@ def error_exits(events: list[Event], t: float, state: dict,
     left the graph, alone: ``(the process's exit event, its nodes that had left)``.
 
     A Python node's uncaught exception ends its process this way: rclpy destroys its nodes on
-    the way out (DDS gets the goodbye) and the interpreter exits with code 1. So does a stop
-    (SIGINT, SIGTERM) of code that does not catch rclpy's ``ExternalShutdownException``, but a
-    stop comes to several processes together. An exit counts when its code is known and neither
-    0 nor a stop signal (`KILL_SIGNALS`; still-listed nodes are a crash the caller sees anyway),
-    once ``together_s`` has passed without another process with nodes ending within
-    ``together_s`` of it. ``events``: this sample's; ``state``: the caller's, kept between calls.
+    the way out (DDS gets the goodbye) and the interpreter exits with code 1. So may SIGTERM
+    (rclpy's ``ExternalShutdownException`` uncaught, or its shutdown racing the executor; Ctrl-C
+    ends with -2 or 0), but a stop usually comes to several processes together. An exit counts
+    when its code is known and neither 0 nor a stop signal (`KILL_SIGNALS`; still-listed nodes
+    are a crash the caller sees anyway), once ``together_s`` has passed without another process
+    with nodes ending within ``together_s`` of it. ``events``: this sample's; ``state``: the
+    caller's, kept between calls.
     """
     pending = state.setdefault("pending", {})  # process -> (t, its exit event, the nodes that left)
     recent = state.setdefault("recent", {})  # process -> when it was seen to end (one with nodes)
