@@ -16,7 +16,11 @@ from stream_viz.testing import ros_env
 pytestmark = pytest.mark.ros
 
 NODE = """
-import sys, rclpy
+import signal, sys
+# Python's own Ctrl-C handler, as a process started from a terminal or launch has it; one started
+# in the background of a shell (a CI run so) inherits SIGINT ignored, and rclpy keeps that.
+signal.signal(signal.SIGINT, signal.default_int_handler)
+import rclpy
 from rclpy.executors import ExternalShutdownException
 shape, act = sys.argv[1], sys.argv[2]
 rclpy.init()

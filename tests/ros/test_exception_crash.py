@@ -44,7 +44,12 @@ rclpy.spin(n)
 """
 
 # A tool an operator runs and stops: argument its node name.
-TOOL = HEAD + """
+TOOL = """
+import signal
+# Python's own Ctrl-C handler, as from a terminal, set before rclpy.init() chains to it: a child
+# of a shell's background job (a CI run so) inherits SIGINT ignored.
+signal.signal(signal.SIGINT, signal.default_int_handler)
+""" + HEAD + """
 n = Node(sys.argv[1])
 n.create_subscription(String, "/detections", lambda m: None, 10)
 print("ready", flush=True)
