@@ -26,6 +26,7 @@ import networkx as nx
 
 from stream_viz.collect.exitcodes import describe_exit, note_exit_code
 from stream_viz.collect.hostreport import AGENT_TOPIC, HostReport, StatusRow, decode, host_of_prefix
+from stream_viz.collect.naming import recently_left
 from stream_viz.collect.processes import MachineSampler
 from stream_viz.collect.readings import PidInfo, ProcessReading
 from stream_viz.model.graph import PROCESS_TREE, add_member, add_tree_edge
@@ -273,11 +274,10 @@ def recently_left_prefixes(left: Mapping[str, tuple[str, float]], before: Mappin
                            now: Mapping[str, str], t: float,
                            keep_s: float = REMOTE_LEFT_S) -> dict[str, tuple[str, float]]:
     """Return node → (its participant's GUID prefix, when it left) of the nodes that left the graph
-    within ``keep_s`` before ``t``: ``left`` the previous answer, ``before`` and ``now`` node →
-    prefix of the previous sample and this one (a node listed again is not left)."""
-    out = {n: v for n, v in left.items() if n not in now and t - v[1] <= keep_s}
-    out.update({n: (pre, t) for n, pre in before.items() if n not in now and n not in out})
-    return out
+    within ``keep_s`` before ``t`` (`naming.recently_left`): ``left`` the previous answer,
+    ``before`` and ``now`` node → prefix of the previous sample and this one."""
+    when = recently_left({n: t0 for n, (_, t0) in left.items()}, before, now, t, keep_s)
+    return {n: (left[n][0] if n in left else before[n], t0) for n, t0 in when.items()}
 
 
 class HostReports:

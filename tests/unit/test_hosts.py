@@ -450,6 +450,6 @@ def test_a_host_s_cpu_is_the_use_of_the_cores_its_robot_may_run_on():
 def test_recently_left_prefixes_keeps_a_node_that_left_for_a_while():
     left = recently_left_prefixes({}, {"/cam": "p1", "/imu": "p2"}, {"/imu": "p2"}, 10.0, keep_s=5.0)
     assert left == {"/cam": ("p1", 10.0)}
-    assert recently_left_prefixes(left, {"/imu": "p2"}, {"/imu": "p2"}, 15.0, keep_s=5.0) == left
+    assert recently_left_prefixes(left, {"/imu": "p2"}, {"/imu": "p2"}, 14.5, keep_s=5.0) == left
     assert recently_left_prefixes(left, {"/imu": "p2"}, {"/imu": "p2"}, 15.5, keep_s=5.0) == {}
     assert recently_left_prefixes(left, {"/imu": "p2"}, {"/imu": "p2", "/cam": "p3"}, 11.0) == {}  # back
