@@ -130,6 +130,9 @@ class TopicRate(Plugin):
         **BASELINE_SETTINGS,
         "drop_ratio": 0.5,
         "drop_k": 3.0,
+        "slow_ratio": 0.8,
+        "slow_k": 10.0,
+        "slow_drop_s": 10.0,
         "min_baseline_hz": 0.5,
         "confirm": 2,
         "silence_periods": 3.0,
@@ -856,32 +859,49 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
         now_pace = ctx.value(CLOCK, "sim_pace")
         expect, sigma = per_sim[0] * now_pace, per_sim[1] * now_pace
     # An empty window is a quiet (judged by `_silence`), not a lower rate.
-    low = (not quieting and 0 < now_rate < s["drop_ratio"] * expect
-           and expect - now_rate >= s["drop_k"] * sigma)
-    low = low and not _lost_on_the_way(ctx, topic, rate, med)
+    deep = 0 < now_rate < s["drop_ratio"] * expect and expect - now_rate >= s["drop_k"] * sigma
+    # A steady topic slowed by a fifth or more, far outside its own spread, for long: a sensor
+    # dropping one message in three (a link that lost its requested interval) is no load hiccup.
+    # One publisher's own stream: several interleave, and one joining or pausing moves the sum.
+    slow = (0 < now_rate < s["slow_ratio"] * expect and expect - now_rate >= s["slow_k"] * sigma
+            and len(ctx.publishers(topic)) == 1)
+    lost = (deep or slow) and _lost_on_the_way(ctx, topic, rate, med)
+    deep, slow = not quieting and deep and not lost, not quieting and slow and not lost
     # A drop lasts longer than any healthy pause of the topic (its recent rate counts a pause).
-    samples, lasted = streak(ctx.state, (topic, "drop"), low), held(ctx.state, (topic, "drop"), low, ctx.t)
+    # The slow tier keeps its own streak: a pause's edges (a window half full) must not lengthen
+    # a deep drop's.
+    samples, lasted = streak(ctx.state, (topic, "drop"), deep), held(ctx.state, (topic, "drop"), deep, ctx.t)
+    slower = deep or slow
+    slow_n = streak(ctx.state, (topic, "slow"), slower)
+    slow_s = held(ctx.state, (topic, "slow"), slower, ctx.t)
+    if not deep and slow:
+        samples, lasted = slow_n, slow_s
     # Modes hold in later runs of the robot (`learned`): a link steps down again as it did then.
     known = ctx.learned.setdefault("modes", {})
     modes = known.get(topic, [])
     ratio = now_rate / expect if expect > 0 else 1.0
-    run = _drop_run(ctx, topic, low, ratio, quieting)
+    run = _drop_run(ctx, topic, deep, ratio, quieting)  # deep runs only: modes as they were learned
     if run is not None:  # a drop that ended by itself, the topic back at its rate: one of its modes
         modes = known[topic] = learn_mode(modes, *run)
-    if samples < s["confirm"] or lasted < r.longest:
+    # A slow drop holds for slow_drop_s and as many samples in a row (at the default 1 s period):
+    # a topic gone from the graph between two slow samples is not judged between them.
+    if (samples < s["confirm"] or lasted < r.longest
+            or (not deep and (lasted < s["slow_drop_s"] or samples < s["slow_drop_s"]))):
         return None
     # Its rate follows what reaches it (a gait published slower as its commands stop); once so,
     # this drop stays the input's for input_grace_s after the input resumed: the recent rate
     # still counts the slow intervals when the input's first messages are back.
     follows = ctx.state.setdefault("drop_follows", {})  # topic -> (its drop's start, last explained)
-    start = held_since(ctx.state, (topic, "drop"))
+    start = held_since(ctx.state, (topic, "drop" if deep else "slow"))
     start = ctx.t - lasted if start is None else start
     if _input_stopped(ctx, topic, start, rhythms):
         follows[topic] = (start, ctx.t)
         return None
     if follows.get(topic, (None, -math.inf))[0] == start and ctx.t - follows[topic][1] <= s["input_grace_s"]:
         return None
-    if in_mode(modes, ratio, lasted, s["gap_margin"]) or _low_before(ctx, topic, now_rate, expect, lasted):
+    level = s["drop_ratio"] if deep else s["slow_ratio"]
+    if in_mode(modes, ratio, lasted, s["gap_margin"]) or _low_before(ctx, topic, now_rate, expect, lasted,
+                                                                     level):
         return None  # a lower rate it has shown and left by itself (a link throttled, a mode)
     steady = per_sim is not None and per_sim[1] <= STEADY_PER_SIM * per_sim[0]
     if lasted < s["irregular_drop_s"] and not steady and _irregular(ctx, topic, med):
@@ -892,8 +912,9 @@ def _drop(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, rate: 
                      symptom="rate_drop", rate_hz=now_rate, baseline_hz=usual, sim_pace_ratio=pace)
 
 
-def _low_before(ctx: PluginContext, topic: str, now_rate: float, expect: float, lasted: float) -> bool:
-    """True when the topic's rate was below ``drop_ratio`` × ``expect``, and at most twice
+def _low_before(ctx: PluginContext, topic: str, now_rate: float, expect: float, lasted: float,
+                ratio: float) -> bool:
+    """True when the topic's rate was below ``ratio`` (the drop's tier) × ``expect``, and at most twice
     ``now_rate``, for a spell earlier in its history that ended by itself (after the
     collector's ``rate_window_s`` first filled, and since the rate was last learned anew), for
     ``confirm`` s at least, and
@@ -910,7 +931,7 @@ def _low_before(ctx: PluginContext, topic: str, now_rate: float, expect: float, 
     keep = times >= since
     if not keep.any():
         return False
-    level = min(s["drop_ratio"] * expect, 2.0 * now_rate)  # as low as now, or half as low at most
+    level = min(ratio * expect, 2.0 * now_rate)  # as low as now, or half as low at most
     _, longest = excursions(np.append(times[keep], ctx.t), -np.append(rates[keep], now_rate), -level)
     return longest >= s["confirm"] and lasted <= s["gap_margin"] * longest
 

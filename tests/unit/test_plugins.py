@@ -247,6 +247,19 @@ def test_topic_rate_an_irregular_topic_s_chance_quiet_is_no_silence():
     assert [a[0] for a in drive("topic_rate", frames(0.6, stopped))] == [33.0, 34.0, 35.0]
 
 
+def test_topic_rate_a_steady_topic_slowed_by_a_third_for_long_is_a_drop_a_noisy_one_is_not():
+    # 50 Hz at 30 s falls to 33 Hz for good. Steady (0.5 % noise): far outside its spread, a drop
+    # once it held slow_drop_s (10 s). Noisy (10 %): within ten of its σ, nothing; nor 8 s of it.
+    def frames(rel, low_until=80):
+        return [(float(t), model(rate=(r := noisy(50.0, rel) if t < 30 or t >= low_until else 33.0),
+                                 recent=r), []) for t in range(80)]
+
+    times = [t for t, _, _ in drive("topic_rate", frames(0.005))]
+    assert times and times[0] == 40.0 and times == [float(t) for t in range(40, 80)]
+    assert drive("topic_rate", frames(0.10)) == []
+    assert drive("topic_rate", frames(0.005, low_until=38)) == []
+
+
 def test_topic_rate_drop_from_the_recent_rate():
     # Slowed to a quarter: the recent rate shows it while the window's rate is still above half.
     frames = [(float(t), model(rate=noisy(10.0), recent=noisy(10.0)), []) for t in range(30)]

@@ -80,6 +80,20 @@ def test_a_continuous_topic_slowed_to_a_quarter_is_a_rate_drop(hz):
     assert first.data["symptom"] == "rate_drop" and HANG < first.t < HANG + 6.0, (first.t, first.message)
 
 
+@pytest.mark.parametrize("hz", [10.0, 30.0, 50.0])
+def test_a_steady_topic_that_loses_one_message_in_three_is_a_rate_drop_after_slow_drop_s(hz):
+    # Two thirds of its rate (a sensor stream that lost its requested interval): above half, so
+    # not the deep drop; a slow one once it held `slow_drop_s` (10 s), a sample or two later.
+    rng = np.random.default_rng(int(hz))
+    msgs = [m for m in messages(rng, END, END, hz, jitter=0.05) if m < HANG]
+    msgs += [HANG + (k + rng.uniform(-0.05, 0.05)) / hz for k in range(int((END - HANG) * hz)) if k % 3 != 2]
+    alerts = drive("topic_rate", sampled(sorted(msgs), samples(rng)), full=True)
+    assert alerts, "no alert"
+    first = alerts[0]
+    assert first.data["symptom"] == "rate_drop", first.message
+    assert HANG + 10.0 < first.t < HANG + 14.0, (first.t, first.message)
+
+
 def test_a_symptom_quiet_ended_by_a_restarted_stream_is_learned_as_a_gap():
     from stream_viz.detect.rhythm import Rhythm, follow, restarted
 
