@@ -33,6 +33,9 @@ from stream_viz.records import Alert
 
 Baseline = tuple[float, float, int] | None
 TRANSITIONS_KEPT = 8  # per node: enough for the changes around one quiet
+# A WARN line again within this of the node's last: it goes on (a single one is routine: a
+# receiver's dropped sentence in a quiet its status vouches for; `services`' warn_repeat_s alike).
+WARN_REPEAT_S = 30.0
 COMPLAINTS_KEPT_S = 30.0  # a node's complaints kept this long: a transition is seen samples after
 COMPLAINTS_KEPT = 1024  # ... and at most this many
 _NUMBER = re.compile(r"[-+]?\d[\d.,:]*")  # a reading in a status's message, not its mode
@@ -772,8 +775,10 @@ def _transitions(ctx: PluginContext) -> dict[str, list[float]]:
 def _self_reports(ctx: PluginContext) -> None:
     """Keep, per node, when it last said OK of itself on /diagnostics and when it last said worse:
     a status of its own worse than OK (published by the node it is mapped to, not an aggregator's
-    copy), or a WARN or worse on /rosout."""
-    said: dict[str, list[float]] = ctx.state.setdefault("self_reports", {})  # node -> [ok at, worse at]
+    copy), or a WARN or worse on /rosout; and when it last said worse *again* (`_vouched`): such
+    a status, an ERROR or worse, or a WARN within `WARN_REPEAT_S` of its last WARN."""
+    # node -> [ok at, worse at, worse again at, its last WARN line at]
+    said: dict[str, list[float]] = ctx.state.setdefault("self_reports", {})
     complaints = ctx.state.setdefault("complaints", {})  # node -> (when, logged: a line, not a status)
     for e in ctx.events:
         if e.kind == "diag" and e.member.startswith("node:") and e.member == e.data.get("publisher"):
@@ -782,8 +787,14 @@ def _self_reports(ctx: PluginContext) -> None:
             k = 1
         else:
             continue
-        last = said.setdefault(e.member, [-math.inf, -math.inf])
+        last = said.setdefault(e.member, [-math.inf] * 4)
         last[k] = max(last[k], e.t)
+        if k and e.kind == "log" and RANK.get(e.level, -1) == RANK["warn"]:
+            if e.t - last[3] <= WARN_REPEAT_S:
+                last[2] = max(last[2], e.t)
+            last[3] = max(last[3], e.t)
+        elif k:
+            last[2] = max(last[2], e.t)
         if k:  # when, as well as the last time: a lifecycle transition asks what came before it
             recent = complaints.setdefault(e.member, deque(maxlen=COMPLAINTS_KEPT))
             recent.append((e.t, e.kind == "log"))
@@ -806,7 +817,9 @@ def _complained(ctx: PluginContext, topic: str, r: Rhythm) -> bool:
 
 def _vouched(ctx: PluginContext, topic: str, r: Rhythm, ref_hz: float) -> bool:
     """True when every publisher of ``topic`` said OK of itself after the topic's next message was
-    due, and nothing worse since its last message: a driver that keeps reporting its device fine
+    due, and nothing worse since its last message — a status worse than OK, an ERROR, a WARN again
+    within `WARN_REPEAT_S` of its last (one WARN is routine: the blind USV's AIS receiver dropped
+    a sentence 39 s into a quiet with no ship in range) —: a driver that keeps reporting its device fine
     while its output stops means it (a USBL receiver with the vehicle on the surface), where a
     driver's frequency check, a crash or a stalled executor says otherwise or stops its reports.
     Not when a publisher's process lost a thread as the topic stopped (`_thread_ended`): a reader
@@ -816,7 +829,7 @@ def _vouched(ctx: PluginContext, topic: str, r: Rhythm, ref_hz: float) -> bool:
         return False
     period = max(1.0 / ref_hz if ref_hz > 0 else 0.0, max(r.gaps) if r.gaps else 0.0)
     said = ctx.state.get("self_reports", {})
-    if not all(n in said and said[n][0] > r.newest + period and said[n][1] < r.newest for n in pubs):
+    if not all(n in said and said[n][0] > r.newest + period and said[n][2] < r.newest for n in pubs):
         return False
     q = _this_quiet(ctx, topic, r)
     return not any(_thread_ended(ctx, n, q, r) for n in pubs)

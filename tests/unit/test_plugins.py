@@ -629,6 +629,24 @@ def test_topic_rate_a_publisher_that_keeps_saying_ok_of_itself_vouches_for_its_q
         assert [a[2] for a in drive("topic_rate", frames(**kw))][:1] == ["error"], kw
 
 
+def test_topic_rate_one_warn_in_a_vouched_quiet_is_routine_a_second_within_30_s_is_not():
+    # The same receiver: one WARN line at 60 (a dropped sentence) leaves the quiet vouched for;
+    # a second at 70 (within WARN_REPEAT_S of the first) is a complaint that goes on: a silence.
+    msgs = [t for t in np.arange(0.0, 40.0, 4.0)]
+
+    def events(t, warns):
+        out = [Event(t - 0.2, "diag", "node:/camera", "info", "usbl_link: OK",
+                     {"name": "usbl_link", "level": 0, "publisher": "node:/camera"})]
+        return out + [Event(w, "log", "node:/camera", "warn", "checksum mismatch, dropped sentence", {})
+                      for w in warns if t - 1.0 < w <= t]
+
+    def frames(warns):
+        return [(t, model(**seen(msgs, t)), events(t, warns)) for t in np.arange(1.0, 90.0, 1.0)]
+
+    assert drive("topic_rate", frames([60.3])) == []
+    assert [a[:3] for a in drive("topic_rate", frames([60.3, 70.3]))][:1] == [(71.0, "topic:/img", "error")]
+
+
 def test_topic_rate_a_feeding_node_s_goal_ending_after_the_quiet_began_explains_nothing():
     # /detector computes /det from /camera's /img and stops at 19.95 while /img goes on; /camera
     # serves an action. Its goal ending first (19.8) is why /det stopped: healthy. Ending 0.75 s
