@@ -2,8 +2,8 @@
 
 ros2doctor's ``QoSCompatibilityCheck`` calls ``rclpy.qos.qos_check_compatible(pub, sub)`` for
 every publisher/subscription pair of every topic, which is rmw's ``qos_profile_check_compatible``
-(rmw_dds_common, Jazzy). `compatibility` is the same rules on the collector's plain QoS dicts
-(``stream_viz.collect.rosgraph.qos_dict``), with the same reasons:
+(rmw_dds_common, Jazzy). `stream_viz.model.qos.compatibility` is the same rules on the
+collector's plain QoS dicts (``stream_viz.collect.rosgraph.qos_dict``), with the same reasons:
 
 errors (DDS will not match the two: the subscription receives nothing from that publisher)
   * best-effort publisher, reliable subscription;
@@ -23,82 +23,8 @@ from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
 from stream_viz.model.ids import name_of
-from stream_viz.model.qos import qos_policy
+from stream_viz.model.qos import compatibility
 from stream_viz.records import Alert
-
-UNSPECIFIED = 0  # rmw's default deadline / lease duration (RMW_DURATION_UNSPECIFIED)
-_UNKNOWN = ("system_default", "unknown")
-
-
-def compatibility(pub: dict[str, Any], sub: dict[str, Any]) -> tuple[str, list[str]]:
-    """Return ``("ok" | "warning" | "error", reasons)`` for a publisher and a subscription QoS.
-
-    The rules and reason texts of rmw's ``qos_profile_check_compatible`` (module docstring);
-    durations are ns (``deadline_ns``, ``liveliness_lease_ns``; 0 = unspecified). A key missing
-    from a dict (an older model) is not checked.
-    """
-    errors = []
-    p, s = _policies(pub), _policies(sub)
-    if p["reliability"] == "best_effort" and s["reliability"] == "reliable":
-        errors.append("Best effort publisher and reliable subscription")
-    if p["durability"] == "volatile" and s["durability"] == "transient_local":
-        errors.append("Volatile publisher and transient local subscription")
-    _durations(pub, sub, "deadline_ns", errors, "Subscription has a deadline, but publisher does not",
-               "Subscription deadline is less than publisher deadline")
-    if p["liveliness"] == "automatic" and s["liveliness"] == "manual_by_topic":
-        errors.append("Publisher's liveliness is automatic and subscription's is manual by topic")
-    _durations(pub, sub, "liveliness_lease_ns", errors,
-               "Subscription has a liveliness lease duration, but publisher does not",
-               "Subscription liveliness lease duration is less than publisher")
-    if errors:
-        return "error", errors
-    warnings = _warnings(p, s)
-    return ("warning", warnings) if warnings else ("ok", [])
-
-
-def _durations(pub: dict[str, Any], sub: dict[str, Any], key: str, errors: list[str], none: str,
-               less: str) -> None:
-    """rmw's two rules for a requested duration (deadline, lease): the publisher offers none, or
-    a longer one than the subscription requests."""
-    pd, sd = pub.get(key), sub.get(key)
-    if not isinstance(pd, int) or not isinstance(sd, int):
-        return
-    if pd == UNSPECIFIED and sd != UNSPECIFIED:
-        errors.append(none)
-    if pd != UNSPECIFIED and sd != UNSPECIFIED and sd < pd:
-        errors.append(less)
-
-
-def _warnings(p: dict[str, str], s: dict[str, str]) -> list[str]:
-    """rmw's warnings (policies it cannot judge), in its order and words."""
-    out = []
-    # ("durabilty" is rmw's own spelling in that message)
-    for key, both, sub_needs, sub_text, pub_gives, pub_text in (
-        ("reliability", "Publisher reliability is {p} and subscription reliability is {s}", "reliable",
-         "Reliable subscription, but publisher is {p}", "best_effort",
-         "Best effort publisher, but subscription is {s}"),
-        ("durability", "Publisher durabilty is {p} and subscription durability is {s}", "transient_local",
-         "Transient local subscription, but publisher is {p}", "volatile",
-         "Volatile publisher, but subscription is {s}"),
-        ("liveliness", "Publisher liveliness is {p} and subscription liveliness is {s}", "manual_by_topic",
-         "Subscription's liveliness is manual by topic, but publisher's is {p}", "automatic",
-         "Publisher's liveliness is automatic, but subscription's is {s}"),
-    ):
-        pv, sv = p[key], s[key]
-        if not pv or not sv:
-            continue
-        pu, su = pv in _UNKNOWN, sv in _UNKNOWN
-        if pu and su:
-            out.append(both.format(p=pv, s=sv))
-        elif pu and sv == sub_needs:
-            out.append(sub_text.format(p=pv))
-        elif pv == pub_gives and su:
-            out.append(pub_text.format(s=sv))
-    return out
-
-
-def _policies(qos: dict[str, Any]) -> dict[str, str]:
-    return {k: qos_policy(qos, k) for k in ("reliability", "durability", "liveliness")}
 
 
 class QosCompat(Plugin):

@@ -22,7 +22,6 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Header, String
 from std_srvs.srv import Trigger
 
-from plugins.qos_compat import compatibility
 from stream_viz.collect.cdr import (
     REQUEST_RECEIVED,
     REQUEST_SENT,
@@ -41,6 +40,7 @@ from stream_viz.collect.services import ServiceCalls, party
 from stream_viz.collect.topics import log_event
 from stream_viz.collect.window import TopicWindow, window_metrics
 from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
+from stream_viz.model.qos import compatibility
 from stream_viz.model.theta import make_theta
 from stream_viz.rca import RcaSettings, analyze
 from stream_viz.records import Alert, Event
@@ -959,3 +959,37 @@ def test_message_age_of_a_pair_out_of_sync_the_one_whose_age_moved_is_charged():
     # Neither age moved: both are charged.
     both = frames + [_triggered(t, apart, dict(left=100.0, center=7.0, right=100.0)) for t in range(10, 14)]
     assert {m for _, m, _ in drive("message_age", both)} == {"topic:/right/image", "topic:/left/image"}
+
+
+def test_a_line_names_a_topic_it_reads_in_full_or_relative_to_its_namespace():
+    from plugins.rosout import named_topics
+
+    topics = ["/usv/odometry/gps", "/usv/gps", "/scan", "/odometry/raw"]
+    assert named_topics("Rejecting /usv/odometry/gps: jump 400012 m", topics, "/usv") == ["/usv/odometry/gps"]
+    assert named_topics("Rejecting odometry/gps: jump", topics, "/usv") == ["/usv/odometry/gps"]
+    assert named_topics("no gps fix", topics, "/usv") == ["/usv/gps"]  # relative, in a namespace
+    assert named_topics("/usv/odometry/gps_raw late", topics, "/usv") == []  # part of a longer name
+    # In the root namespace a bare word is any word; a relative name with a / is a name.
+    assert named_topics("scan matching failed; odometry/raw late", topics, "/") == ["/odometry/raw"]
+
+
+def test_an_error_naming_an_input_topic_charges_its_publisher_unless_it_receives_nothing():
+    # /ekf reads /gps from /navsat and ERRORs about it: the RCA ranks /navsat first. With a
+    # reliable subscription against the best-effort publisher it receives nothing: its own doing.
+    def graph(sub_reliability):
+        G = new_graph()
+        for m in ("node:/navsat", "node:/ekf", "topic:/gps", "process:1", "process:2"):
+            add_member(G, m)
+        add_flow_edge(G, "node:/navsat", "topic:/gps", "pub")
+        add_flow_edge(G, "topic:/gps", "node:/ekf", "sub")
+        add_tree_edge(G, "process:1", "node:/navsat")
+        add_tree_edge(G, "process:2", "node:/ekf")
+        G.nodes["topic:/gps"]["qos"] = [
+            {"node": "/navsat", "role": "pub", "reliability": "best_effort", "durability": "volatile"},
+            {"node": "/ekf", "role": "sub", "reliability": sub_reliability, "durability": "volatile"}]
+        return G
+
+    line = Event(10.0, "log", "node:/ekf", "error", "Rejecting /gps: position jump 400012 m", {})
+    for rel, named in (("best_effort", ["node:/navsat"]), ("reliable", None)):
+        alerts = drive("rosout", [(10.5, graph(rel), [line])], full=True)
+        assert alerts and alerts[0].data.get("names") == named, (rel, alerts)
