@@ -636,7 +636,8 @@ def _upstream(
     `SILENT_DECAY` (a symptom that began more than ``tolerance`` before ``n``'s and still held
     when they began counts in full: `_led`); so does the walk from what ``n``'s silent siblings
     read (`_sibling_inputs`: composed nodes share data in memory). A symptom charged to ``n``
-    never excuses it, and a topic without a symptom of its own that carried no message in that
+    never excuses it, nor through a topic its publisher sends, and a topic without a symptom of
+    its own that carried no message in that
     time (`traffic.idle`: a teleop topic nobody publishes on) passes nothing but, as ``n``'s own
     input, its publishers' departure. A cause whose symptom is known to have begun after ``n``'s
     (`began_after`: a log line stamped after the next message of ``n``'s silent output was
@@ -788,9 +789,11 @@ def _excuse(
     e = ev_passive.get(p)
     if e is not None and e.meets(lo, hi):
         worst = max(worst, e.strength)
+    mine = views[n].own if n in views else ()  # complaints naming n: its evidence, never its excuse
     for q in publishers(G, p, parents):
         qv = views.get(q)
-        if q == n or qv is None or qv.implied or began_after(qv.began, qv.vague, latest, tolerance):
+        if (q == n or q in mine or qv is None or qv.implied
+                or began_after(qv.began, qv.vague, latest, tolerance)):
             continue
         fellow = home is not None and process_of_node(G, q) == home
         if bare:

@@ -376,6 +376,33 @@ def test_a_complaint_charged_to_a_server_never_excuses_it_round_its_siblings():
     assert BT in by[PLANNER].evidence["symptoms"]
 
 
+def test_a_topic_of_the_complaining_client_never_excuses_the_server_round_its_siblings():
+    # The same, but the way back is a topic: the mission (process 6) calls the planner and
+    # publishes its state, which a mux (process 7) reads; the planner's silent sibling reads the
+    # mux's output. The mission's complaint naming the planner is the planner's evidence; through
+    # that topic it excused it (the blind USV's slow route planner ranked second to the mission
+    # executive that complained of it).
+    g = new_graph()
+    mission, sibling, mux = "node:/mission", "node:/follower", "node:/mux"
+    state, cmd = "topic:/mission/state", "topic:/cmd"
+    for m in ("process:5", "process:6", "process:7", PLANNER, sibling, mission, mux, state, cmd):
+        add_member(g, m)
+    add_tree_edge(g, "process:5", PLANNER)
+    add_tree_edge(g, "process:5", sibling)
+    add_tree_edge(g, "process:6", mission)
+    add_tree_edge(g, "process:7", mux)
+    add_flow_edge(g, mission, PLANNER, "send")
+    add_flow_edge(g, mission, state, "pub")
+    add_flow_edge(g, state, mux, "sub")
+    add_flow_edge(g, mux, cmd, "pub")
+    add_flow_edge(g, cmd, sibling, "sub")
+    server = PLANNER.removeprefix("node:")
+    alerts = [a for t in (10, 17, 24)
+              for a in (al(mission, "rosout", t, symptom="log"), al(mission, "services", t, server=server))]
+    by, order = rank(g, alerts)
+    assert order[0] == PLANNER and by[PLANNER].evidence["upstream"] == 0.0, by[PLANNER].evidence
+
+
 def test_a_node_killed_by_a_signal_is_not_excused_by_its_inputs(G):
     # /imu stops at 10; fuse, which reads it, dies at 12. A crash (an exception, an abort) may
     # be what the stopped input did to it; a kill (SIGKILL: a person, a supervisor, the OOM
