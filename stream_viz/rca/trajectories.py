@@ -141,7 +141,9 @@ def trajectory_of(ctx: Context, c: str) -> Trajectory:
     coverage = len(explained) / len(s.times) if s.times else 0.0
     first = ctx.first or s.first
     own = ctx.views[c].own if c in ctx.views else []
-    if first is not None and first in cost and first != c and first not in own:
+    # The run's first symptom starts the path, unless it is a sibling's share of their process's.
+    if (first is not None and first in cost and first != c and first not in own
+            and not _shared(ctx, home, c, first)):
         start = first
     elif explained:  # the farthest symptom it explains: the whole propagation is shown
         start = max(explained, key=lambda m: (cost[m], -s.onset[m], m))

@@ -160,6 +160,18 @@ def test_a_named_node_ranks_first_though_a_sibling_feeds_it(G):
     assert by[LIDAR].score > by[CAM].score
 
 
+def test_a_named_node_ranks_first_though_a_sibling_feeds_a_third_whose_alert_came_first(G):
+    # cam feeds lidar, imu is named by the process's alerts (it began to warn as the CPU rose);
+    # lidar's alert is the first of the run. Its share is the process's: no start of cam's
+    # trajectory, which would lend cam the pair's co-occurrence and time lag. Before: cam tied
+    # imu (the blind USV's radar tracker, feeding its obstacle map, beside the named detector).
+    with_cam_info(G)
+    busy = [al(n, "process_resources", 9, "warn", process=BOX, names=[IMU]) for n in (LIDAR, CAM, IMU)]
+    by, order = rank(G, busy)
+    assert order[0] == IMU and by[IMU].score > by[CAM].score, [(m, by[m].score) for m in order]
+    assert by[CAM].trajectory == [CAM] and by[CAM].evidence.get("cooccurrence") is None
+
+
 def test_a_fellows_own_changed_output_still_excuses_the_node_it_feeds(G):
     # The same, but cam's own output changed too: that does travel, and tells them apart.
     with_cam_info(G)
