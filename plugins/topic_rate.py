@@ -441,6 +441,11 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     bursty = bool(r.gaps or r.carried) and not stalled
     within = quiet if bursty or not ref > 0 else 1.0 / ref
     began = {} if r.newest is None else {"since": r.newest, "since_within": within}
+    # When its publisher last logged, any level: on a stopped executor, the one that ran last.
+    pubs = ctx.publishers(topic)
+    said = ctx.attr(pubs[0], "logged_at") if len(pubs) == 1 else None
+    if isinstance(said, int | float):
+        began["logged_at"] = float(said)
     return ctx.alert(topic, "error", f"silent for {quiet:.1f} s ({usual}){again}", symptom="silence",
                      silent_s=quiet, baseline_hz=ref, limit_s=limit, flaps=flaps,
                      episode_hold_s=s["flap_window_s"], executor_stopped=stalled, executor_idle=idle,

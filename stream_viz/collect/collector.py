@@ -27,7 +27,7 @@ from stream_viz.collect.fastdds import decode_gid
 from stream_viz.collect.goals import STATUS_SUFFIX, GoalTracker
 from stream_viz.collect.graphsignal import GraphSignal
 from stream_viz.collect.hosts import HostReports
-from stream_viz.collect.last_words import LAST_WORDS_S, last_words, note_lines
+from stream_viz.collect.last_words import LAST_WORDS_S, last_words, newest_lines, note_lines
 from stream_viz.collect.naming import NodeNames, recently_left
 from stream_viz.collect.oomkills import OomKill, OomWatch
 from stream_viz.collect.params import param_event
@@ -245,6 +245,9 @@ class Collector:
         events += self._message_events(t, reading, index, messages)
         services, calls = self._service_calls(reading)
         G = build_model(reading, pids, processes, stats, services, calls)
+        for fqn, at in newest_lines(self._lines, reading.nodes).items():
+            if (m := make_id("node", fqn)) in G:
+                G.nodes[m]["logged_at"] = at  # any level: who ran last on a stalled executor (`siblings`)
         self._goal_progress(G, t, reading, stats)
         unreadable = {make_id("node", n): why for n, why in reading.skipped.items()}
         remote_events, unreadable_remote = self.hosts.apply(G, pids, t)  # other computers' agents

@@ -7,6 +7,8 @@ process died was running then — on one executor thread, the callback that logg
 raised, more often than not ("Reloaded planogram … (0 bays)", then an ``IndexError``). So the
 collector keeps each logger's newest line, and an exit names the node of its process that logged
 last, within `LAST_WORDS_S` before it: of two that spoke then, the later ran closer to the end.
+The same lines stamp each node's ``logged_at`` (`newest_lines`): a node that logged after every
+message of its stalled executor's nodes was running when it stopped (`stream_viz.rca.siblings`).
 """
 
 from __future__ import annotations
@@ -54,3 +56,15 @@ def last_words(lines: Mapping[str, tuple[float, str]], nodes: Iterable[str], sta
         return None
     t, n, text = max(said)
     return n, t, text
+
+
+def newest_lines(lines: Mapping[str, tuple[float, str]], nodes: Iterable[str]) -> dict[str, float]:
+    """Return node fqn → the stamp of its newest line (any level, its child loggers' too) among
+    ``lines`` (`note_lines`), for the loggers that belong to one of ``nodes``."""
+    fqns = frozenset(nodes)
+    out: dict[str, float] = {}
+    for logger, (t, _) in lines.items():
+        n = logger_node(logger, fqns)
+        if n in fqns and t > out.get(n, float("-inf")):
+            out[n] = t
+    return out

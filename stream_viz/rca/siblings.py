@@ -39,6 +39,7 @@ OUTPUT_PRIOR = 0.7
 LATE_S = 0.003  # a timer due while another callback runs waits for it (a few ms in rclpy)
 BEAT_ERROR = 0.01  # a beat learned from a steady rate is off by up to this fraction
 TELLS = 3.0  # a fellow this many times likelier to have blocked the executor tells it apart
+LINE_S = 0.05  # a log line's stamp against a message's arrival: the writer's and our clocks' offset
 
 
 class OwnChange(Protocol):
@@ -56,6 +57,7 @@ class OwnChange(Protocol):
     due: float
     beat: float
     last: float
+    logged_at: float
     inputs: list[tuple[float, float]]
 
 
@@ -165,6 +167,24 @@ def blocked_first(dues: Mapping[str, tuple[float, float, float]],
     return {n: x / total for n, x in out.items()}
 
 
+def ran_last(dues: Mapping[str, tuple[float, float, float]], logged: Mapping[str, float]) -> str | None:
+    """Return the node that logged after every message of the nodes of a stalled executor and by
+    the first one due, or None when none or several did.
+
+    ``dues``: node → (its newest message, its next one due, its beat), as `blocked_first`;
+    ``logged``: node → when it last logged, any level. One thread runs their callbacks one at a
+    time: a line stamped after the last message any of them sent came from the last callback that
+    ran, and none ran after the executor stopped — a driver announcing the call that then blocks
+    ("Running flat field correction"), which publishes nothing the timing could weigh.
+    """
+    if len(dues) < 2:
+        return None
+    newest = max(last for last, _, _ in dues.values())
+    first = min(due for _, due, _ in dues.values())
+    said = [n for n in dues if newest - LINE_S <= logged.get(n, -INF) <= first + LINE_S]
+    return said[0] if len(said) == 1 else None
+
+
 def _slack(beat: float) -> float:
     """How late after the first due a due at a beat of ``beat`` s still counts as first."""
     return LATE_S + BEAT_ERROR * beat
@@ -183,14 +203,19 @@ def _ahead(a: tuple[float, float, float], b: tuple[float, float, float]) -> bool
 
 def _timing(views: Mapping[str, OwnChange], n: str, fellows: set[str],
             cache: dict[frozenset[str], dict[str, float]]) -> dict[str, float]:
-    """`blocked_first` of ``n``'s stall with ``fellows`` (empty when a fellow died, or has no
-    silence with a beat: a crash stops every thread at once, and an untimed silence says nothing)."""
+    """`blocked_first` of ``n``'s stall with ``fellows`` — certainty for the one that logged last
+    (`ran_last`) — empty when a fellow died, or has no silence with a beat: a crash stops every
+    thread at once, and an untimed silence says nothing."""
     group = frozenset(fellows | {n})
     if group not in cache:
         vs = {m: views[m] for m in group}
         timed = all(v.exited == INF and v.due < INF and v.beat > 0 for v in vs.values())
-        cache[group] = blocked_first({m: (v.last, v.due, v.beat) for m, v in vs.items()},
-                                     {m: v.inputs for m, v in vs.items()}) if timed else {}
+        dues = {m: (v.last, v.due, v.beat) for m, v in vs.items()}
+        runner = ran_last(dues, {m: v.logged_at for m, v in vs.items()}) if timed else None
+        if runner is not None:  # it ran last: its callback is the one that blocked
+            cache[group] = {m: float(m == runner) for m in group}
+        else:
+            cache[group] = blocked_first(dues, {m: v.inputs for m, v in vs.items()}) if timed else {}
     return cache[group]
 
 
@@ -283,7 +308,7 @@ def judge(G: nx.MultiDiGraph, views: Mapping[str, OwnChange], tol: float,
                     if _spoke(w, tol) != _spoke(v, tol):  # only the one that logged was running
                         if _spoke(w, tol):
                             verdict.excuse = max(verdict.excuse, w.own_anomaly * (1.0 - w.upstream))
-                    elif odds and odds[m] >= TELLS * odds[n]:  # m's callback blocked them, likelier
+                    elif odds and odds[m] > 0 and odds[m] >= TELLS * odds[n]:  # m blocked them, likelier
                         verdict.excuse = max(verdict.excuse,
                                              (1.0 - odds[n] / odds[m]) * w.own_anomaly * (1.0 - w.upstream))
                     elif not odds or odds[n] < TELLS * odds[m]:

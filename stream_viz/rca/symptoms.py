@@ -69,7 +69,8 @@ class Symptoms:
     alert said went silent with their publisher's single-threaded executor idle, inputs or not
     (data ``executor_idle``); ``silence`` a silent member's
     newest message and its beat (data ``since``, ``since_within``: its next was due at their sum),
-    of its newest silence.
+    of its newest silence; ``logged_at`` when a silent member's publisher last logged, any level
+    (data ``logged_at``).
     """
 
     times: dict[str, np.ndarray] = field(default_factory=dict)
@@ -92,6 +93,7 @@ class Symptoms:
     executor_stopped: set[str] = field(default_factory=set)
     executor_idle: set[str] = field(default_factory=set)
     silence: dict[str, tuple[float, float]] = field(default_factory=dict)
+    logged_at: dict[str, float] = field(default_factory=dict)
     latest: float = -INF
     count: int = 0
 
@@ -177,6 +179,8 @@ def collect_symptoms(
             within = float(within) if isinstance(within, int | float) and within > 0 else 0.0
             if within and float(since) > s.silence.get(m, (-INF,))[0]:  # its newest silence
                 s.silence[m] = (float(since), within)
+            if isinstance(said := data.get("logged_at"), int | float):
+                s.logged_at[m] = max(s.logged_at.get(m, -INF), float(said))
             s.began_by[m] = min(s.began_by.get(m, INF), float(since) + within, t)
         else:
             s.vague[m] = min(s.vague.get(m, INF), t)
@@ -223,7 +227,8 @@ class NodeView:
     do not say (`Symptoms`): what `began_after` compares. ``awaited``: the clients calling it
     that complained while its symptoms were on (`_await`). ``due``/``beat``/``last``: of its
     silent outputs, when the first next message was due and that output's beat, and its newest
-    message (`siblings.blocked_first` reads them), and ``inputs`` the newest arrival and beat of
+    message (`siblings.blocked_first` reads them), ``logged_at`` when it last logged, any level,
+    as its silence was seen (`siblings.ran_last`), and ``inputs`` the newest arrival and beat of
     each stopped input its outputs do not follow; ``blocked``: how likely its callback blocked
     the executor of a stall it is in (None: not told by that).
     """
@@ -261,6 +266,7 @@ class NodeView:
     due: float = INF
     beat: float = 0.0
     last: float = -INF
+    logged_at: float = -INF
     blocked: float | None = None
     inputs: list[tuple[float, float]] = field(default_factory=list)
 
@@ -449,6 +455,7 @@ def _beat(v: NodeView, s: Symptoms, m: str) -> None:
         if last + beat < v.due:
             v.due, v.beat = last + beat, beat
         v.last = max(v.last, last)
+    v.logged_at = max(v.logged_at, s.logged_at.get(m, -INF))
 
 
 def _fed_dues(G: nx.MultiDiGraph, s: Symptoms, views: Mapping[str, NodeView]) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
-from stream_viz.collect.last_words import last_words, note_lines
+from stream_viz.collect.last_words import last_words, newest_lines, note_lines
 
 NODES = ["/rs/gap_detector", "/rs/shopper_detector", "/rs/label_reader"]
 
@@ -35,3 +35,9 @@ def test_the_node_that_logged_last_in_the_span_is_named():
     assert (first(10.7), first(10.2)) == ("/rs/shopper_detector", "/rs/gap_detector")
     # a child logger speaks for its node
     assert last_words({"rs.label_reader.ocr": (10.0, "loaded")}, NODES, 9.5, 11.0)[0] == "/rs/label_reader"
+
+
+def test_newest_lines_stamp_each_node_with_its_newest_line_its_child_loggers_too():
+    lines = {"rs.gap_detector": (10.5, "a"), "rs.gap_detector.lookup": (11.0, "b"),
+             "rs.shopper_detector": (8.0, "c"), "rs.not_a_node": (12.0, "d")}
+    assert newest_lines(lines, NODES) == {"/rs/gap_detector": 11.0, "/rs/shopper_detector": 8.0}

@@ -7,7 +7,7 @@ import pytest
 
 from stream_viz.model.graph import add_flow_edge, add_member, add_tree_edge, new_graph
 from stream_viz.rca import RcaSettings, analyze
-from stream_viz.rca.siblings import BEAT_ERROR, LATE_S, OUTPUT_PRIOR, blocked_first
+from stream_viz.rca.siblings import BEAT_ERROR, LATE_S, LINE_S, OUTPUT_PRIOR, blocked_first, ran_last
 from stream_viz.records import Alert
 from tests.unit.test_rca_containers import GROUND, pipeline
 
@@ -129,3 +129,27 @@ def test_an_input_whose_callback_publishes_nothing_may_be_where_it_blocked():
     assert odds["merger"] == pytest.approx(odds["imu"]) and odds["imu"] > 3 * odds["driver"]
     late = blocked_first(dues, {"merger": [(9.9, 1 / 30)]})  # an older arrival: it was answered
     assert late == pytest.approx(alone)
+
+
+def test_the_one_that_logged_after_every_message_of_the_stall_ran_last():
+    dues = {"cam": (10.0, 10.1, 0.1), "thermal": (9.98, 10.09, 1 / 9)}
+    assert ran_last(dues, {"thermal": 10.03, "cam": 4.0}) == "thermal"  # after 10.0, by 10.09
+    assert ran_last(dues, {"thermal": 10.0 - LINE_S + 0.001}) == "thermal"  # stamps a little off
+    assert ran_last(dues, {"thermal": 9.9}) is None  # before the cam's last frame: others ran since
+    assert ran_last(dues, {"thermal": 10.2}) is None  # after the first due: it was running then
+    assert ran_last(dues, {"thermal": 10.03, "cam": 10.04}) is None  # two: nothing told
+    assert ran_last({"cam": (10.0, 10.1, 0.1)}, {"cam": 10.03}) is None  # one node is no stall
+
+
+def test_a_fellow_that_announced_the_call_that_blocked_ranks_first_where_the_timing_would_not(G):
+    # Camera, IMU and lidar in step at 10 Hz, the camera first in their round: by the timing it
+    # blocked them. The lidar logged
+    # "Running a self-test" at 10.01, after the last message of them all (10.004): it ran last.
+    alerts = (silent(IMAGE, 10.0, 0.1) + silent(IMUT, 10.002, 0.1)
+              + silent(SCAN, 10.004, 0.1, logged_at=10.01))
+    by, order = rank(G, alerts)
+    assert order[0] == LIDAR and by[LIDAR].evidence["blocked"] == 1.0
+    assert by[CAM].evidence["blocked"] == 0.0 and by[CAM].evidence["upstream"] > 0
+    # Its line before the camera's last frame says nothing: the camera first, as without it.
+    early = silent(IMAGE, 10.0, 0.1) + silent(IMUT, 10.002, 0.1) + silent(SCAN, 10.004, 0.1, logged_at=9.9)
+    assert rank(G, early)[1][0] == CAM
