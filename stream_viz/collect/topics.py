@@ -38,6 +38,11 @@ from stream_viz.records import Event
 
 OBSERVE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.VOLATILE, history=HistoryPolicy.KEEP_LAST)
+# An action's status array is sent on change, reliable and transient-local (rcl_action's default):
+# read the same way, a goal already executing when we looked is listed at once, so its end is
+# seen as a change (`goals`), where a volatile reader's first array is that end, undated.
+STATUS_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL, history=HistoryPolicy.KEEP_LAST)
 CLOCK_GRACE_NS = 2_000_000_000  # after /clock is subscribed, how long its first tick is awaited
 PACE_SPAN_NS = 1_000_000_000  # the simulation's pace over the last second: as prompt as a recent rate
 FIRST_LOOK_NS = 5_000_000_000  # from the start, how long a /clock not discovered yet is awaited
@@ -166,7 +171,8 @@ class TopicMonitor:
                 else "event" if topic.endswith(EVENT_SUFFIX) and is_service_event(cls)
                 else "clock" if topic == ROS_CLOCK and type_name == CLOCK_TYPE else "raw")
         try:
-            sub = self.node.create_subscription(cls, topic, lambda _m: None, OBSERVE_QOS,
+            sub = self.node.create_subscription(cls, topic, lambda _m: None,
+                                                STATUS_QOS if kind == "status" else OBSERVE_QOS,
                                                 raw=kind != "log")
         except Exception as e:  # rclpy raises plain RuntimeError/RCLError kinds; one topic must not stop us
             self._failed[topic] = f"cannot subscribe: {e}"

@@ -279,6 +279,51 @@ def test_every_goal_that_ends_is_a_goal_event_of_its_server(children, ros_domain
     assert errors == []
 
 
+# A server whose one goal executes for 8 s, sent before anyone looks.
+LONG_GOAL = """
+import time, rclpy
+from rclpy.action import ActionClient, ActionServer
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from test_msgs.action import Fibonacci
+rclpy.init()
+server, client = Node("follower"), Node("mission")
+def execute(goal):
+    time.sleep(8.0)
+    goal.succeed()
+    return Fibonacci.Result()
+ActionServer(server, Fibonacci, "/leg", execute)
+ac = ActionClient(client, Fibonacci, "/leg")
+ex = MultiThreadedExecutor()
+ex.add_node(server)
+ex.add_node(client)
+import threading
+threading.Thread(target=ex.spin, daemon=True).start()
+ac.wait_for_server()
+ac.send_goal_async(Fibonacci.Goal(order=1))
+print("sent", flush=True)
+time.sleep(60)
+"""
+
+
+@pytest.mark.skipif(not HAVE_ACTIONS, reason="test_msgs (ros-jazzy-test-msgs) is not installed")
+def test_a_goal_executing_before_the_collector_looked_ends_as_a_goal_event(children, ros_domain, tmp_path):
+    # The status array is latched: the collector's reader gets the executing goal when it matches,
+    # so the end is a change it sees (a volatile reader got the end first and could not date it).
+    proc = children.python(LONG_GOAL, name="leg")
+    log_path = children.workdir / f"leg_{children.procs.index(proc)}.log"
+    wait_for(lambda: "sent" in log_path.read_text(), timeout=20)
+    time.sleep(1.0)  # executing before the collector starts
+    events = []
+    with Collector(ros_domain) as col:
+        end = time.monotonic() + 20.0
+        while time.monotonic() < end and not any(e.kind == "goal" for e in events):
+            events += col.sample().events
+            time.sleep(0.5)
+    goals = [(e.member, e.data["action"], e.data["status"]) for e in events if e.kind == "goal"]
+    assert goals == [("node:/follower", "/leg", "succeeded")], goals
+
+
 # A node that adds a publisher when told (a file appears) and removes it when told again.
 GROWER = """
 import os, sys, time, rclpy
