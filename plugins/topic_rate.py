@@ -700,17 +700,21 @@ def _other_output(ctx: PluginContext, topic: str, node: str, since: float,
 def _executor_ratio(ctx: PluginContext, node: str, q: dict[str, Any]) -> float:
     """The CPU of the single-threaded executor running ``node`` now over its median before the
     quiet (kept for the quiet); NaN when the process's executor is not single-threaded (its
-    ``running_threads`` is not 1), unmeasured, or used under ``withheld_cpu_min`` % of a core
-    before (too little to tell a pause from a stop). A blocked callback stops that thread and
-    every node it runs: 0."""
+    ``running_threads`` is not 1, or its main thread dispatched a multi-threaded executor in the
+    window: while that spins, rclpy#1452, its workers' CPU is too little to count, and the
+    dispatcher's resting after it is no stop), unmeasured, or used under ``withheld_cpu_min`` %
+    of a core before (too little to tell a pause from a stop). A blocked callback stops that
+    thread and every node it runs: 0."""
     proc = ctx.process_of(node)
-    if proc is None or ctx.value(proc, "running_threads") != 1:
+    if proc is None or ctx.value(proc, "running_threads") != 1 or ctx.value(proc, "dispatching") == 1:
         return math.nan
     if proc not in q["refs"]:
         times, past = ctx.past(proc, EXECUTOR_CPU, last=PROCESS_SETTINGS["window"])
         before = past[(times < q["since"]) & np.isfinite(past)]
         enough = len(before) >= PROCESS_SETTINGS["min_samples"]
-        q["refs"][proc] = float(np.median(before)) if enough else math.nan
+        _, dispatched = ctx.past(proc, "dispatching", last=PROCESS_SETTINGS["window"])
+        single = not np.any(dispatched == 1.0)
+        q["refs"][proc] = float(np.median(before)) if enough and single else math.nan
     ref = q["refs"][proc]
     if not ref >= ctx.settings["withheld_cpu_min"]:
         return math.nan

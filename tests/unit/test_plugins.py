@@ -760,9 +760,10 @@ def test_topic_rate_a_quiet_that_follows_its_inputs_is_the_inputs():
     assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img"}
 
 
-def one_thread_model(img, det, t, main, running=1, latched_img=False):
+def one_thread_model(img, det, t, main, running=1, latched_img=False, dispatching=lambda t: 0.0):
     """`chain_model` with the camera and the detector in one process (pid 100) whose executor
-    (one thread running, or ``running``) uses ``main(t)`` % of a core."""
+    (one thread running, or ``running``) uses ``main(t)`` % of a core; its main thread dispatching
+    a multi-threaded executor when ``dispatching(t)`` is 1."""
     G = chain_model(img, det, t, latched_img=latched_img)
     G.remove_edge("process:200", "node:/detector")
     G.remove_node("process:200")
@@ -770,7 +771,7 @@ def one_thread_model(img, det, t, main, running=1, latched_img=False):
     add_tree_edge(G, "process:100", "node:/detector")
     G.nodes["process:100"]["theta"] = make_theta("process", {
         "cpu_percent": 5.0, "rss_mb": 80.0, "threads": 4, "executor_cpu_percent": main(t),
-        "running_threads": running})
+        "running_threads": running, "dispatching": dispatching(t)})
     return G
 
 
@@ -801,6 +802,12 @@ def test_topic_rate_a_stalled_executor_silences_its_nodes_together_not_one_after
     # Threads of a multi-threaded process say nothing of one executor: as in two processes.
     frames = [(t, one_thread_model(img, det, t, stopped, running=3), []) for t in HALF[:40]]
     assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img"}
+    # So do they when one probe saw only the dispatching main thread run (rclpy's multi-threaded
+    # executor spinning, its workers too little to count) and it rests after: no stopped thread.
+    spun = lambda t: 1.0 if t < 20 else 0.0  # noqa: E731
+    frames = [(t, one_thread_model(img, det, t, stopped, dispatching=spun), []) for t in HALF[:40]]
+    got = drive("topic_rate", frames, full=True)
+    assert {a.member for a in got} == {"topic:/img"} and not any(a.data["executor_idle"] for a in got)
     # The input's quiet is healthy (its latched publisher stopped): the thread idles, no alert.
     frames = [(t, one_thread_model(img, det, t, stopped, latched_img=True), []) for t in HALF[:40]]
     assert drive("topic_rate", frames) == []
