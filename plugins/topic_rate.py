@@ -55,6 +55,7 @@ STOPPING_PERIODS = 3.0  # a quiet this many usual periods long: the topic is sto
 FEED_SLACK_S = 0.25  # a feeding node's change of state reaches a publisher within a period and this
 THREADS_STEADY = 8  # samples before a quiet with one thread count: the process's threads are steady
 THREAD_END_S = 1.0  # a thread that stops publishing on an error ends within this (or a period) after
+LINES_KEPT = 4  # per node: its newest log lines' times (`_announced`)
 # On simulated time a sensor's messages come in bursts, one per /clock tick: its intervals spread
 # however steady its rate per simulated second is (σ within this share of it): then it is regular.
 STEADY_PER_SIM = 0.1
@@ -167,6 +168,7 @@ class TopicRate(Plugin):
         ctx.state["interval"] = ctx.since_last_call()  # what this sample's process metrics cover
         rhythms: dict[str, Rhythm] = ctx.state.setdefault("rhythms", {})
         _self_reports(ctx)
+        _note_lines(ctx)
         for topic, r in rhythms.items():  # before any is followed: a quiet complained of is not learned
             if r.newest is not None and not r.doubted and _complained(ctx, topic, r):
                 r.doubted = True  # a sensor's dropout, each with a WARN, is no rhythm of its topic
@@ -412,6 +414,8 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
         return None
     if not r.departed and _withheld(ctx, topic, r, rhythms):
         return None  # the topic's own rhythm: learned when it ends, judged again every sample
+    if not r.departed and _announced(ctx, topic, r):
+        return None  # it said what it did as it stopped: its state, learned when it ends
     if not r.departed and _on_request(ctx, topic, r):
         return None  # its quiet is its clients' (learned when it ends)
     if not r.departed and s["self_reports"] and _vouched(ctx, topic, r, ref):
@@ -617,6 +621,51 @@ def _thread_ended(ctx: PluginContext, node: str, q: dict[str, Any], r: Rhythm) -
         if ended[proc]:
             q["ended"] = proc
     return ended[proc]
+
+
+def _note_lines(ctx: PluginContext) -> None:
+    """Keep, per node, the times of its newest log lines seen (any level; the collector's
+    ``logged_at``, one a sample at most), the newest `LINES_KEPT`."""
+    lines: dict[str, deque] = ctx.state.setdefault("lines", {})
+    for node in ctx.structural(lambda: list(ctx.members("node")), key="nodes"):
+        at = ctx.attr(node, "logged_at")
+        if isinstance(at, int | float):
+            times = lines.setdefault(node, deque(maxlen=LINES_KEPT))
+            if not times or at > times[-1]:
+                times.append(float(at))
+
+
+def _announced(ctx: PluginContext, topic: str, r: Rhythm) -> bool:
+    """True when every publisher of ``topic`` logged a line as the topic stopped — within one of
+    its periods and ``FEED_SLACK_S`` of its last message, after a pause in its logging of
+    ``transition_grace_s`` at least — and nothing worse than INFO (`_complained`): a tracker's
+    "track lost", a collision avoider's "contact clear; resuming": a node that says what it does
+    changed its state. Its output published only while something holds is then quiet by design,
+    which a multi-threaded container's threads cannot show (`_withheld`). Not when the line was
+    the last act of a stopped single-threaded executor or of a thread that ended (a driver's
+    "running calibration" before its read blocks), nor for a node that calls a server (a client
+    waiting, the server's symptom). A line and then a hang in a multi-threaded process looks the
+    same, and is taken for a change of state."""
+    pubs = ctx.publishers(topic)
+    if not pubs or r.newest is None or _complained(ctx, topic, r):
+        return False
+    slack = (1.0 / r.rate if r.rate > 0 else 0.0) + FEED_SLACK_S
+    lines, q = ctx.state.get("lines", {}), _this_quiet(ctx, topic, r)
+    said = q.setdefault("said", {})  # node -> its line at the stop, once no line can still come
+    for node in pubs:
+        if node not in said:
+            times = list(lines.get(node, ()))
+            at = [k for k, x in enumerate(times) if abs(x - r.newest) <= slack]
+            # no line at the stop, or one of a node that logs all the time
+            pause = times[at[0]] - times[at[0] - 1] if at and at[0] else math.inf
+            ok = bool(at) and pause >= ctx.settings["transition_grace_s"]
+            if not ok and ctx.t - r.newest <= slack + min(ctx.state.get("interval", 1.0), 5.0):
+                return False  # its line may come with the next sample
+            said[node] = ok  # later lines do not push it out
+        if not said[node] or ctx.called_servers(node) or _executor_stopped(ctx, node, q) \
+                or _thread_ended(ctx, node, q, r):
+            return False
+    return True
 
 
 def _on_request(ctx: PluginContext, topic: str, r: Rhythm) -> bool:

@@ -878,6 +878,39 @@ def test_topic_rate_an_output_withheld_by_a_working_node_is_its_rhythm():
     assert {m for _, m, _ in drive("topic_rate", frames)} == {"topic:/img"}
 
 
+def test_topic_rate_an_output_its_node_said_it_stopped_is_its_state():
+    # /det stops at 20 s (its last message 19.95) in a multi-threaded process, whose busy threads
+    # say nothing of one node: a silence, unless the detector logged a line as it stopped ("track
+    # lost"), after a pause in its logging.
+    det = [m + 0.05 for m in [i / 10 for i in range(200)]]
+    going = lambda t: noisy(3.0, 0.3)  # noqa: E731
+
+    def run(lines, main=going, running=3, events=lambda t: []):
+        frames = []
+        for t in HALF[:40]:
+            G = withholding_model(det, t, main=main, running=running)
+            said = [x for x in lines if x <= t]
+            if said:
+                G.nodes["node:/detector"]["logged_at"] = said[-1]
+            frames.append((t, G, events(t)))
+        return [(t, m) for t, m, _ in drive("topic_rate", frames)]
+
+    assert run([])[:1] == [(21.5, "topic:/det")]
+    assert run([20.0]) == []
+    assert run([4.0, 20.0]) == []
+    # A line seconds before the stop, or one of a node that logs every half second, says nothing.
+    assert run([17.0])[:1] == [(21.5, "topic:/det")]
+    assert run([k / 2 for k in range(1, 80)])[:1] == [(21.5, "topic:/det")]
+    # Its single-threaded executor stopped with the line (a driver's "calibrating" before its read
+    # blocked): the line was its last act.
+    hung = lambda t: noisy(3.0, 0.3) if t < 20 else 0.0  # noqa: E731
+    assert run([20.0], main=hung, running=1)[:1] == [(21.5, "topic:/det")]
+    # A WARN with it is a complaint, no change of state.
+    lost = Event(20.0, "log", "node:/detector", "warn", "lost the target", {})
+    warn = lambda t: [lost] if t == 20.5 else []  # noqa: E731
+    assert run([20.0], events=warn)[:1] == [(20.5, "topic:/det")]
+
+
 def test_topic_rate_an_output_whose_thread_ended_is_silent_while_its_node_works():
     # /det stops at 20 s while the executor goes on: withheld, unless the process lost a thread
     # as it stopped (its publishing thread died on an exception).
