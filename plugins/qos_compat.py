@@ -22,6 +22,7 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.detect.endpoints import endpoints
 from stream_viz.model.ids import name_of
 from stream_viz.model.qos import compatibility
 from stream_viz.records import Alert
@@ -94,28 +95,4 @@ def _mismatches(ctx: PluginContext, topic: str) -> list[tuple[str, str, str, lis
         reasons = sorted({f"{p}: {w}" for p in chosen for lv, why in found[p] if lv == level for w in why})
         out.append((topic, sub, level, chosen, len(pubs), reasons))
     return out
-
-
-def endpoints(ctx: PluginContext, topic: str) -> tuple[dict[str, list[dict]], dict[str, list[dict]]]:
-    """Publisher and subscriber nodes of ``topic`` with their QoS dicts.
-
-    From the topic attribute ``qos`` (one ``{"node", "role", "reliability", …}`` per endpoint, as
-    the collector writes it), else the data-flow edge's ``qos``; a node with neither has none.
-    """
-    pubs: dict[str, list[dict]] = {u: [] for u in ctx.publishers(topic)}
-    subs: dict[str, list[dict]] = {v: [] for v in ctx.subscribers(topic)}
-    for q in ctx.attr(topic, "qos") or ():
-        if not isinstance(q, dict):
-            continue
-        side = pubs if q.get("role") == "pub" else subs if q.get("role") == "sub" else None
-        node = str(q.get("node", ""))
-        member = node if node.startswith("node:") else f"node:{node}"
-        if side is not None and member in side:
-            side[member].append(q)
-    for side, edge in ((pubs, lambda u: (u, topic)), (subs, lambda v: (topic, v))):
-        for m in side:
-            q = ctx.flow_edge(*edge(m)).get("qos")
-            if not side[m] and isinstance(q, dict):
-                side[m] = [q]
-    return pubs, subs
 

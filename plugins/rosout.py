@@ -7,8 +7,8 @@ from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
+from stream_viz.detect.endpoints import receives
 from stream_viz.detect.startup import STARTUP_S, bring_up_note, hold_back, starting
-from stream_viz.model.qos import compatibility
 from stream_viz.records import SEVERITY_RANK as RANK
 from stream_viz.records import Alert
 
@@ -71,27 +71,17 @@ def _named_inputs(ctx: PluginContext, member: str, evs: list) -> list[str]:
     the localiser, whose silence may look healthy (it was deactivated): the RCA charges it. So are
     the publishers of a topic it reads that a line names (`named_topics`): "Rejecting
     /odometry/gps: position jump 400012 m" is about what its publisher sent — unless its QoS
-    matches none of theirs (`_receives`): "No point cloud on /lidar/points" is its own doing."""
+    matches none of theirs (`receives`): "No point cloud on /lidar/points" is its own doing."""
     named = {n for e in evs for n in e.data.get("nodes", ()) if isinstance(n, str)} - {member}
     read = ctx.subscribed_topics(member)
     said = named_topics(" ".join(e.text for e in evs),
-                        [t.removeprefix("topic:") for t in read if _receives(ctx, member, t)],
+                        [t.removeprefix("topic:") for t in read if receives(ctx, member, t)],
                         member.removeprefix("node:").rsplit("/", 1)[0])
     named |= {p for t in said for p in ctx.publishers("topic:" + t)} - {member}
     if not named:
         return []
     inputs = {p for t in read for p in ctx.publishers(t)}
     return sorted(named & (inputs | set(ctx.called_servers(member))))
-
-
-def _receives(ctx: PluginContext, node: str, topic: str) -> bool:
-    """False when ``node``'s subscription to ``topic`` matches none of its publishers' QoS (it
-    receives nothing: its complaint is of its own misconfiguration, `qos_compat`'s alert)."""
-    qos = [q for q in ctx.attr(topic, "qos") or () if isinstance(q, dict)]
-    mine = [q for q in qos if q.get("role") == "sub" and str(q.get("node", "")).removeprefix("node:")
-            == node.removeprefix("node:")]
-    pubs = [q for q in qos if q.get("role") == "pub"]
-    return not (mine and pubs) or any(compatibility(p, q)[0] != "error" for p in pubs for q in mine)
 
 
 def named_topics(text: str, topics: list[str], namespace: str) -> list[str]:
