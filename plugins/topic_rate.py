@@ -56,6 +56,7 @@ FEED_SLACK_S = 0.25  # a feeding node's change of state reaches a publisher with
 THREADS_STEADY = 8  # samples before a quiet with one thread count: the process's threads are steady
 THREAD_END_S = 1.0  # a thread that stops publishing on an error ends within this (or a period) after
 LINES_KEPT = 4  # per node: its newest log lines' times (`_announced`)
+BEAT_SHARE = 0.02  # a line this close to the interval of the two before it comes at their beat (a timer)
 # On simulated time a sensor's messages come in bursts, one per /clock tick: its intervals spread
 # however steady its rate per simulated second is (σ within this share of it): then it is regular.
 STEADY_PER_SIM = 0.1
@@ -636,9 +637,9 @@ def _note_lines(ctx: PluginContext) -> None:
 
 
 def _announced(ctx: PluginContext, topic: str, r: Rhythm) -> bool:
-    """True when every publisher of ``topic`` logged a line as the topic stopped — within one of
-    its periods and ``FEED_SLACK_S`` of its last message, after a pause in its logging of
-    ``transition_grace_s`` at least — and nothing worse than INFO (`_complained`): a tracker's
+    """True when every publisher of ``topic`` logged a line as the topic stopped — from
+    ``FEED_SLACK_S`` before its last message to one of its periods and that after it, no routine
+    line (`_routine`) — and nothing worse than INFO (`_complained`): a tracker's
     "track lost", a collision avoider's "contact clear; resuming": a node that says what it does
     changed its state. Its output published only while something holds is then quiet by design,
     which a multi-threaded container's threads cannot show (`_withheld`). Not when the line was
@@ -655,10 +656,10 @@ def _announced(ctx: PluginContext, topic: str, r: Rhythm) -> bool:
     for node in pubs:
         if node not in said:
             times = list(lines.get(node, ()))
-            at = [k for k, x in enumerate(times) if abs(x - r.newest) <= slack]
-            # no line at the stop, or one of a node that logs all the time
-            pause = times[at[0]] - times[at[0] - 1] if at and at[0] else math.inf
-            ok = bool(at) and pause >= ctx.settings["transition_grace_s"]
+            at = [k for k, x in enumerate(times) if -FEED_SLACK_S <= x - r.newest <= slack]
+            # the line before it gone from what is kept: the node logged as many since
+            lost = bool(at) and at[0] == 0 and len(times) == LINES_KEPT
+            ok = bool(at) and not lost and not _routine(times[:at[0] + 1], ctx.settings["transition_grace_s"])
             if not ok and ctx.t - r.newest <= slack + min(ctx.state.get("interval", 1.0), 5.0):
                 return False  # its line may come with the next sample
             said[node] = ok  # later lines do not push it out
@@ -666,6 +667,17 @@ def _announced(ctx: PluginContext, topic: str, r: Rhythm) -> bool:
                 or _thread_ended(ctx, node, q, r):
             return False
     return True
+
+
+def _routine(times: list[float], pause_s: float) -> bool:
+    """True when the newest of a node's line ``times`` says nothing of its own: it came under
+    ``pause_s`` after the one before (a node that logs all the time), or at the beat of the two
+    before (within `BEAT_SHARE` of their interval: a status line every few seconds)."""
+    if len(times) < 2:
+        return False
+    pause = times[-1] - times[-2]
+    return pause < pause_s or (len(times) >= 3 and abs(pause - (times[-2] - times[-3]))
+                               <= BEAT_SHARE * (times[-2] - times[-3]))
 
 
 def _on_request(ctx: PluginContext, topic: str, r: Rhythm) -> bool:

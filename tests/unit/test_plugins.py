@@ -901,6 +901,9 @@ def test_topic_rate_an_output_its_node_said_it_stopped_is_its_state():
     # A line seconds before the stop, or one of a node that logs every half second, says nothing.
     assert run([17.0])[:1] == [(21.5, "topic:/det")]
     assert run([k / 2 for k in range(1, 80)])[:1] == [(21.5, "topic:/det")]
+    # Nor does a status line every 5 s that happened to come with the stop.
+    assert run([5.0, 10.0, 15.0, 20.0])[:1] == [(21.5, "topic:/det")]
+    assert run([5.0, 10.0, 20.0]) == []
     # Its single-threaded executor stopped with the line (a driver's "calibrating" before its read
     # blocked): the line was its last act.
     hung = lambda t: noisy(3.0, 0.3) if t < 20 else 0.0  # noqa: E731
