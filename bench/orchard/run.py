@@ -61,7 +61,7 @@ states, controller states, pressures, picks, ``/tf``, ``/diagnostics``, ``/diagn
 ``/orchard/cmd_vel_mux/active``, ``/orchard/controller_manager/activity``,
 ``/orchard/gnss_driver/rtk_status``, ``/orchard/bin_logger/bin_fill``,
 ``/orchard/robot_description``), ``/tf_static`` transient-local depth 100. Several publishers on
-one topic: ``/diagnostics`` (19 statuses from 17 nodes), ``/tf`` (the EKF's odom->base_link 20 Hz,
+one topic: ``/diagnostics`` (20 statuses from 17 nodes), ``/tf`` (the EKF's odom->base_link 20 Hz,
 robot_state_publisher's two tube ends 10 Hz each), ``/orchard/cmd_vel_nav`` (row follower, path
 tracker).
 
@@ -162,7 +162,7 @@ Processes -> nodes (14 processes, 30 nodes; the tablet comes and goes):
 Healthy dynamics (intended; see the smoke test numbers in the commit): IMU and joint states 50 Hz,
 ``/tf`` 40 msgs/s, filtered and wheel odometry 20 Hz, canopy scan 15 Hz (none 66-88 s of each row),
 both cameras 8 Hz (images and camera_info), fix and ``/orchard/odometry/gps`` 10 Hz, vacuum
-pressure 10 Hz, ``/diagnostics`` ~17 arrays/s, canopy density 2 Hz, battery, link quality,
+pressure 10 Hz, ``/diagnostics`` ~16 arrays/s, canopy density 2 Hz, battery, link quality,
 ``/diagnostics_agg``, RTCM (while the link is up), farm pose 1 Hz. Bursty or on demand: detections
 and fruits (~8-16 Hz in the first seconds of pick windows, nothing else), ``~/picked`` and the bin
 fill (one per apple), both ``~/controller_state`` (25 Hz during picks), ``/orchard/cmd_vel_nav`` (20
