@@ -340,7 +340,7 @@ class VacuumPump(Node):
         self.p = 101.3
         self.pub = self.create_publisher(FluidPressure, "~/pressure", RELIABLE)
         self.create_service(SetBool, "~/enable", self.enable)
-        self.create_timer(0.1, self.tick)
+        self.create_timer(0.2, self.tick)
         Diag(self, self.diag)
         self.get_logger().info("Becker blower VFD on can0 node 5; manifold sensor 0-110 kPa")
 
@@ -636,7 +636,7 @@ class StereoCamera(Node):
         self.frame = f"{side}_camera_optical_frame"
         self.img = self.create_publisher(CompressedImage, "~/image_rect_color/compressed", SENSOR)
         self.info = self.create_publisher(CameraInfo, "~/camera_info", SENSOR)
-        self.jpegs = [array.array("B", os.urandom(random.randint(22_000, 28_000))) for _ in range(4)]
+        self.jpegs = [array.array("B", os.urandom(random.randint(13_000, 17_000))) for _ in range(4)]
         self.n = 0
         self.lag0 = None
         self.glare = every(120, 260)
@@ -644,7 +644,7 @@ class StereoCamera(Node):
         Diag(self, self.diag)
         self.get_logger().info(
             f"ZED X SN {serial} opened on GMSL2 port {0 if side == 'left' else 1}: "
-            "HD1200 @ 15 fps, publishing rectified color at 8 Hz (grab_frame_rate)"
+            "HD1200 @ 15 fps, publishing rectified color 960x600 at 8 Hz (grab_frame_rate)"
         )
 
     def grab(self) -> None:
@@ -668,16 +668,16 @@ class StereoCamera(Node):
         self.img.publish(
             CompressedImage(header=h, format="bgr8; jpeg compressed bgr8", data=self.jpegs[self.n % 4])
         )
-        ci = CameraInfo(header=h, height=1200, width=1920, distortion_model="plumb_bob")
-        ci.k = [1067.3, 0.0, 958.2, 0.0, 1067.1, 601.8, 0.0, 0.0, 1.0]
+        ci = CameraInfo(header=h, height=600, width=960, distortion_model="plumb_bob")
+        ci.k = [533.7, 0.0, 479.1, 0.0, 533.6, 300.9, 0.0, 0.0, 1.0]
         ci.p = [
-            1067.3,
+            533.7,
             0.0,
-            958.2,
-            -128.1 if self.side == "right" else 0.0,
+            479.1,
+            -64.1 if self.side == "right" else 0.0,
             0.0,
-            1067.1,
-            601.8,
+            533.6,
+            300.9,
             0.0,
             0.0,
             0.0,
@@ -724,15 +724,9 @@ class FruitDetector(Node):
         self.lat_ms = 0.0
         self.frames = 0
         self.pub = self.create_publisher(PoseArray, "~/detections", RELIABLE)
+        self.group = g
+        self.subs: list = []  # the cameras, subscribed only while enabled (saves the GMSL/DDS copies)
         self.create_service(SetBool, "~/enable", self.enable, callback_group=g)
-        for side in ("left", "right"):
-            self.create_subscription(
-                CompressedImage,
-                f"{side}_camera/image_rect_color/compressed",
-                lambda m, s=side: self.on_image(s, m),
-                SENSOR,
-                callback_group=g,
-            )
         self.create_timer(1.0, self.watch, callback_group=g)
         Diag(self, self.diag, group=g)
         self.get_logger().info(
@@ -741,6 +735,22 @@ class FruitDetector(Node):
         )
 
     def enable(self, req, res):
+        if req.data and not self.subs:
+            self.last_img = {"left": time.time(), "right": time.time()}
+            self.subs = [
+                self.create_subscription(
+                    CompressedImage,
+                    f"{side}_camera/image_rect_color/compressed",
+                    lambda m, s=side: self.on_image(s, m),
+                    SENSOR,
+                    callback_group=self.group,
+                )
+                for side in ("left", "right")
+            ]
+        elif not req.data and self.subs:
+            for sub in self.subs:
+                self.destroy_subscription(sub)
+            self.subs = []
         self.enabled = req.data
         self.enabled_at = time.time()
         res.success = True
@@ -764,8 +774,8 @@ class FruitDetector(Node):
         out = PoseArray(header=msg.header)
         for _ in range(n):
             p = Pose()
-            p.position.x, p.position.y = r.uniform(200, 1700), r.uniform(150, 1050)
-            p.position.z = r.uniform(60, 140)  # bounding-box size in px
+            p.position.x, p.position.y = r.uniform(100, 850), r.uniform(75, 525)
+            p.position.z = r.uniform(30, 70)  # bounding-box size in px
             p.orientation.w = r.uniform(0.5, 0.97)  # confidence
             out.poses.append(p)
         self.pub.publish(out)
@@ -811,19 +821,29 @@ class FruitLocalizer(Node):
         self.create_subscription(
             PoseArray, "fruit_detector/detections", self.on_detections, RELIABLE, callback_group=g
         )
-        for side in ("left", "right"):
-            self.create_subscription(
+        self.info_subs = {
+            side: self.create_subscription(
                 CameraInfo,
                 f"{side}_camera/camera_info",
-                lambda m, s=side: self.fx.__setitem__(s, m.k[0]),
+                lambda m, s=side: self.on_info(s, m),
                 SENSOR,
                 callback_group=g,
             )
+            for side in ("left", "right")
+        }
         self.create_timer(1.0, self.prune_timer, callback_group=g)
         Diag(self, self.diag, group=g)
         self.get_logger().info(
             f"Tracker ready: max_age {self.MAX_AGE_S:.2f} s, gating 0.08 m, max_misses {self.MAX_MISSES}"
         )
+
+    def on_info(self, side: str, m: CameraInfo) -> None:
+        """The intrinsics once per camera (they do not change): then unsubscribe."""
+        if side in self.fx:
+            return
+        self.fx[side] = m.k[0]
+        self.get_logger().info(f"{side}_camera intrinsics: fx {m.k[0]:.1f}, baseline from P {m.p[3]:.1f}")
+        self.destroy_subscription(self.info_subs[side])
 
     def on_detections(self, msg: PoseArray) -> None:
         side = msg.header.frame_id.split("_")[0]
@@ -835,15 +855,15 @@ class FruitLocalizer(Node):
                 throttle_duration_sec=5.0,
             )
             return
-        fx = self.fx.get(side, 1067.3)
+        fx = self.fx.get(side, 533.7)
         out = PoseArray(header=header("base_link", to_s(msg.header.stamp)))
         with self.lock:
             for d in msg.poses:
                 z = 0.075 * fx / max(d.position.z, 1.0)  # apple of 75 mm: depth from its size
                 p = Pose()
-                p.position.x = 0.3 + (d.position.x - 960) * z / fx
+                p.position.x = 0.3 + (d.position.x - 480) * z / fx
                 p.position.y = (0.9 + z * 0.4) * (1 if side == "left" else -1)
-                p.position.z = 1.2 - (d.position.y - 600) * z / fx
+                p.position.z = 1.2 - (d.position.y - 300) * z / fx
                 p.orientation.w = 1.0
                 tid = self.associate(p)
                 out.poses.append(p)
@@ -1069,7 +1089,7 @@ class RobotStatePublisher(Node):
     def __init__(self) -> None:
         super().__init__("robot_state_publisher", namespace=NS)
         self.declare_parameter("robot_description", URDF)
-        self.declare_parameter("publish_frequency", 10.0)
+        self.declare_parameter("publish_frequency", 5.0)
         self.desc = self.create_publisher(String, "robot_description", LATCHED)
         self.static = self.create_publisher(TransformStamped, "/tf_static", TF_STATIC)
         self.tf = self.create_publisher(TransformStamped, "/tf", RELIABLE)
@@ -1081,7 +1101,7 @@ class RobotStatePublisher(Node):
             t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = x, y, z
             t.transform.rotation.w = 1.0
             self.static.publish(t)
-        self.create_timer(0.1, self.publish)
+        self.create_timer(0.2, self.publish)
         self.get_logger().info("got segment base_link")
 
     def on_joints(self, m: JointState) -> None:
@@ -1121,9 +1141,6 @@ class RowFollower(Node):
         self.cmd = self.create_publisher(Twist, "cmd_vel_nav", COMMAND)
         self.create_subscription(
             LaserScan, "canopy_lidar/scan", self.on_scan, SENSOR, callback_group=self.sub_group
-        )
-        self.create_subscription(
-            Odometry, "odometry/filtered", lambda m: None, RELIABLE, callback_group=self.sub_group
         )
         ActionServer(
             self,
@@ -1456,7 +1473,10 @@ def arms(faults: Faults):
                     flush=True,
                 )
                 os._exit(134)  # the C++ node aborts: its nodes stay listed until their leases end
-            jsb.pub.publish(JointState(header=header("base_link", t), name=names, position=left.q + right.q))
+            if cm.cycles % 2 == 0:  # joint_state_broadcaster: publish_rate 25 Hz
+                jsb.pub.publish(
+                    JointState(header=header("base_link", t), name=names, position=left.q + right.q)
+                )
             cm.cycles += 1
             if cm.overrun():
                 cm.get_logger().warning(
@@ -1866,8 +1886,10 @@ class HarvestCoordinator(Node):
             gh = wait_future(ac.send_goal_async(Fibonacci.Goal(order=len(res.plan.poses))), 1.0)
             if gh is None or not gh.accepted:
                 self.failed += 1
+                why = "did not answer the goal request within 1.0 s" if gh is None else "rejected the goal"
                 self.get_logger().warning(
-                    f"{side}_arm_controller rejected the pick trajectory", throttle_duration_sec=5.0
+                    f"{side}_arm_controller {why} (pick trajectory, row {row}, bay {bay})",
+                    throttle_duration_sec=5.0,
                 )
                 time.sleep(0.5)
                 continue
