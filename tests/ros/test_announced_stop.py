@@ -14,17 +14,9 @@ import time
 
 import pytest
 
-from tests.ros.test_dynamics import HEAD, _monitor, _no_alerts, _observe, _plugin
+from tests.ros.test_dynamics import CAMERA, HEAD, _monitor, _observe, _plugin, _settle
 
 pytestmark = pytest.mark.ros
-
-CAMERA = HEAD + """
-n = Node("camera")
-pub = n.create_publisher(String, "/image", 10)
-n.create_timer(0.1, lambda: pub.publish(String(data="frame")))
-print("ready", flush=True)
-rclpy.spin(n)
-"""
 
 TRACKERS = HEAD + """
 from rclpy.executors import MultiThreadedExecutor
@@ -58,11 +50,7 @@ def test_a_stop_its_node_logged_is_no_silence_and_a_silent_one_is(children, tmp_
     children.python(TRACKERS, str(flag), name="trackers")
     mon = _monitor(children, tmp_path)
     try:
-        deadline = time.monotonic() + 20
-        while not {"node:/a_tracker", "node:/b_tracker"} <= set(mon.seen) and time.monotonic() < deadline:
-            _observe(mon, 1.0)
-        _observe(mon, 16.0)
-        _no_alerts(mon, "two trackers following their targets")
+        _settle(mon, {"node:/a_tracker", "node:/b_tracker"}, "two trackers following their targets", 16.0)
         rhythms = _plugin(mon, "topic_rate").state["rhythms"]
         # both settled as continuous: a quiet is judged at its base limit, not at its own gaps
         assert all(rhythms[t].settled and not rhythms[t].gaps for t in TOPICS), [rhythms[t] for t in TOPICS]
