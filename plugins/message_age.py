@@ -30,6 +30,8 @@ from stream_viz.detect.startup import standing
 from stream_viz.model.ids import name_of
 from stream_viz.records import Alert
 
+PAUSE_PERIODS = 3.0  # an interval this many periods long (and PAUSE_MIN_S) ends a burst of a topic
+PAUSE_MIN_S = 0.5
 JUMP_SAID_S = 60.0  # a clock's jump back is said in the stale alerts this long after it
 
 
@@ -241,6 +243,7 @@ def _desync(ctx: PluginContext, topic: str, age: float, fresh: bool) -> Alert | 
     the other's shift at least), else both."""
     s = ctx.settings
     now = ctx.attr(topic, "stamp_partners") or {}
+    _note_resumed(ctx, topic)
     learned = ctx.state.setdefault("partners", {}).setdefault(topic, {})  # partner -> samples matched
     if fresh:
         for p, share in now.items():
@@ -258,6 +261,16 @@ def _desync(ctx: PluginContext, topic: str, age: float, fresh: bool) -> Alert | 
         theirs = max(abs(ctx.value(p, "stamp_age_ms") - ages.get(p, math.nan)) for p in compared)
         lost = not theirs > 2.0 * mine  # NaN: unknown, both are charged
     began = ctx.state.setdefault("desync_since", {})
+    resumed = ctx.state["resumed"]
+    for p in compared if lost else ():  # a partner judged after this topic in this sample
+        _note_resumed(ctx, p)
+    if lost and any(resumed.get(x, -math.inf) > matched.get(topic, -math.inf) for x in (topic, *compared)):
+        # A burst began since they matched: its messages may take other ticks of the clock they
+        # share (an arm controller's state every other cycle from its trajectory's start).
+        for p in compared:
+            learned.pop(p, None)
+        streak(ctx.state, (topic, "desync"), False, fresh)
+        lost = False
     if not lost:
         if fresh:
             began.pop(topic, None)
@@ -275,6 +288,15 @@ def _desync(ctx: PluginContext, topic: str, age: float, fresh: bool) -> Alert | 
                      "them receives no set)", symptom="desync", partners=compared,
                      **({"shift_ms": shift} if shift == shift else {}), since=since,
                      since_within=began[topic] - since)
+
+
+def _note_resumed(ctx: PluginContext, topic: str) -> None:
+    """Note when ``topic`` resumed after a pause: its longest interval since the last sample
+    (``gap_s``) over `PAUSE_PERIODS` of its periods and `PAUSE_MIN_S`."""
+    gap, rate = ctx.value(topic, "gap_s"), ctx.value(topic, "rate_hz")
+    resumed = ctx.state.setdefault("resumed", {})
+    if gap == gap and gap > max(PAUSE_MIN_S, PAUSE_PERIODS / rate if rate > 0 else 0.0):
+        resumed[topic] = ctx.t
 
 
 def _matched_elsewhere(ctx: PluginContext, topic: str, but: str) -> bool:

@@ -14,6 +14,7 @@ import time
 
 import pytest
 
+from stream_viz.testing import wait_for
 from tests.ros.test_dynamics import HEAD, _monitor, _observe, _observe_until, _settle
 
 pytestmark = pytest.mark.ros
@@ -88,5 +89,60 @@ def test_a_camera_whose_stamps_leave_its_trigger_group_is_ranked_first(children,
         assert desync == {"topic:/right/image_raw"}, [(a.member, a.message) for a in after]
         top = mon.engine.result().root_causes
         assert top and top[0].member == "node:/right", [(c.member, c.score) for c in top[:3]]
+    finally:
+        mon.close()
+
+
+# A ros2_control-like loop at 50 Hz stamps what it publishes with its cycle's time: the joint
+# states every other cycle, an arm controller's state every other cycle from its trajectory's
+# start, only during a trajectory (3 s, then 2 s idle; every other one starts an odd cycle).
+ARM = HEAD + """
+import threading
+from sensor_msgs.msg import JointState
+from builtin_interfaces.msg import Time
+n = Node("controller_manager")
+joints = n.create_publisher(JointState, "/joint_states", 10)
+state = n.create_publisher(JointState, "/arm_controller/controller_state", 10)
+from std_msgs.msg import Header
+def stamped(t):
+    stamp = Time(sec=int(t), nanosec=int((t - int(t)) * 1e9))
+    return JointState(header=Header(stamp=stamp), name=["a"], position=[0.0])
+def loop():
+    cycle, k, start = 0, 0, None
+    while rclpy.ok():
+        t = time.time()
+        cycle += 1
+        if cycle % 2 == 0:
+            joints.publish(stamped(t))
+        phase = (cycle // 50) % 5  # seconds of the 5 s period: moving in the first 3
+        if phase < 3 and (start is not None or cycle % 2 == (cycle // 250) % 2):
+            start = cycle if start is None else start
+            if (cycle - start) % 2 == 0:
+                state.publish(stamped(t))
+        elif phase >= 3:
+            start = None
+        time.sleep(max(0.0, 0.02 - (time.time() - t)))
+threading.Thread(target=loop, daemon=True).start()
+print("ready", flush=True)
+rclpy.spin(n)
+"""
+
+
+def test_a_burst_on_other_ticks_of_a_shared_loop_is_no_desync(children, tmp_path):
+    children.python(ARM, name="arm")
+    mon = _monitor(children, tmp_path)
+    try:
+        wait_for(lambda: (mon.step(), "node:/controller_manager" in mon.seen)[1], timeout=20, period=1.0)
+        shares = []  # the arm state's share of the joint states' stamps, a sample at a time
+        end = time.monotonic() + 40.0
+        while time.monotonic() < end:
+            _observe(mon, 1.0)
+            got = mon.seen.nodes["topic:/joint_states"].get("stamp_partners") or {}
+            shares.append(got.get("topic:/arm_controller/controller_state"))
+        # They shared their stamps in some bursts and none in others ...
+        assert any(x is not None and x >= 0.8 for x in shares), shares
+        assert any(x is not None and x <= 0.1 for x in shares), shares
+        # ... and neither is out of sync for it.
+        assert [a for a in mon.store.alerts() if a.data.get("symptom") == "desync"] == [], mon.store.alerts()
     finally:
         mon.close()

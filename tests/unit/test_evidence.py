@@ -915,14 +915,15 @@ def test_a_parameter_event_that_changes_or_deletes_is_one_param_event_of_its_nod
     assert len(long.data["changed"]["s"]) == 60 and long.data["changed"]["s"].endswith("…")
 
 
-def _triggered(t, shares, ages):
+def _triggered(t, shares, ages, gaps=None):
     """Three cameras on one trigger, each topic's ``stamp_partners`` from ``shares`` (pair -> share)
-    and its age from ``ages`` (topic -> ms)."""
+    and its age from ``ages`` (topic -> ms); ``gaps``: camera -> its ``gap_s``."""
     G = new_graph()
     for cam in ("left", "center", "right"):
         add_member(G, f"node:/{cam}", pid=100, alive=True)
         add_member(G, f"topic:/{cam}/image", theta=make_theta("topic", {
-            "rate_hz": 5.0, "publishers": 1, "subscribers": 1, "age_s": 0.1, "stamp_age_ms": ages[cam]}),
+            "rate_hz": 5.0, "publishers": 1, "subscribers": 1, "age_s": 0.1, "stamp_age_ms": ages[cam],
+            **({"gap_s": gaps[cam]} if gaps and cam in gaps else {})}),
             stamp_partners={f"topic:/{o}/image": shares[frozenset((cam, o))]
                             for o in ("left", "center", "right") if o != cam})
         add_flow_edge(G, f"node:/{cam}", f"topic:/{cam}/image", "pub")
@@ -946,6 +947,26 @@ def test_message_age_a_camera_whose_stamps_leave_its_trigger_group_is_out_of_syn
     assert alerts[0].data["shift_ms"] == pytest.approx(-41.0)
     # Before the partners were learnt (5 samples matching), nothing is lost.
     assert drive("message_age", frames[6:]) == []
+
+
+def test_message_age_a_burst_that_takes_other_ticks_of_a_shared_clock_is_no_desync():
+    # An arm controller's state (every other cycle from its trajectory's start) and the joint
+    # states (every other cycle of the loop) share stamps in one pick, not in the next: each pick
+    # is a burst after a pause, its partners learnt anew. Parting mid-burst is a desync.
+    pairs = [frozenset(p) for p in (("left", "center"), ("left", "right"), ("center", "right"))]
+    matched = dict.fromkeys(pairs, 1.0)
+    moved = {**matched, pairs[1]: 0.0, pairs[2]: 0.0}
+    same = {"left": 100.0, "center": 100.0, "right": 100.0}
+
+    def run(paused_at):  # /right/image resumed after a 4 s pause at that sample
+        return drive("message_age", [_triggered(t, matched if t < 10 else moved, same,
+                                                {"right": 4.0} if t == paused_at else None)
+                                     for t in range(15)])
+
+    assert {m for _, m, _ in run(None)} == {"topic:/right/image"}
+    assert run(10) == []
+    assert run(11) == []  # seen a sample late: the streak not yet confirmed
+    assert {m for _, m, _ in run(5)} == {"topic:/right/image"}  # a pause before they last matched
 
 
 def test_message_age_of_a_pair_out_of_sync_the_one_whose_age_moved_is_charged():
