@@ -31,7 +31,7 @@ from stream_viz.model.ids import name_of
 from stream_viz.records import Alert
 
 PAUSE_PERIODS = 3.0  # an interval this many periods long (and PAUSE_MIN_S) ends a burst of a topic
-PAUSE_MIN_S = 0.5
+PAUSE_MIN_S = 0.2
 JUMP_SAID_S = 60.0  # a clock's jump back is said in the stale alerts this long after it
 
 
