@@ -14,7 +14,17 @@ import time
 
 import pytest
 
-from tests.ros.test_dynamics import CAMERA, HEAD, _monitor, _observe, _plugin, _settle
+from stream_viz.testing import wait_for
+from tests.ros.test_dynamics import (
+    CAMERA,
+    HEAD,
+    _monitor,
+    _no_alerts,
+    _observe,
+    _observe_until,
+    _plugin,
+    _settle,
+)
 
 pytestmark = pytest.mark.ros
 
@@ -50,14 +60,19 @@ def test_a_stop_its_node_logged_is_no_silence_and_a_silent_one_is(children, tmp_
     children.python(TRACKERS, str(flag), name="trackers")
     mon = _monitor(children, tmp_path)
     try:
-        _settle(mon, {"node:/a_tracker", "node:/b_tracker"}, "two trackers following their targets", 16.0)
+        _settle(mon, {"node:/a_tracker", "node:/b_tracker"}, "two trackers following their targets", 12.0)
+        # Both settled (a loaded machine's hiccup may add a short gap to either: it only lengthens
+        # the quiet each is judged at); until then a stop is not judged at all.
         rhythms = _plugin(mon, "topic_rate").state["rhythms"]
-        # both settled as continuous: a quiet is judged at its base limit, not at its own gaps
-        assert all(rhythms[t].settled and not rhythms[t].gaps for t in TOPICS), [rhythms[t] for t in TOPICS]
+        settled = lambda: (_observe(mon, 1.0), all(t in rhythms and rhythms[t].settled for t in TOPICS))[1]  # noqa: E731
+        wait_for(settled, timeout=30, period=0.0)
+        _no_alerts(mon, "two trackers following their targets")
         since = time.time()
         flag.touch()
-        _observe(mon, 10.0)
-        silent = {a.member for a in mon.store.alerts(since=since) if a.data.get("symptom") == "silence"}
-        assert silent == {"topic:/b_tracker/track"}, mon.store.alerts(since=since)
+        silent = lambda found: {a.member for a in found if a.data.get("symptom") == "silence"}  # noqa: E731
+        _observe_until(mon, since, silent, 20.0)
+        _observe(mon, 5.0)  # the other's quiet judged by then too (its limit a hiccup's gap longer at most)
+        after = mon.store.alerts(since=since)
+        assert silent(after) == {"topic:/b_tracker/track"}, after
     finally:
         mon.close()
