@@ -100,15 +100,15 @@ ARM = HEAD + """
 import threading
 from sensor_msgs.msg import JointState
 from builtin_interfaces.msg import Time
+from std_msgs.msg import Header
 n = Node("controller_manager")
 joints = n.create_publisher(JointState, "/joint_states", 10)
 state = n.create_publisher(JointState, "/arm_controller/controller_state", 10)
-from std_msgs.msg import Header
 def stamped(t):
     stamp = Time(sec=int(t), nanosec=int((t - int(t)) * 1e9))
     return JointState(header=Header(stamp=stamp), name=["a"], position=[0.0])
 def loop():
-    cycle, k, start = 0, 0, None
+    cycle, start = 0, None
     while rclpy.ok():
         t = time.time()
         cycle += 1
