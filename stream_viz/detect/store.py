@@ -182,7 +182,10 @@ class AlertStore:
     def _migrate(self, version: int) -> None:
         db = self._db
         for v in range(version, SCHEMA_VERSION):
-            with db:
+            # An explicit transaction: the sqlite3 module commits each CREATE on its own, so a
+            # monitor killed mid-migration would leave a half-made schema no later run could open.
+            db.execute("BEGIN IMMEDIATE")
+            try:
                 for stmt in MIGRATIONS[v]:
                     db.execute(stmt)
                 if v == 0:
@@ -192,6 +195,10 @@ class AlertStore:
                 done.append({"to": v + 1, "at": time.time()})
                 db.execute("UPDATE meta SET value = ? WHERE key = 'migrations'", (_json(done),))
                 db.execute(f"PRAGMA user_version = {v + 1}")
+            except BaseException:
+                db.rollback()
+                raise
+            db.commit()
 
     @property
     def schema_version(self) -> int:

@@ -271,3 +271,39 @@ def test_sigkilled_writer_loses_nothing_committed(tmp_path):
         assert set(map(float, done)) <= set(times)
         assert len(times) in (len(done), len(done) + 1)
         assert all(len(st.alerts(since=t)) - len(st.alerts(since=t + 0.5)) == 3 for t in times)
+
+
+def test_a_writer_killed_at_any_statement_of_the_schema_leaves_a_file_that_opens(tmp_path):
+    """A real child creating the database is SIGKILLed as SQLite starts its k-th statement; the
+    file then opens as an empty or a whole alert database, never as a half-made one."""
+    n = 100  # more statements than the creation runs
+    for k in range(n):
+        path = tmp_path / f"k{k}.sqlite"
+        code = textwrap.dedent(f"""
+            import os, signal, sqlite3
+            seen = []
+            def trace(stmt):
+                seen.append(stmt)
+                if len(seen) > {k}:
+                    os.kill(os.getpid(), signal.SIGKILL)
+            connect = sqlite3.connect
+            def traced(*a, **kw):
+                db = connect(*a, **kw)
+                db.set_trace_callback(trace)
+                return db
+            sqlite3.connect = traced
+            from stream_viz.detect.store import AlertStore
+            AlertStore({str(path)!r}).close()
+        """)
+        p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+        if p.returncode == 0:  # k past the last statement: the creation was whole
+            break
+        assert p.returncode == -signal.SIGKILL, p.stderr
+        with AlertStore(path) as st:
+            assert st.schema_version == SCHEMA_VERSION
+            assert [m["to"] for m in st.get_meta("migrations")] == list(range(1, SCHEMA_VERSION + 1))
+            st.add([Alert("node:/a", "rosout", 1.0, "error", "x")])
+            assert len(st.alerts()) == 1
+    else:
+        pytest.fail(f"the creation ran over {n} statements")
+    assert k > sum(len(m) for m in MIGRATIONS)  # the kills did land between the CREATEs
