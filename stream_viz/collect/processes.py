@@ -79,6 +79,10 @@ RAN_OF_BUSIEST = 0.01
 # of them running, dispatches a multi-threaded executor: rclpy's spin loop in the main thread hands
 # callbacks to a pool of workers (11-17x at a light load, docs/collector.md).
 DISPATCH_RATIO = 5.0
+# Seen dispatching at this many probes, a process's main thread still does while it stays its
+# busiest thread: an executor's kind is fixed for its life, and a starved probe shows only one
+# worker that ran, or the main thread fewer times busier than the workers.
+DISPATCH_SEEN = 2
 RISE_PROBE = 25.0  # a process's CPU up this many points since the last sample: probe it now and next
 FIRST_PROBES = 4
 PROBE_MIN_S = 0.5  # probes closer than this say nothing (the sampler is called between samples too)
@@ -146,6 +150,7 @@ class _Tracked:
     worker: tuple[int, float, float] | None = None  # the one that ran: (tid, when, its CPU time s)
     main: tuple[float, float] | None = None  # its main thread: (when, its CPU time s)
     dispatching: float = float("nan")  # 1.0: its main thread dispatched at the last probe; 0.0: not
+    dispatched: int = 0  # probes that saw it dispatch
     rise_probes: int = 0  # probes still due for a CPU rise
     last_cpu: float = float("nan")
 
@@ -465,7 +470,10 @@ def _probe_threads(pid: int, tr: _Tracked, executor: bool = True) -> None:
     # Nothing ran: an idle or blocked executor is still the one it was (kept), and its CPU (none)
     # is what tells a blocked callback.
     if ran:
-        tr.dispatching = float(dispatches(tr.thread_ns or {}, now, t - tr.probe_t, pid))
+        seen = dispatches(tr.thread_ns or {}, now, t - tr.probe_t, pid)
+        tr.dispatched += seen
+        kept = tr.dispatched >= DISPATCH_SEEN and leads(tr.thread_ns or {}, now, pid)
+        tr.dispatching = float(seen or kept)
     if executor and ran is not None and (ran or tr.running != tr.running):
         tr.running = float(len(ran))
         if len(ran) != 1:
@@ -517,6 +525,14 @@ def dispatches(before: dict[int, int], now: dict[int, int], span_s: float, main:
     if used.get(main, 0) < least or len(others) < 2:
         return False
     return used[main] >= DISPATCH_RATIO * max(others)
+
+
+def leads(before: dict[int, int], now: dict[int, int], main: int) -> bool:
+    """True when ``main`` used more CPU between two probes than each other thread (as in
+    `dispatches`): a dispatcher seen before still dispatches; a runaway thread beside it does not.
+    """
+    used = {tid: ns - before.get(tid, 0) for tid, ns in now.items()}
+    return used.get(main, 0) > max((ns for tid, ns in used.items() if tid != main), default=0)
 
 
 def _thread_ns(pid: int, tid: int) -> int:

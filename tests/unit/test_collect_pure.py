@@ -458,6 +458,37 @@ def test_a_main_thread_dispatches_when_it_outworks_two_others_five_times():
     assert not dispatches({}, {1: 49_000_000, 5: 10_000_000, 6: 9_000_000}, 1.0, 1)
 
 
+def test_a_dispatcher_seen_twice_still_dispatches_while_its_main_thread_leads(monkeypatch, tmp_path):
+    from stream_viz.collect import processes
+    from stream_viz.collect.processes import _probe_threads, _Tracked, leads
+
+    assert leads({1: 0, 5: 0}, {1: 450_000_000, 5: 170_000_000}, 1)
+    assert not leads({1: 0, 5: 0, 6: 0}, {1: 200_000_000, 5: 1_000_000_000, 6: 1_000}, 1)
+    assert not leads({}, {1: 0, 5: 0}, 1)  # nothing ran
+    # Probes of a process (pid 1) read from a fake /proc: the thread CPU times (ns) after each.
+    light = {1: 970_000_000, 5: 8_000_000, 6: 3_000_000}  # main dispatching, two workers
+    starved = {1: 450_000_000, 5: 170_000_000, 6: 0}  # one worker ran, main 2.6x it
+    runaway = {1: 200_000_000, 5: 1_000_000_000, 6: 0}
+    steps, at = [], {1: 0, 5: 0, 6: 0}
+    monkeypatch.setattr(processes.os, "listdir", lambda path: ["1", "5", "6"])
+    monkeypatch.setattr(processes, "read_file", lambda path: b"python")
+    monkeypatch.setattr(processes, "_thread_ns", lambda pid, tid: at[tid])
+    clock = iter(float(i) for i in range(100))
+    monkeypatch.setattr(processes.time, "monotonic", lambda: next(clock))
+
+    def probe(tr, used):
+        for tid, ns in used.items():
+            at[tid] += ns
+        _probe_threads(1, tr)
+        steps.append(tr.dispatching)
+
+    tr = _Tracked(proc=None, info=None)
+    probe(tr, {1: 0, 5: 0, 6: 0})  # the first probe: nothing to compare with
+    for used in (starved, light, starved, light, starved, runaway, starved):
+        probe(tr, used)
+    assert steps[1:] == [0.0, 1.0, 0.0, 1.0, 1.0, 0.0, 1.0]
+
+
 def test_threads_that_ran_are_above_a_core_share_and_a_share_of_the_busiest():
     from stream_viz.collect.processes import threads_that_ran
 
