@@ -149,8 +149,12 @@ class Robot:
             if waiting:
                 time.sleep(0.05)
 
-    def stop(self, timeout: float = 5.0) -> None:
-        """SIGINT every process group, SIGKILL what is left after ``timeout``, clean DDS shared memory."""
+    def stop(self, timeout: float = 8.0) -> None:
+        """SIGINT every process group, SIGKILL what is left after ``timeout``, clean DDS shared memory.
+
+        ``timeout`` outlasts a process's own watchdog (`child.end_process`: 5 s after it sees the
+        signal), so a process slow to shut down on a loaded machine still ends itself, with code 0.
+        """
         atexit.unregister(self.stop)
         self._stopping.set()
         if self._supervisor is not None:
