@@ -353,8 +353,10 @@ class LaserMerger(Node):
         best = min(other, key=lambda m: abs(to_s(m.header.stamp) - t), default=None)
         if best is None or abs(to_s(best.header.stamp) - t) > 0.04:
             return
-        other.remove(best)
-        q.remove(msg)
+        # approximate time: the pair and anything older than it leave the queues
+        t_best = to_s(best.header.stamp)
+        other[:] = [m for m in other if to_s(m.header.stamp) > t_best]
+        q.clear()
         front, rear = (msg, best) if side == "front" else (best, msg)
         newer = msg if to_s(msg.header.stamp) >= to_s(best.header.stamp) else best
         out = LaserScan(header=newer.header, angle_min=-math.pi, angle_max=math.pi,
@@ -516,7 +518,7 @@ class Ekf(Node):
 
     def __init__(self) -> None:
         super().__init__("ekf_filter_node", namespace=NS)
-        g_in, g_out = MutuallyExclusiveCallbackGroup(), MutuallyExclusiveCallbackGroup()
+        g_in, g_out = ReentrantCallbackGroup(), MutuallyExclusiveCallbackGroup()  # the inputs take a lock
         self.pub = self.create_publisher(Odometry, "odometry/filtered", RELIABLE)
         self.tf = self.create_publisher(TransformStamped, "/tf", RELIABLE)
         self.create_subscription(Odometry, "odometry/wheel", self.on_wheel, RELIABLE, callback_group=g_in)
@@ -1102,7 +1104,8 @@ class LiftController(Node):
         self.ki = 0.4
         self.integral = 0.0
         self.reloaded = False
-        ActionServer(self, Fibonacci, "~/lift", self.execute, callback_group=ReentrantCallbackGroup())
+        ActionServer(self, Fibonacci, "lift_controller/lift", self.execute,
+                     callback_group=ReentrantCallbackGroup())
 
     def update(self, dt: float) -> None:
         if self.fault.word == "crash" and not self.reloaded:
@@ -1257,7 +1260,7 @@ class Vda5050Bridge(Node):
 RECORDED = (
     ("/fl/safety/fields", UInt8MultiArray, SENSOR), ("/fl/safety/estop", Bool, LATCHED),
     ("/fl/scan_merged", LaserScan, SENSOR), ("/fl/odometry/filtered", Odometry, SENSOR),
-    ("/fl/odometry/wheel", Odometry, SENSOR), ("/fl/imu/data", Imu, SENSOR),
+    ("/fl/mast/height", Range, SENSOR), ("/fl/vda5050/order", String, SENSOR),
     ("/fl/amcl_pose", PoseWithCovarianceStamped, LATCHED), ("/fl/cmd_vel", Twist, SENSOR),
     ("/fl/joint_states", JointState, SENSOR), ("/fl/battery_state", BatteryState, SENSOR),
     ("/fl/vda5050/state", String, LATCHED), ("/fl/plan", PathMsg, SENSOR),
@@ -1270,11 +1273,11 @@ class Recorder(Node):
     """rosbag2 record-like: 15 topics serialized into a 10 s chunk, compressed and written to a
     temp bag file at each flush (split at 64 MB)."""
 
-    def __init__(self) -> None:
+    def __init__(self, where: Path) -> None:
         super().__init__("recorder", namespace=NS)
         self.chunk: list[bytes] = []
         self.n = 0
-        self.dir = Path(tempfile.mkdtemp(prefix="fl_bag_"))
+        self.dir = Path(tempfile.mkdtemp(prefix="fl_bag_", dir=where))
         self.file = open(self.dir / "fl_0.mcap", "wb")
         self.split = 0
         for topic, typ, qos in RECORDED:
@@ -1380,10 +1383,7 @@ def build(process: str, fault_dir: Path):
     if process == "scan_tools":
         return single_threaded(LaserMerger(fault_dir), ScanThrottle(), OdomRelay())
     if process == "localization":
-        ex = MultiThreadedExecutor(num_threads=3)
-        for n in (Ekf(), Amcl()):
-            ex.add_node(n)
-        return ex
+        return single_threaded(Ekf(), Amcl())
     if process == "base_driver":
         shared = DriveState()
         return single_threaded(DriveController(shared), ImuDriver(fault_dir, shared), BatteryManager())
@@ -1407,7 +1407,7 @@ def build(process: str, fault_dir: Path):
     if process == "fleet_bridge":
         return single_threaded(Vda5050Bridge())
     if process == "recorder":
-        return single_threaded(Recorder())
+        return single_threaded(Recorder(fault_dir.parent))
     if process == "web_bridge":
         return single_threaded(FoxgloveBridge())
     if process == "diagnostics":
