@@ -176,10 +176,11 @@ def yaw_of(q: Quaternion) -> float:
 
 
 class FaultFile:
-    """A node's fault file ``FAULT_DIR/<node>``: its word, read at start and every 0.5 s."""
+    """A node's fault file ``FAULT_DIR/fl.<node>`` (`bench.handwritten.NamespacedRobot.fault_file`):
+    its word, read at start and every 0.5 s."""
 
     def __init__(self, fault_dir: Path, node: str) -> None:
-        self.path = fault_dir / node
+        self.path = fault_dir / f"{NS.strip('/')}.{node}"
         self.word = self._read()
         threading.Thread(target=self._poll, daemon=True).start()
 
@@ -942,7 +943,7 @@ class MissionManager(Node):
             return False
         gh = wait_future(client.send_goal_async(Fibonacci.Goal(order=order)), 2.0)
         if gh is None or not gh.accepted:
-            self.log.error(f"{what}: goal rejected")
+            self.log.error(f"{what}: goal {'not answered within 2.0 s' if gh is None else 'rejected'}")
             return False
         res = wait_future(gh.get_result_async(), timeout)
         if res is None or res.status != 4:  # SUCCEEDED
