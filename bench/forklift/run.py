@@ -162,8 +162,8 @@ what a user sees:
   leaves them); ``/fl/joint_states`` and ``/fl/mast/height`` stop, the controller manager's diagnostics
   go STALE; at the lift (107 s) the mission manager ERRORs "Move 1 lift: goal not answered
   within 2.0 s" (the dead server still discovered) or "... action server
-  /fl/lift_controller/lift not available after 2.0 s"; the drive to the dock goes on. Root cause /fl/lift_controller (process
-  fork_control).
+  /fl/lift_controller/lift not available after 2.0 s"; the drive to the dock goes on. Root cause
+  /fl/lift_controller (process fork_control).
 - ``slow_planner_server``: new costmap parameters disable the obstacle layer's clearing: WARN
   "global_costmap: obstacle_layer clearing disabled ..." at the next plan (113 s), every plan takes 3 s
   ("Planning took 3.00 s"), the navigator ERRORs "Failed to compute path for drive_to_dock:
