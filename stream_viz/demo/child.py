@@ -10,6 +10,7 @@ respawned process does not inject a one-off fault again. The process-wide faults
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import hashlib
 import json
 import os
@@ -22,6 +23,10 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from stream_viz.demo.faults import CPU_SHARE, ERRLOG_PER_S, FAULTS, LEAK_MB_S, STOP
+
+# The last resort of `end_process`, and the line it prints first (faulthandler's).
+WATCHDOG_S = 6.0
+WATCHDOG = "Timeout (0:00:06)!"
 
 LEAK_CAP = 1536 * 2**20
 BURN_PERIOD = 0.1  # s: a partial ``cpu`` fault burns its share of each such period
@@ -153,10 +158,14 @@ def end_process(executors: list, spinners: list[threading.Thread], destroy: Iter
 
     A clean shutdown can hang (an executor busy in a callback, DDS teardown): a watchdog exits
     regardless after 5 s. Destroying the participant makes peers see the nodes leave at once.
+    Fast DDS's participant teardown can also spin for good in C holding the GIL (its
+    ``set_listener`` waiting on a discovery callback), which no Python thread outlives: then
+    faulthandler's own C thread prints every thread's stack and exits with code 1 after 6 s.
     """
     watchdog = threading.Timer(5.0, os._exit, args=(code,))
     watchdog.daemon = True
     watchdog.start()
+    faulthandler.dump_traceback_later(WATCHDOG_S, exit=True)
     for ex in executors:
         ex.shutdown(timeout_sec=1.0)
     for t in spinners:  # a node still in use by a spinning executor would not really be destroyed

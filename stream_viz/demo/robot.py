@@ -14,6 +14,7 @@ import threading
 import time
 from pathlib import Path
 
+from stream_viz.demo.child import WATCHDOG
 from stream_viz.demo.faults import FAULTS, FaultSpec
 from stream_viz.demo.topology import DEMO, GroupSpec, Topology
 from stream_viz.errors import DemoError
@@ -57,6 +58,7 @@ class Robot:
         self._own_dir = run_dir is None
         self.run_dir = Path(run_dir) if run_dir else None
         self.procs: dict[str, subprocess.Popen] = {}
+        self.hung: set[str] = set()  # groups whose teardown hung: their watchdog ended them (`stop`)
         self.started_at: float | None = None
         self.fault_at: float | None = None
         self._injected: dict = {}
@@ -174,6 +176,8 @@ class Robot:
                 p.wait(5)
         if self.procs:
             shm_clean()
+        self.hung = {g for g, p in self.procs.items()
+                     if p.returncode == 1 and WATCHDOG in self.log_tail(g, 200)}
         if self._own_dir and self.run_dir is not None:
             shutil.rmtree(self.run_dir, ignore_errors=True)
             self.run_dir = None

@@ -127,7 +127,8 @@ def test_graph_matches_topology_and_stop_leaves_nothing(observer):
         pids = list(robot.pids().values())
     assert not [p for p in pids if psutil.pid_exists(p) and psutil.Process(p).status() != "zombie"]
     codes = {g: p.returncode for g, p in robot.procs.items()}
-    assert set(codes.values()) == {0}, codes  # ended by SIGINT, not SIGKILL
+    # Ended by SIGINT, not SIGKILL: cleanly, or by its own watchdog when Fast DDS's teardown hung.
+    assert all(c == 0 or g in robot.hung for g, c in codes.items()), codes
     # A clean exit announces the participant's end at once; on a loaded machine that message
     # can be lost, and then DDS drops the participant when its lease runs out (Fast DDS: 20 s,
     # checked by the observer's own timer). A node's name can stay listed for good without any
@@ -288,4 +289,4 @@ def test_children_end_when_the_parent_is_terminated(children, tmp_path):
 
     def gone():
         return not [p for p in pids if psutil.pid_exists(p) and psutil.Process(p).status() != "zombie"]
-    wait_for(gone, timeout=10)
+    wait_for(gone, timeout=15)  # each polls its parent every 0.5 s; its watchdogs end it by 6 s

@@ -88,3 +88,37 @@ def test_a_partial_cpu_fault_burns_about_its_share_of_a_core():
     _run_for(2.0, burn, 0.25)
     used = (time.process_time() - t0) / 2.0
     assert 0.05 < used < 0.4  # at most its share (plus this test's own work); less only on a busy machine
+
+
+def test_a_demo_process_whose_teardown_holds_the_gil_still_ends(tmp_path):
+    """A real child in `end_process` whose teardown spins in C holding the GIL (as Fast DDS's
+    participant teardown did in CI, for 33 min at 100 % of a core) still ends, with its stacks."""
+    import subprocess
+    import sys
+    import textwrap
+    import time
+
+    from stream_viz.demo.child import WATCHDOG
+
+    code = textwrap.dedent("""
+        import re
+        from rclpy.context import Context
+        from stream_viz.demo.child import end_process
+        ctx = Context()
+        ctx.init()
+        spin = lambda: re.fullmatch(r"(a+)+b", "a" * 64)  # exponential, in C, the GIL held
+        print("ending", flush=True)
+        end_process([], [], [spin], ctx)
+    """)
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         text=True)
+    try:
+        assert p.stdout.readline() == "ending\n"
+        t0 = time.monotonic()
+        _, err = p.communicate(timeout=30)
+        took = time.monotonic() - t0
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert p.returncode == 1 and 5.5 < took < 15, (p.returncode, took, err)
+    assert WATCHDOG in err and "fullmatch" in err, err
