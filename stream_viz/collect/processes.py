@@ -520,7 +520,7 @@ def dispatches(before: dict[int, int], now: dict[int, int], span_s: float, main:
         The main thread's id (the process id).
     """
     least = RAN_SHARE * 1e9 * span_s
-    used = {tid: ns - before.get(tid, 0) for tid, ns in now.items()}
+    used = _used(before, now)
     others = [ns for tid, ns in used.items() if tid != main and ns >= least]
     if used.get(main, 0) < least or len(others) < 2:
         return False
@@ -531,8 +531,13 @@ def leads(before: dict[int, int], now: dict[int, int], main: int) -> bool:
     """True when ``main`` used more CPU between two probes than each other thread (as in
     `dispatches`): a dispatcher seen before still dispatches; a runaway thread beside it does not.
     """
-    used = {tid: ns - before.get(tid, 0) for tid, ns in now.items()}
+    used = _used(before, now)
     return used.get(main, 0) > max((ns for tid, ns in used.items() if tid != main), default=0)
+
+
+def _used(before: dict[int, int], now: dict[int, int]) -> dict[int, int]:
+    """Each thread's CPU time (ns) between two probes; a thread new since ``before`` from 0."""
+    return {tid: ns - before.get(tid, 0) for tid, ns in now.items()}
 
 
 def _thread_ns(pid: int, tid: int) -> int:
