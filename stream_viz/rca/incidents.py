@@ -21,8 +21,10 @@ one with an alerted symptom still holding (within ``LASTING_S`` of the latest al
 ended 20 s ago does not displace a fault whose alerts still come) if any; among those,
 one that is not a recurrence (an incident all of whose members had symptoms in incidents that
 ended before it began) if any; among those one that is news (it began more than ``led_max``
-after every other ongoing one last changed: those stand, known) if any; among those the one
-whose best candidate stands out most (the strongest
+after every other ongoing one last changed: those stand, known) if any; among those one that
+is a state, not an event (not `once`: one sample's log lines, said once and not again, as a
+loaded robot's hiccup logs; a symptom still said is what is still wrong) if any; among those
+the one whose best candidate stands out most (the strongest
 hypothesis test ``ht`` among its candidates, the same for every ranking method), so a minor
 symptom elsewhere does not displace a fault that is still going on; ties: the one with more
 symptomatic members (a lone symptom as clear as the fault's does not displace its cascade),
@@ -63,6 +65,7 @@ class Incident:
     last episode ended less than the episode gap ago); ``lasting`` whether an alerted symptom of
     it held within `LASTING_S` of the latest alert;
     ``recurring`` whether all its members had symptoms in incidents that ended before it began;
+    ``once`` whether its alerts are one alert of log lines (an event, said once; set when ranked);
     ``strength`` the strongest hypothesis test among its candidates and ``first`` the member of
     its earliest alert (set when it is ranked);
     ``current`` whether the diagnosis is this incident's; ``key`` what its ranking was made from
@@ -76,6 +79,7 @@ class Incident:
     ongoing: bool
     lasting: bool = False
     recurring: bool = False
+    once: bool = False
     strength: float = 0.0
     first: str | None = None
     current: bool = False
@@ -379,7 +383,8 @@ def current(incidents: list[Incident], reach: float = INF) -> Incident | None:
         return all(inc.start > o.changed + reach for o in live if o is not inc)
 
     return max(incidents, key=lambda inc: (inc.strength > 0, inc.ongoing, inc.lasting, not inc.recurring,
-                                           news(inc), round(inc.strength, 9), len(inc.episodes), inc.start))
+                                           news(inc), not inc.once, round(inc.strength, 9), len(inc.episodes),
+                                           inc.start))
 
 
 @dataclass
@@ -467,6 +472,8 @@ def diagnose(
     mine = _split(alerts, keep, incidents)
     known = {inc.key: inc for inc in previous if inc.key}
     for inc in incidents:
+        own = mine[inc.id]
+        inc.once = len(own) == 1 and bool(own[0].data) and own[0].data.get("symptom") == "log"
         # evidence without a time counts in every incident; timed evidence in its own
         ev_inc = {m: e for m, e in ev.items() if not e.timed or e.episode() in inc.episodes.get(m, ())}
         inc.key = (tuple(sorted((m, tuple(v)) for m, v in inc.episodes.items())), len(mine[inc.id]),

@@ -179,6 +179,28 @@ def test_a_blip_that_ended_does_not_displace_a_fault_whose_alerts_still_come(G):
     assert current(strengths(got, **{SCAN: 0.3, BATT: 0.9})).members == [BATT, BATTERY]
 
 
+def test_a_line_said_once_does_not_displace_a_fault_still_said(G):
+    # /scan's rate has been down since 100 s, alerted every 5 s; at 127 the battery node logs
+    # one ERROR line (a hiccup), clearer than a rate warning, and says no more
+    fault = [al(SCAN, "topic_rate", t, "warn") for t in (100, 105, 110, 115, 120, 125, 130)]
+    line = al(BATT, "rosout", 127, symptom="log")
+    r = analyze(G, [*fault, line], RcaSettings(), None)
+    assert [(i.members, i.once, i.current) for i in r.incidents] == [
+        ([SCAN], False, True), ([BATT], True, False)]
+    assert r.root_causes[0].member == SENSOR
+    # said again (a state, not an event), it stands out more: its incident is current
+    r = analyze(G, [*fault, line, al(BATT, "rosout", 129, symptom="log")], RcaSettings(), None)
+    assert [(i.members, i.once, i.current) for i in r.incidents] == [
+        ([SCAN], False, False), ([BATT], False, True)]
+    # once, but news: /scan's fault has stood unchanged for longer than `led_max`
+    end = 100 + int(RcaSettings().led_max) + 30
+    late = al(BATT, "rosout", end + 2, symptom="log")
+    r = analyze(G, [*fault, *(al(SCAN, "topic_rate", t, "warn") for t in range(135, end + 1, 5)), late],
+                RcaSettings(), None)
+    assert [(i.members, i.once, i.current) for i in r.incidents] == [
+        ([SCAN], False, False), ([BATT], True, True)]
+
+
 def test_a_new_incident_after_an_old_one_stood_unchanged_is_current(G):
     # /scan's publisher died at 0 s and its subscriber warned from 5 s on (a larger incident,
     # still going on); a new one begins at 100 s, elsewhere, as clear: once the old one stood
