@@ -10,6 +10,7 @@ respawned process does not inject a one-off fault again. The process-wide faults
 from __future__ import annotations
 
 import argparse
+import datetime
 import faulthandler
 import hashlib
 import json
@@ -24,9 +25,9 @@ from typing import Any, NoReturn
 
 from stream_viz.demo.faults import CPU_SHARE, ERRLOG_PER_S, FAULTS, LEAK_MB_S, STOP
 
-# The last resort of `end_process`, and the line it prints first (faulthandler's).
-WATCHDOG_S = 6.0
-WATCHDOG = "Timeout (0:00:06)!"
+# The last resort of `end_process` (whole seconds), and the line faulthandler prints first.
+WATCHDOG_S = 6
+WATCHDOG = f"Timeout ({datetime.timedelta(seconds=WATCHDOG_S)})!"
 
 LEAK_CAP = 1536 * 2**20
 BURN_PERIOD = 0.1  # s: a partial ``cpu`` fault burns its share of each such period

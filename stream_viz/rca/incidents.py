@@ -473,10 +473,10 @@ def diagnose(
     known = {inc.key: inc for inc in previous if inc.key}
     for inc in incidents:
         own = mine[inc.id]
-        inc.once = len(own) == 1 and bool(own[0].data) and own[0].data.get("symptom") == "log"
+        inc.once = len(own) == 1 and (own[0].data or {}).get("symptom") == "log"
         # evidence without a time counts in every incident; timed evidence in its own
         ev_inc = {m: e for m, e in ev.items() if not e.timed or e.episode() in inc.episodes.get(m, ())}
-        inc.key = (tuple(sorted((m, tuple(v)) for m, v in inc.episodes.items())), len(mine[inc.id]),
+        inc.key = (tuple(sorted((m, tuple(v)) for m, v in inc.episodes.items())), len(own),
                    tuple(sorted(ev_inc.items())), G.number_of_nodes(), len(gone), first)
         if inc.key in known:  # unchanged since the last diagnosis (an incident that has ended)
             old = known[inc.key]

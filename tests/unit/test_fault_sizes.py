@@ -5,12 +5,15 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import subprocess
+import sys
+import textwrap
 import threading
 import time
 
 import pytest
 
-from stream_viz.demo.child import burn, errlog, next_fault, parser, record_injection
+from stream_viz.demo.child import WATCHDOG, burn, errlog, next_fault, parser, record_injection
 from stream_viz.demo.faults import SIZES, FaultSpec, keeps
 from stream_viz.errors import DemoError
 
@@ -93,13 +96,6 @@ def test_a_partial_cpu_fault_burns_about_its_share_of_a_core():
 def test_a_demo_process_whose_teardown_holds_the_gil_still_ends(tmp_path):
     """A real child in `end_process` whose teardown spins in C holding the GIL (as Fast DDS's
     participant teardown did in CI, for 33 min at 100 % of a core) still ends, with its stacks."""
-    import subprocess
-    import sys
-    import textwrap
-    import time
-
-    from stream_viz.demo.child import WATCHDOG
-
     code = textwrap.dedent("""
         import re
         from rclpy.context import Context
