@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import re
 from collections.abc import Iterator
 from typing import Any, ClassVar
 
 from stream_viz.detect.api import Plugin, PluginContext
-from stream_viz.detect.endpoints import receives
+from stream_viz.detect.endpoints import named_topics, receives
 from stream_viz.detect.startup import STARTUP_S, bring_up_note, hold_back, starting
 from stream_viz.records import SEVERITY_RANK as RANK
 from stream_viz.records import Alert
@@ -82,19 +81,3 @@ def _named_inputs(ctx: PluginContext, member: str, evs: list) -> list[str]:
         return []
     inputs = {p for t in read for p in ctx.publishers(t)}
     return sorted(named & (inputs | set(ctx.called_servers(member))))
-
-
-def named_topics(text: str, topics: list[str], namespace: str) -> list[str]:
-    """Return those of ``topics`` (full names) that ``text`` names: in full, or relative to
-    ``namespace`` (the logging node's; in the root namespace only a relative name with a ``/``),
-    as a whole name (not part of a longer one)."""
-    out = []
-    for t in topics:
-        forms = [t]
-        ns = namespace.rstrip("/") + "/"
-        rel = t[len(ns):] if t.startswith(ns) else ""
-        if "/" in rel or (rel and ns != "/"):  # a bare word of the root namespace ("scan") is any word
-            forms.append(rel)
-        if any(re.search(rf"(?<![\w/~]){re.escape(f)}(?![\w/])", text) for f in forms):
-            out.append(t)
-    return out

@@ -22,6 +22,7 @@ from stream_viz.detect.baseline import (
     robust,
     streak,
 )
+from stream_viz.detect.endpoints import named_topics, receives
 from stream_viz.detect.lifecycle import transitions as lifecycle_transitions
 from stream_viz.detect.process import SETTINGS as PROCESS_SETTINGS
 from stream_viz.detect.process import publishers_busy
@@ -90,6 +91,9 @@ class TopicRate(Plugin):
       (a message on its ``transition_event`` topic: a deactivated publisher is silent) or a goal
       of an action it serves ending (a controller stops when its goal is reached);
       such a quiet is healthy, and not learned (its length is the state's, not the rhythm's).
+      Neither that nor what its publishers do or say (`_withheld`, `_announced`, `_on_request`,
+      `_vouched`) excuses a quiet a node that reads the topic complained of after its last
+      message (`_contested`): the system did not mean it.
       Nor when every publisher has an input that went quiet up to ``input_grace_s`` before the
       topic did: the quiet is the input's (`_inherited`), not learned either; nor while every
       publisher's process is busy beyond its own CPU baseline (`publishers_busy`: its executor held by its
@@ -170,6 +174,7 @@ class TopicRate(Plugin):
         rhythms: dict[str, Rhythm] = ctx.state.setdefault("rhythms", {})
         _self_reports(ctx)
         _note_lines(ctx)
+        _readers_complaints(ctx)
         for topic, r in rhythms.items():  # before any is followed: a quiet complained of is not learned
             if r.newest is not None and not r.doubted and _complained(ctx, topic, r):
                 r.doubted = True  # a sensor's dropout, each with a WARN, is no rhythm of its topic
@@ -385,7 +390,8 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
     """Quiet for longer than the topic's own rhythm allows (see `TopicRate`)."""
     s = ctx.settings
     ref = _ref_hz(r, base)
-    if quiet is None or not r.settled or r.explained:
+    contested = _contested(ctx, topic, r)
+    if quiet is None or not r.settled or (r.explained and not contested):
         return None
     pace = _pace(ctx, topic)  # on simulated time a quiet lasts 1/pace as long on our clock
     judged = quiet * pace if 0 < pace < 1 else quiet
@@ -413,13 +419,14 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
         # before it (a late sample) may still show a stopped executor's last work.
         r.explained = ctx.t - ctx.state.get("interval", math.inf) >= r.newest
         return None
-    if not r.departed and _withheld(ctx, topic, r, rhythms):
+    # What its publishers do or say explains a quiet none of its readers complains of.
+    if not r.departed and not contested and _withheld(ctx, topic, r, rhythms):
         return None  # the topic's own rhythm: learned when it ends, judged again every sample
-    if not r.departed and _announced(ctx, topic, r):
+    if not r.departed and not contested and _announced(ctx, topic, r):
         return None  # it said what it did as it stopped: its state, learned when it ends
-    if not r.departed and _on_request(ctx, topic, r):
+    if not r.departed and not contested and _on_request(ctx, topic, r):
         return None  # its quiet is its clients' (learned when it ends)
-    if not r.departed and s["self_reports"] and _vouched(ctx, topic, r, ref):
+    if not r.departed and not contested and s["self_reports"] and _vouched(ctx, topic, r, ref):
         return None  # its publishers say they are fine with it quiet: their state, judged every sample
     if not r.departed:  # a new silence: count it for flapping
         r.departed = True
@@ -436,6 +443,9 @@ def _silence(ctx: PluginContext, topic: str, r: Rhythm, quiet: float | None, bas
         again += "; its executor stopped while its input arrives"
     if complained and quiet < _base_limit(s, ref):
         again += "; its publisher complained as it went quiet"
+    if contested:
+        reader, line = contested
+        again += f"; {name_of(reader)}, which reads it, complains: {line[:120]}"
     if ended := _this_quiet(ctx, topic, r).get("ended"):
         again += f"; {ended} lost a thread as it stopped"
     idle = stalled or _idle(ctx, topic, r)
@@ -496,12 +506,46 @@ def _healthy_quiet(ctx: PluginContext, topic: str, r: Rhythm, transitions: dict[
     pubs = ctx.publishers(topic)
     if not _changed_state(ctx, pubs, last, last, transitions, topic, period):
         return False
+    if _contested(ctx, topic, r):
+        return False  # a change of state its readers did not expect
     if not _complained(ctx, topic, r):
         return True
     # A lifecycle node put in another state says so after it ("Standby", a WARN of a driver not
     # streaming): the state, not trouble. One that complained before its transition changed state
     # because of it (a localiser deactivating itself on an ERROR): that transition excuses nothing.
     return _own_change(ctx, pubs, last, last, ctx.state.get("clean_lifecycle", {}), period)
+
+
+def _readers_complaints(ctx: PluginContext) -> None:
+    """Keep, per topic, the newest complaint of a node that reads it: a WARN or worse on /rosout
+    naming the topic (`named_topics`) or a publisher of it (the collector's ``nodes``), from a
+    node that receives it (`receives`) and does not publish it."""
+    said: dict[str, tuple[float, str, str]] = ctx.state.setdefault("readers_said", {})
+    for e in ctx.events:
+        if e.kind != "log" or RANK.get(e.level, -1) < RANK["warn"]:
+            continue
+        read = [t for t in ctx.subscribed_topics(e.member)
+                if e.member not in ctx.publishers(t) and receives(ctx, e.member, t)]
+        if not read:
+            continue
+        names = set(e.data.get("nodes", ()))
+        ns = e.member.removeprefix("node:").rsplit("/", 1)[0]
+        hit = {"topic:" + t for t in named_topics(e.text, [t.removeprefix("topic:") for t in read], ns)}
+        hit |= {t for t in read if names.intersection(ctx.publishers(t))}
+        for topic in hit:
+            if e.t > said.get(topic, (-math.inf,))[0]:
+                said[topic] = (e.t, e.member, e.text)
+
+
+def _contested(ctx: PluginContext, topic: str, r: Rhythm) -> tuple[str, str] | None:
+    """(reader, its line) when a node that reads ``topic`` complained of it after its last message
+    (`_readers_complaints`): the quiet is not what the system meant, whatever its publishers'
+    change of state or word says (a lidar deactivated by hand mid-row, its row follower warning
+    "No scan on …/scan for 8.9 s")."""
+    said = ctx.state.get("readers_said", {}).get(topic)
+    if said is None or r.newest is None or said[0] <= r.newest:
+        return None
+    return said[1], said[2]
 
 
 def _inherited(ctx: PluginContext, topic: str, r: Rhythm, rhythms: dict[str, Rhythm],

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 from stream_viz.detect.api import PluginContext
 from stream_viz.model.qos import compatibility
 
@@ -37,3 +39,19 @@ def receives(ctx: PluginContext, node: str, topic: str) -> bool:
     pubs, subs = endpoints(ctx, topic)
     mine, theirs = subs.get(node, []), [q for qs in pubs.values() for q in qs]
     return not (mine and theirs) or any(compatibility(p, q)[0] != "error" for p in theirs for q in mine)
+
+
+def named_topics(text: str, topics: list[str], namespace: str) -> list[str]:
+    """Return those of ``topics`` (full names) that ``text`` names: in full, or relative to
+    ``namespace`` (the logging node's; in the root namespace only a relative name with a ``/``),
+    as a whole name (not part of a longer one)."""
+    out = []
+    for t in topics:
+        forms = [t]
+        ns = namespace.rstrip("/") + "/"
+        rel = t[len(ns):] if t.startswith(ns) else ""
+        if "/" in rel or (rel and ns != "/"):  # a bare word of the root namespace ("scan") is any word
+            forms.append(rel)
+        if any(re.search(rf"(?<![\w/~]){re.escape(f)}(?![\w/])", text) for f in forms):
+            out.append(t)
+    return out

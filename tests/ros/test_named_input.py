@@ -3,10 +3,10 @@ through the real monitor against real rclpy nodes in subprocesses.
 
 A localiser (a lifecycle node) publishes its pose at 5 Hz; a controller reads it and, when the
 pose is stale, logs "Robot pose is … s old (localizer)". The localiser deactivates itself (a
-misread configuration): its silence follows a lifecycle transition, which is healthy dynamics
-and raises nothing, so the controller's ERRORs are the only symptom. They name the localiser,
-which the controller reads from: the alert says so (data ``names``) and the localiser is ranked
-first, not the controller that complained.
+misread configuration): its silence follows a lifecycle transition, which alone would be healthy
+dynamics. The controller's ERRORs name the localiser, which the controller reads from: its alert
+says so (data ``names``), the silence its reader complains of is a symptom after all (its alert
+quotes the controller), and the localiser is ranked first, not the controller that complained.
 """
 
 from __future__ import annotations
@@ -70,8 +70,11 @@ def test_an_error_naming_the_node_it_reads_from_ranks_that_node_first(children, 
         _observe(mon, 3.0)
         after = mon.store.alerts(since=t0)
         assert after, "the controller's ERRORs raised nothing"
-        assert {a.member for a in after} == {"node:/controller"}, after  # the silence is healthy
-        assert all(a.data.get("names") == ["node:/localizer"] for a in after), [a.data for a in after]
+        assert {a.member for a in after} == {"node:/controller", "topic:/pose"}, after
+        said = [a for a in after if a.member == "node:/controller"]
+        assert all(a.data.get("names") == ["node:/localizer"] for a in said), [a.data for a in said]
+        quiet = [a for a in after if a.member == "topic:/pose"]
+        assert all("/controller, which reads it, complains" in a.message for a in quiet), quiet
         top = mon.engine.result().root_causes
         assert top and top[0].member == "node:/localizer", top[:3]
     finally:

@@ -983,7 +983,7 @@ def test_message_age_of_a_pair_out_of_sync_the_one_whose_age_moved_is_charged():
 
 
 def test_a_line_names_a_topic_it_reads_in_full_or_relative_to_its_namespace():
-    from plugins.rosout import named_topics
+    from stream_viz.detect.endpoints import named_topics
 
     topics = ["/usv/odometry/gps", "/usv/gps", "/scan", "/odometry/raw"]
     assert named_topics("Rejecting /usv/odometry/gps: jump 400012 m", topics, "/usv") == ["/usv/odometry/gps"]
