@@ -165,6 +165,7 @@ class Collector:
         self._prev_t: float | None = None  # the last sample's time
         self._lines: dict[str, tuple[float, str]] = {}  # /rosout logger → its newest line (`last_words`)
         self._left: dict[str, float] = {}  # node fqn → when it left the graph
+        self._param_values: dict[tuple[str, str], str] = {}  # (node fqn, parameter) → its value
         self._left_pids: dict[str, int | None] = {}  # node fqn in `_left` → the process it was in
         self._dead: dict[int, ProcessReading] = {}
         self._closed = False
@@ -349,7 +350,7 @@ class Collector:
                         out.append(ev)
                 elif topic == "/parameter_events":
                     self.diagnostics.hardware.add(msg)
-                    ev = param_event(msg, recv / 1e9)
+                    ev = param_event(msg, recv / 1e9, self._param_values)
                     if ev is not None:
                         out.append(ev)
                 elif topic in DIAGNOSTICS:

@@ -4,7 +4,9 @@ A roboticist tunes a running robot (``ros2 param set /camera rate_hz 4``) and it
 their own settings (a zone manager setting a controller's speed limit): a change of a node's
 configuration, after which its outputs may follow a new normal. Each ``ParameterEvent`` that
 changes or deletes a parameter becomes one ``param`` event of that node; declarations
-(``new_parameters`` alone, as every node sends when it starts) are not changes.
+(``new_parameters`` alone, as every node sends when it starts) are not changes, nor is a value set
+to what it already was (an executive applying a mode's whole configuration at every step, most
+of it unchanged; ROS sends an event for every set).
 """
 
 from __future__ import annotations
@@ -21,21 +23,32 @@ _FIELDS = {1: "bool_value", 2: "integer_value", 3: "double_value", 4: "string_va
 MAX_VALUE_CHARS = 60  # a long array or string is cut in the event's text and data
 
 
-def value_text(value: Any) -> str:
-    """The value of a ``rcl_interfaces/ParameterValue`` as short text (``"?"`` when not set)."""
+def value_text(value: Any, limit: int = MAX_VALUE_CHARS) -> str:
+    """The value of a ``rcl_interfaces/ParameterValue`` as text, cut at ``limit`` characters
+    (``"?"`` when not set)."""
     field = _FIELDS.get(int(getattr(value, "type", 0)))
     if field is None:
         return "?"
     v = getattr(value, field)
     text = repr(v) if isinstance(v, str) else str(list(v) if field.endswith("_array_value") else v)
-    return text if len(text) <= MAX_VALUE_CHARS else text[:MAX_VALUE_CHARS - 1] + "…"
+    return text if len(text) <= limit else text[:limit - 1] + "…"
 
 
-def param_event(msg: Any, recv_s: float) -> Event | None:
+def param_event(msg: Any, recv_s: float, known: dict[tuple[str, str], str] | None = None) -> Event | None:
     """The ``param`` event of a ``rcl_interfaces/ParameterEvent`` received at ``recv_s``, or None
-    when it changes nothing (only declarations, or no node named)."""
-    changed = {p.name: value_text(p.value) for p in msg.changed_parameters}
+    when it changes nothing (only declarations, values set to what ``known`` holds, or no node
+    named). ``known`` ((node, parameter) → its value's full text) is kept up to date from every
+    event, declarations included."""
+    known = {} if known is None else known
+    full = {p.name: value_text(p.value, limit=10**9) for p in msg.changed_parameters}
+    for p in msg.new_parameters:
+        known[(msg.node, p.name)] = value_text(p.value, limit=10**9)
+    changed = {p.name: value_text(p.value) for p in msg.changed_parameters
+               if known.get((msg.node, p.name)) != full[p.name]}
+    known.update({(msg.node, k): v for k, v in full.items()})
     deleted = [p.name for p in msg.deleted_parameters]
+    for name in deleted:
+        known.pop((msg.node, name), None)
     if not (changed or deleted) or not msg.node:
         return None
     parts = [f"{k} = {v}" for k, v in changed.items()] + [f"{k} deleted" for k in deleted]

@@ -915,6 +915,25 @@ def test_a_parameter_event_that_changes_or_deletes_is_one_param_event_of_its_nod
     assert len(long.data["changed"]["s"]) == 60 and long.data["changed"]["s"].endswith("…")
 
 
+def test_a_parameter_set_to_the_value_it_had_is_no_change():
+    def p(name, value):
+        return Parameter(name=name, value=ParameterValue(type=3, double_value=value))
+
+    known = {}
+    assert param_event(ParameterEvent(node="/cam", new_parameters=[p("frame_rate", 5.0)]), 1.0, known) is None
+    def set_(node, t, **values):
+        return param_event(ParameterEvent(node=node, changed_parameters=[p(k, v) for k, v in values.items()]),
+                           t, known)
+
+    assert set_("/cam", 2.0, frame_rate=5.0) is None  # as declared
+    ev = set_("/cam", 3.0, frame_rate=10.0, gain=2.0)
+    assert ev.data == {"changed": {"frame_rate": "10.0", "gain": "2.0"}, "deleted": []}
+    ev = set_("/cam", 4.0, frame_rate=10.0, gain=3.0)
+    assert ev.data["changed"] == {"gain": "3.0"} and ev.text == "parameter of /cam: gain = 3.0"
+    assert set_("/cam", 5.0, frame_rate=10.0) is None
+    assert set_("/cam2", 6.0, frame_rate=10.0)  # another node's parameter of the same name is its own
+
+
 def _triggered(t, shares, ages, gaps=None):
     """Three cameras on one trigger, each topic's ``stamp_partners`` from ``shares`` (pair -> share)
     and its age from ``ages`` (topic -> ms); ``gaps``: camera -> its ``gap_s``."""
