@@ -230,8 +230,8 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
     A *cause* is a ``param`` event of a publisher or a state it latched anew, or an input of a
     publisher that follows one
     (data computed from a reconfigured input changes with it), up to ``reconfigure_s`` ago. After
-    a cause, a topic whose recent rate departs from its baseline (below ``drop_ratio`` × it, or
-    above it / ``drop_ratio``) in messages sent after it, promptly (within ``PROMPT_INTERVALS``
+    a cause, a topic whose recent rate departs from its baseline (below ``slow_ratio`` × it, or
+    above it / ``slow_ratio``) in messages sent after it, promptly (within ``PROMPT_INTERVALS``
     of its new intervals, or ``transition_grace_s``), has its rhythm and rate baseline learned
     anew from the cause: no drop, no silence against its old rate; not while it is quiet for
     ``STOPPING_PERIODS`` of its periods and a publisher complained (`_complained`: a flaky encoder
@@ -245,7 +245,9 @@ def _reconfigured(ctx: PluginContext, followed: list[tuple], rhythms: dict[str, 
     cycle) is no cause when it changes again (`_note_changes`).
     """
     s = ctx.settings
-    window, ratio = s["reconfigure_s"], s["drop_ratio"]
+    # Any departure that could alert, down to a slow drop's: a rate halved or doubled is measured
+    # a hair short of drop_ratio (a camera set from 10 to 5 fps and back shows 5.0 and 9.9).
+    window, ratio = s["reconfigure_s"], s["slow_ratio"]
     changed: dict[str, float] = ctx.state.setdefault("reconfigured", {})  # node -> its newest param event
     relearn: dict[str, float] = ctx.state["relearn"]
     _note_changes(ctx, changed, relearn, window)

@@ -1113,10 +1113,32 @@ def test_topic_rate_a_slower_rate_seen_a_sample_late_is_still_the_changes():
     # The event stamped 0.6 s before the camera slows: the recent rate is under half the baseline
     # only at the second sample after it (2.1 s), one sample later than a new rate's few intervals.
     assert drive("topic_rate", slowed_while_idle([55.0, 135.0], -0.6, 170)) == []
-    # One change stamped 2.5 s early is a rate drop (too late to be the change's); it does not make
+    # One change stamped 3.5 s early is a rate drop (too late to be the change's); it does not make
     # `fps` a parameter that moves no rate, so the next slowdowns are changes again.
-    late = drive("topic_rate", slowed_while_idle([55.0, 135.0, 215.0, 295.0], [-0.6, -2.5, -0.6, -0.6], 330))
+    late = drive("topic_rate", slowed_while_idle([55.0, 135.0, 215.0, 295.0], [-0.6, -3.5, -0.6, -0.6], 330))
     assert late and {int(t) // 80 for t, _, _ in late} == {1}, late
+
+
+def test_topic_rate_a_rate_doubled_by_a_parameter_is_its_new_normal():
+    # A camera at 5 fps set to 10 at 28 s. Its recent rate, over its last intervals and the open
+    # one, reads 0.84 of the fps, as the blind tunnel crawler's camera did (8.4 Hz at 10 fps): short
+    # of twice the rate before. The rise is the change's all the same, learned anew: `fps` moved a
+    # rate (two changes that move none make it a parameter that moves nothing, and the next fall a
+    # drop: the crawler's executive sets its camera from 5 to 10 fps and back at every segment).
+    frames = []
+    for t in HALF[:50]:
+        fps, rate = (10.0, min(10.0, 5.0 + 5.0 * (t - 28.0) / 3.0)) if t >= 28.0 else (5.0, 5.0)
+        events = [param(27.9, fps="10.0")] if t == 28.5 else []
+        frames.append((t, model(rate=rate, recent=0.84 * fps, age=0.095), events))
+    ps = PluginSet.load(enable=["topic_rate"], cwd_plugins=False, settings={}, isolate=False)
+    hist, prev, alerts = History(), new_graph(), []
+    for t, G, events in frames:
+        record_history(hist, G, t)
+        alerts += ps.run(t, G, G.nodes, hist, events, diff(prev, G), None)[0]
+        prev = G
+    (plugin,) = ps.plugins
+    assert alerts == [] and plugin.state["relearn"] == {"topic:/img": 27.9}
+    assert plugin.state["param_misses"] == {("node:/camera", "fps"): 0}
 
 
 def test_topic_rate_a_parameter_set_once_to_its_value_still_moves_the_rate_later():
