@@ -3,8 +3,9 @@ alert names.
 
 A symptom on a passive member says something is wrong with the nodes feeding it. With one
 publisher that is the one; with several (``/tf``, ``/diagnostics``, a fan-in) the symptom is
-charged to the publishers its alerts name (data ``publishers``: whose own stamps are late), else
-to those whose own traffic changed (``publisher_rates`` on the topic: a
+charged to the publishers its alerts name (data ``publishers``: whose own stamps are late), else,
+for a symptom the messages carry (stale, out of sync, late, lost: `CARRIED`), to those that send
+them, else to those whose own traffic changed (``publisher_rates`` on the topic: a
 publisher gone silent while the others go on), else to those with other evidence of their own
 at that time (their other outputs, their own alerts, their process), else equally to all. An
 alert that names a server, a service or a node (``data["server"]``, ``data["service"]``,
@@ -25,6 +26,8 @@ from stream_viz.model.queries import publishers, servers
 
 LOW_SHARE = 0.25  # share of a publisher the other publishers' own evidence does not clear
 NAME_KEYS = ("server", "service", "names")  # alert data that names the member to blame
+# Symptoms a topic's messages carry (alert data ``symptom``): theirs who send them, not a standby's.
+CARRIED = frozenset({"stale", "desync", "clock_skew", "latency_rise", "jitter_rise", "drops"})
 
 
 def charged_nodes(G: nx.MultiDiGraph, member: str) -> list[str]:
@@ -89,7 +92,8 @@ def pointed_nodes(G: nx.MultiDiGraph, member: str, names: Iterable[str]) -> list
 
 
 def publisher_shares(
-    G: nx.MultiDiGraph, topic: str, pubs: list[str], other: Mapping[str, float], named: Iterable[str] = ()
+    G: nx.MultiDiGraph, topic: str, pubs: list[str], other: Mapping[str, float], named: Iterable[str] = (),
+    carried: bool = False,
 ) -> dict[str, float]:
     """Return the share of a symptom on ``topic`` that each of its publishers ``pubs`` carries.
 
@@ -106,12 +110,16 @@ def publisher_shares(
         Each publisher's anomaly from evidence of its own at the time (0 or missing: none).
     named : iterable of str, optional
         The publishers the symptom's own alerts name (data ``publishers``: whose stamps are late).
+    carried : bool, optional
+        The symptom is carried by the messages (`CARRIED`): the publishers that send them carry
+        it, not one that sends nothing (a hot standby), which would otherwise look stopped.
 
     Returns
     -------
     dict
         1 for the publishers the alerts name or the evidence points at; 0 for the others
-        beside those named, and for those still publishing when others stopped; `LOW_SHARE` for
+        beside those named, for those sending nothing when the messages carry the symptom, and
+        for those still publishing when others stopped; `LOW_SHARE` for
         those that the others' own evidence does not clear; 1 for all when nothing tells them
         apart (or there is a single publisher).
     """
@@ -122,6 +130,10 @@ def publisher_shares(
         return {p: 1.0 if p in named else 0.0 for p in pubs}
     rates = G.nodes[topic].get("publisher_rates") if topic in G else None
     rates = rates if isinstance(rates, Mapping) else {}
+    if carried:
+        sending = {p for p in pubs if not G.nodes[p].get("gone") and (_rate(rates.get(p)) or 0.0) > 0}
+        if sending and len(sending) < len(pubs):
+            return {p: 1.0 if p in sending else 0.0 for p in pubs}
     stopped = {p for p in pubs if G.nodes[p].get("gone") or _rate(rates.get(p)) == 0.0}
     if stopped and len(stopped) < len(pubs):
         return {p: 1.0 if p in stopped else 0.0 for p in pubs}

@@ -26,7 +26,7 @@ from stream_viz.model.queries import (
 from stream_viz.model.traffic import idle, measured
 from stream_viz.rca import siblings
 from stream_viz.rca.causal import causes_in, effects, is_node, outputs, publishers
-from stream_viz.rca.charge import NAME_KEYS, charged_nodes, names_in, pointed_nodes, publisher_shares
+from stream_viz.rca.charge import CARRIED, NAME_KEYS, charged_nodes, names_in, pointed_nodes, publisher_shares
 from stream_viz.rca.episodes import Episode, Evidence, as_evidence, merge, overlaps
 from stream_viz.rca.settings import RcaSettings
 from stream_viz.records import Alert
@@ -70,7 +70,8 @@ class Symptoms:
     (data ``executor_idle``); ``silence`` a silent member's
     newest message and its beat (data ``since``, ``since_within``: its next was due at their sum),
     of its newest silence; ``logged_at`` when a silent member's publisher last logged, any level
-    (data ``logged_at``).
+    (data ``logged_at``); ``carried`` the members every alert of which is a symptom the
+    messages carry (`charge.CARRIED`: stale, out of sync, late).
     """
 
     times: dict[str, np.ndarray] = field(default_factory=dict)
@@ -94,6 +95,7 @@ class Symptoms:
     executor_idle: set[str] = field(default_factory=set)
     silence: dict[str, tuple[float, float]] = field(default_factory=dict)
     logged_at: dict[str, float] = field(default_factory=dict)
+    carried: set[str] = field(default_factory=set)
     latest: float = -INF
     count: int = 0
 
@@ -132,8 +134,11 @@ def collect_symptoms(
     anomaly, relevance, plugins = s.anomaly, s.relevance, s.plugins
     own_anomaly, own_onset, logged, exited, named = s.own_anomaly, s.own_onset, s.logged, s.exited, s.named
     first_t, latest = INF, s.latest
+    absent: set[str] = set()  # members with an alert whose symptom the messages do not carry
     for a in chosen:
         m, t, data = a.member, a.t, a.data
+        if not (data and data.get("symptom") in CARRIED):
+            absent.add(m)
         w = sev.get(a.severity, warn)
         factor = 1.0 if (a.plugin in direct or not m.startswith("node:")) else settings.charge
         x = min(1.0, w * factor)
@@ -193,6 +198,7 @@ def collect_symptoms(
         latest = max(latest, t)
     s.latest = latest
     s.count = len(chosen)
+    s.carried = set(raw) - absent
     for m, ts in raw.items():
         s.times[m] = np.asarray(sorted(set(ts)), dtype=float)  # np.unique costs more on short lists
         s.onset[m] = float(s.times[m][0])
@@ -501,7 +507,7 @@ def _charge_shared(
         lo, hi = s.onset[m] - gap, s.episodes[m][-1][1] + gap
         other = {n: max(v.direct, v.charged, v.evidence) if overlaps(v.spans, lo, hi) else v.untimed
                  for n in nodes if (v := views.get(n)) is not None}
-        shares[m] = publisher_shares(G, m, nodes, other, s.culprits.get(m, ()))
+        shares[m] = publisher_shares(G, m, nodes, other, s.culprits.get(m, ()), m in s.carried)
     for m, nodes in shared_by:
         for n in nodes:
             x = s.anomaly[m] * settings.charge * shares[m][n]

@@ -75,6 +75,19 @@ def test_a_multi_publisher_symptom_is_charged_to_the_publisher_that_stopped():
     assert by[ODOM].evidence["symptoms"] == [TF]
 
 
+def test_a_symptom_the_messages_carry_is_charged_to_the_publisher_that_sends_them():
+    # A hot standby (ODOM's rate 0: it sends nothing until it takes over) beside the active one.
+    G = tf_graph({ODOM: 0.0, LOC: 50.0})
+    assert publisher_shares(G, TF, [LOC, ODOM], {}, carried=True) == {LOC: 1.0, ODOM: 0.0}
+    assert publisher_shares(G, TF, [LOC, ODOM], {}, carried=False) == {LOC: 0.0, ODOM: 1.0}
+    by, order = causes_of(G, [al(TF, "message_age", 10, "warn", symptom="stale")])
+    assert order == [LOC] and by[LOC].evidence["symptoms"] == [TF]
+    # A silence beside the stale messages: the absent messages are the one that stopped.
+    _, order = causes_of(G, [al(TF, "message_age", 10, "warn", symptom="stale"),
+                             al(TF, "topic_rate", 11, symptom="silence")])
+    assert order == [ODOM]
+
+
 def test_a_multi_publisher_symptom_follows_the_publishers_other_outputs_and_process():
     alerts = [al(TF, "topic_rate", 10), al(POSE, "topic_rate", 10)]
     by, order = causes_of(tf_graph(), alerts)
