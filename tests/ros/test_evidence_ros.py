@@ -14,6 +14,7 @@ import time
 import pytest
 
 from stream_viz.model.theta import theta_dict
+from stream_viz.rca import RcaSettings, analyze
 from stream_viz.testing import wait_for
 from tests.ros.test_plugins_ros import PERIOD, Run, _ready, _sick_after_healthy
 
@@ -39,22 +40,24 @@ def run_of(ros_domain):
         r.close()
 
 
+# Stamps 0.3 s old once the flag exists. With a second argument, a hot standby of that name: its
+# publisher on the same topic, and nothing sent (until it would take over: never, here).
 STAMPED = """
 import os, sys
 import rclpy
 from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import Imu
-flag = sys.argv[1]
+flag, standby = sys.argv[1], sys.argv[2] if len(sys.argv) > 2 else None
 rclpy.init()
-n = Node('imu_driver', namespace='/robot')
+n = Node(standby or 'imu_driver', namespace='/robot')
 pub = n.create_publisher(Imu, '/robot/imu', 10)
 def tick():
     m = Imu()
     lag = Duration(seconds=0.3) if os.path.exists(flag) else Duration()
     m.header.stamp, m.header.frame_id = (n.get_clock().now() - lag).to_msg(), 'imu'
     pub.publish(m)
-n.create_timer(0.05, tick)
+n.create_timer(0.05, lambda: None if standby else tick())
 rclpy.spin(n)
 """
 
@@ -77,6 +80,21 @@ def test_message_age_of_stamps_lagging_300ms(children, tmp_path, run_of):
     assert 280.0 <= sick["stamp_age_ms"] <= 400.0 and sick["latency_ms"] < 50.0, sick
     # the youngest is late too (it may be a hair older than the mean: both are ~300 ms plus jitter)
     assert 280.0 <= sick["stamp_age_recent_ms"] <= 400.0, sick
+
+
+def test_late_messages_are_the_sending_publishers_not_a_hot_standbys(children, tmp_path, run_of):
+    flag, topic = tmp_path / "lag", "topic:/robot/imu"
+    children.python(STAMPED, str(flag), name="imu")
+    children.python(STAMPED, str(flag), "standby", name="standby")
+    run = run_of(["message_age"])
+    _ready(run, "node:/robot/imu_driver", "node:/robot/standby")
+    wait_for(lambda: (run.step(), "node:/robot/standby" in (run.G.nodes.get(topic, {})
+                                                           .get("publisher_rates") or {}))[1],
+             timeout=20, period=PERIOD)
+    assert run.G.nodes[topic]["publisher_rates"]["node:/robot/standby"] == 0.0  # listed, idle
+    a = _sick_after_healthy(run, flag, "message_age", topic, healthy_s=6.0, symptom="stale")
+    top = analyze(run.G, [a], RcaSettings(), None).root_causes
+    assert [rc.member for rc in top] == ["node:/robot/imu_driver"], top  # not the standby, which sent nothing
 
 
 DEVICE_CLOCK = """
