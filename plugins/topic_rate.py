@@ -526,16 +526,15 @@ def _readers_complaints(ctx: PluginContext) -> None:
     for e in ctx.events:
         if e.kind != "log" or RANK.get(e.level, -1) < RANK["warn"]:
             continue
-        read = [t for t in ctx.subscribed_topics(e.member)
-                if e.member not in ctx.publishers(t) and receives(ctx, e.member, t)]
+        read = [t for t in ctx.subscribed_topics(e.member) if e.member not in ctx.publishers(t)]
         if not read:
             continue
         names = set(e.data.get("nodes", ()))
         ns = e.member.removeprefix("node:").rsplit("/", 1)[0]
         hit = {"topic:" + t for t in named_topics(e.text, [t.removeprefix("topic:") for t in read], ns)}
         hit |= {t for t in read if names.intersection(ctx.publishers(t))}
-        for topic in hit:
-            if e.t > said.get(topic, (-math.inf,))[0]:
+        for topic in hit:  # QoS last: the costliest test, asked only of the topics the line names
+            if e.t > said.get(topic, (-math.inf,))[0] and receives(ctx, e.member, topic):
                 said[topic] = (e.t, e.member, e.text)
 
 

@@ -23,15 +23,18 @@ _FIELDS = {1: "bool_value", 2: "integer_value", 3: "double_value", 4: "string_va
 MAX_VALUE_CHARS = 60  # a long array or string is cut in the event's text and data
 
 
-def value_text(value: Any, limit: int = MAX_VALUE_CHARS) -> str:
-    """The value of a ``rcl_interfaces/ParameterValue`` as text, cut at ``limit`` characters
-    (``"?"`` when not set)."""
+def value_text(value: Any) -> str:
+    """The value of a ``rcl_interfaces/ParameterValue`` as text, whole (``"?"`` when not set)."""
     field = _FIELDS.get(int(getattr(value, "type", 0)))
     if field is None:
         return "?"
     v = getattr(value, field)
-    text = repr(v) if isinstance(v, str) else str(list(v) if field.endswith("_array_value") else v)
-    return text if len(text) <= limit else text[:limit - 1] + "…"
+    return repr(v) if isinstance(v, str) else str(list(v) if field.endswith("_array_value") else v)
+
+
+def _short(text: str) -> str:
+    """``text`` cut at `MAX_VALUE_CHARS` for an event's text and data."""
+    return text if len(text) <= MAX_VALUE_CHARS else text[:MAX_VALUE_CHARS - 1] + "…"
 
 
 def param_event(msg: Any, recv_s: float, known: dict[tuple[str, str], str] | None = None) -> Event | None:
@@ -40,11 +43,10 @@ def param_event(msg: Any, recv_s: float, known: dict[tuple[str, str], str] | Non
     named). ``known`` ((node, parameter) → its value's full text) is kept up to date from every
     event, declarations included."""
     known = {} if known is None else known
-    full = {p.name: value_text(p.value, limit=10**9) for p in msg.changed_parameters}
+    full = {p.name: value_text(p.value) for p in msg.changed_parameters}
     for p in msg.new_parameters:
-        known[(msg.node, p.name)] = value_text(p.value, limit=10**9)
-    changed = {p.name: value_text(p.value) for p in msg.changed_parameters
-               if known.get((msg.node, p.name)) != full[p.name]}
+        known[(msg.node, p.name)] = value_text(p.value)
+    changed = {k: _short(v) for k, v in full.items() if known.get((msg.node, k)) != v}
     known.update({(msg.node, k): v for k, v in full.items()})
     deleted = [p.name for p in msg.deleted_parameters]
     for name in deleted:
